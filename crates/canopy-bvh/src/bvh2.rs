@@ -1,0 +1,290 @@
+//! The one binary tree format that every builder produces.
+
+use crate::Aabb;
+use bytemuck::{Pod, Zeroable};
+use glam::Vec3;
+use thiserror::Error;
+
+/// A node of a [`Bvh2`]: 32 bytes, `#[repr(C)]` and `Pod`, so a node array uploads to a
+/// GPU as is.
+///
+/// Byte layout: `min: [f32; 3]` (0..12), `first: u32` (12..16), `max: [f32; 3]` (16..28),
+/// `count: u32` (28..32).
+///
+/// `count == 0`: an interior node whose children are nodes `first` and `first + 1`.
+/// `count > 0`: a leaf of `count` primitives at `prim_indices[first..first + count]`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+pub struct Bvh2Node {
+    pub min: Vec3,
+    pub first: u32,
+    pub max: Vec3,
+    pub count: u32,
+}
+
+impl Bvh2Node {
+    #[inline]
+    pub fn leaf(bounds: Aabb, first: u32, count: u32) -> Self {
+        debug_assert!(count > 0);
+        Self {
+            min: bounds.min,
+            first,
+            max: bounds.max,
+            count,
+        }
+    }
+
+    #[inline]
+    pub fn interior(bounds: Aabb, first_child: u32) -> Self {
+        Self {
+            min: bounds.min,
+            first: first_child,
+            max: bounds.max,
+            count: 0,
+        }
+    }
+
+    #[inline]
+    pub fn is_leaf(&self) -> bool {
+        self.count > 0
+    }
+
+    #[inline]
+    pub fn bounds(&self) -> Aabb {
+        Aabb::new(self.min, self.max)
+    }
+}
+
+/// A binary BVH: a flat node array (root at index 0, siblings adjacent) and the
+/// permutation of primitive indices that leaves point into.
+///
+/// An empty input gives a tree with no nodes, which every query answers with a miss.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Bvh2 {
+    pub(crate) nodes: Vec<Bvh2Node>,
+    pub(crate) prim_indices: Vec<u32>,
+}
+
+/// What [`Bvh2::validate`] found wrong with a tree.
+#[derive(Debug, Error, PartialEq)]
+pub enum BvhError {
+    #[error("node {node}: child index {child} is out of range ({len} nodes)")]
+    ChildOutOfRange {
+        node: usize,
+        child: usize,
+        len: usize,
+    },
+    #[error("node {node}: leaf range {first}..{end} exceeds {len} primitive indices")]
+    LeafOutOfRange {
+        node: usize,
+        first: usize,
+        end: usize,
+        len: usize,
+    },
+    #[error("node {node} is reached more than once")]
+    NodeShared { node: usize },
+    #[error("{unreached} of {len} nodes are not reachable from the root")]
+    UnreachableNodes { unreached: usize, len: usize },
+    #[error("primitive {prim} appears {times} times in leaves (expected once)")]
+    PrimitiveCount { prim: u32, times: usize },
+    #[error("primitive index {prim} is out of range ({len} primitives)")]
+    PrimitiveOutOfRange { prim: u32, len: usize },
+    #[error("node {node}: box is not the tight union of its contents")]
+    NotTight { node: usize },
+    #[error("node {node}: child {child} is not inside its parent's box")]
+    ChildOutsideParent { node: usize, child: usize },
+}
+
+impl Bvh2 {
+    /// Assembles a tree from parts; call [`Bvh2::validate`] if they come from outside.
+    pub fn from_parts(nodes: Vec<Bvh2Node>, prim_indices: Vec<u32>) -> Self {
+        Self {
+            nodes,
+            prim_indices,
+        }
+    }
+
+    pub fn nodes(&self) -> &[Bvh2Node] {
+        &self.nodes
+    }
+
+    pub fn prim_indices(&self) -> &[u32] {
+        &self.prim_indices
+    }
+
+    /// Box of the whole tree (empty for an empty tree).
+    pub fn bounds(&self) -> Aabb {
+        self.nodes.first().map_or(Aabb::EMPTY, Bvh2Node::bounds)
+    }
+
+    /// The primitive indices of a leaf.
+    #[inline]
+    pub fn leaf_prims(&self, node: &Bvh2Node) -> &[u32] {
+        let first = node.first as usize;
+        &self.prim_indices[first..first + node.count as usize]
+    }
+
+    /// Recomputes every box bottom-up from the primitive boxes, keeping the topology.
+    pub fn refit(&mut self, boxes: &[Aabb]) {
+        // Children always have larger indices than their parent, so a reverse sweep
+        // visits children first.
+        for i in (0..self.nodes.len()).rev() {
+            let node = self.nodes[i];
+            let bounds = if node.is_leaf() {
+                self.leaf_prims(&node)
+                    .iter()
+                    .fold(Aabb::EMPTY, |b, &p| b.union(boxes[p as usize]))
+            } else {
+                let c = node.first as usize;
+                self.nodes[c].bounds().union(self.nodes[c + 1].bounds())
+            };
+            self.nodes[i].min = bounds.min;
+            self.nodes[i].max = bounds.max;
+        }
+    }
+
+    /// Checks the invariants every builder must keep: indices in range, every node reached
+    /// exactly once, every primitive in exactly one leaf, every child inside its parent
+    /// and every box the tight union of its contents.
+    pub fn validate(&self, boxes: &[Aabb]) -> Result<(), BvhError> {
+        if self.nodes.is_empty() {
+            return match boxes.len() {
+                0 => Ok(()),
+                _ => Err(BvhError::PrimitiveCount { prim: 0, times: 0 }),
+            };
+        }
+        let len = self.nodes.len();
+        let mut reached = vec![false; len];
+        let mut times_seen = vec![0usize; boxes.len()];
+        let mut stack = vec![0usize];
+        reached[0] = true;
+        while let Some(i) = stack.pop() {
+            let node = &self.nodes[i];
+            let tight = if node.is_leaf() {
+                let (first, end) = (
+                    node.first as usize,
+                    node.first as usize + node.count as usize,
+                );
+                if end > self.prim_indices.len() {
+                    return Err(BvhError::LeafOutOfRange {
+                        node: i,
+                        first,
+                        end,
+                        len: self.prim_indices.len(),
+                    });
+                }
+                let mut bounds = Aabb::EMPTY;
+                for &prim in &self.prim_indices[first..end] {
+                    let seen =
+                        times_seen
+                            .get_mut(prim as usize)
+                            .ok_or(BvhError::PrimitiveOutOfRange {
+                                prim,
+                                len: boxes.len(),
+                            })?;
+                    *seen += 1;
+                    bounds = bounds.union(boxes[prim as usize]);
+                }
+                bounds
+            } else {
+                let mut bounds = Aabb::EMPTY;
+                for child in [node.first as usize, node.first as usize + 1] {
+                    if child >= len || child == 0 {
+                        return Err(BvhError::ChildOutOfRange {
+                            node: i,
+                            child,
+                            len,
+                        });
+                    }
+                    if std::mem::replace(&mut reached[child], true) {
+                        return Err(BvhError::NodeShared { node: child });
+                    }
+                    let child_box = self.nodes[child].bounds();
+                    if !node.bounds().contains(&child_box) {
+                        return Err(BvhError::ChildOutsideParent { node: i, child });
+                    }
+                    bounds = bounds.union(child_box);
+                    stack.push(child);
+                }
+                bounds
+            };
+            if tight != node.bounds() {
+                return Err(BvhError::NotTight { node: i });
+            }
+        }
+        let unreached = reached.iter().filter(|r| !**r).count();
+        if unreached > 0 {
+            return Err(BvhError::UnreachableNodes { unreached, len });
+        }
+        if let Some((prim, &times)) = times_seen.iter().enumerate().find(|(_, &t)| t != 1) {
+            return Err(BvhError::PrimitiveCount {
+                prim: prim as u32,
+                times,
+            });
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn boxes() -> Vec<Aabb> {
+        vec![
+            Aabb::new(Vec3::ZERO, Vec3::ONE),
+            Aabb::new(Vec3::splat(2.0), Vec3::splat(3.0)),
+        ]
+    }
+
+    fn two_leaf_tree() -> Bvh2 {
+        let b = boxes();
+        Bvh2::from_parts(
+            vec![
+                Bvh2Node::interior(b[0].union(b[1]), 1),
+                Bvh2Node::leaf(b[0], 0, 1),
+                Bvh2Node::leaf(b[1], 1, 1),
+            ],
+            vec![0, 1],
+        )
+    }
+
+    #[test]
+    fn node_is_32_bytes() {
+        assert_eq!(std::mem::size_of::<Bvh2Node>(), 32);
+    }
+
+    #[test]
+    fn hand_built_tree_validates() {
+        assert_eq!(two_leaf_tree().validate(&boxes()), Ok(()));
+    }
+
+    #[test]
+    fn loose_box_is_rejected() {
+        let mut t = two_leaf_tree();
+        t.nodes[0].max = Vec3::splat(4.0);
+        assert_eq!(t.validate(&boxes()), Err(BvhError::NotTight { node: 0 }));
+    }
+
+    #[test]
+    fn duplicated_primitive_is_rejected() {
+        let mut t = two_leaf_tree();
+        t.prim_indices = vec![0, 0];
+        t.nodes[0].max = Vec3::ONE;
+        t.nodes[2].min = Vec3::ZERO;
+        t.nodes[2].max = Vec3::ONE;
+        assert!(matches!(
+            t.validate(&boxes()),
+            Err(BvhError::PrimitiveCount { .. })
+        ));
+    }
+
+    #[test]
+    fn refit_restores_tight_boxes() {
+        let mut t = two_leaf_tree();
+        t.nodes[0].max = Vec3::splat(9.0);
+        t.nodes[1].min = Vec3::splat(-9.0);
+        t.refit(&boxes());
+        assert_eq!(t, two_leaf_tree());
+    }
+}

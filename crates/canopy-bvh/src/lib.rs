@@ -1,0 +1,34 @@
+//! canopy-bvh: bounding volume hierarchies for ray tracing.
+//!
+//! Every builder produces the one binary format, [`Bvh2`]; statistics, validation and
+//! traversal are written once against it. The library knows boxes, rays and primitive
+//! indices only: the caller supplies the primitive test as a closure, so the same tree
+//! serves spheres, triangles or anything else with a bounding box.
+//!
+//! ```
+//! use canopy_bvh::{build, Aabb, BuildParams, Builder, Ray};
+//! use glam::Vec3;
+//!
+//! let boxes: Vec<Aabb> = (0..100)
+//!     .map(|i| Aabb::new(Vec3::splat(i as f32), Vec3::splat(i as f32 + 0.5)))
+//!     .collect();
+//! let bvh = build(Builder::BinnedSah, &boxes, &BuildParams::default());
+//! bvh.validate(&boxes).unwrap();
+//!
+//! let ray = Ray::new(Vec3::new(-1.0, 10.25, 10.25), Vec3::X, 0.0, f32::INFINITY);
+//! let hit = bvh.intersect(&ray, |prim, ray| boxes[prim as usize].ray_entry(ray));
+//! assert_eq!(hit.map(|h| h.prim), Some(10));
+//! ```
+
+mod aabb;
+pub mod build;
+mod bvh2;
+mod ray;
+mod stats;
+mod traverse;
+
+pub use aabb::Aabb;
+pub use build::{build, BuildParams, Builder, SahCosts, UnknownBuilder};
+pub use bvh2::{Bvh2, Bvh2Node, BvhError};
+pub use ray::{Hit, Ray};
+pub use stats::TreeStats;

@@ -1,0 +1,51 @@
+//! Rays and hit records.
+
+use glam::Vec3;
+
+/// A ray with its valid parameter interval `[t_min, t_max]`.
+///
+/// The reciprocal direction is precomputed for the slab test; a zero direction component
+/// gives an infinite reciprocal, which the slab test handles.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Ray {
+    pub origin: Vec3,
+    pub dir: Vec3,
+    pub inv_dir: Vec3,
+    pub t_min: f32,
+    pub t_max: f32,
+}
+
+impl Ray {
+    #[inline]
+    pub fn new(origin: Vec3, dir: Vec3, t_min: f32, t_max: f32) -> Self {
+        Self {
+            origin,
+            dir,
+            inv_dir: dir.recip(),
+            t_min,
+            t_max,
+        }
+    }
+
+    /// The point at parameter `t`.
+    #[inline]
+    pub fn at(&self, t: f32) -> Vec3 {
+        self.origin + t * self.dir
+    }
+}
+
+/// The closest hit found by a traversal: ray parameter and primitive index.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hit {
+    pub t: f32,
+    pub prim: u32,
+}
+
+impl Hit {
+    /// Whether `self` is closer than `other`; equal distances go to the lower primitive
+    /// index, so every acceleration structure (and brute force) agrees on the answer.
+    #[inline]
+    pub fn is_before(&self, other: &Hit) -> bool {
+        self.t < other.t || (self.t == other.t && self.prim < other.prim)
+    }
+}

@@ -1,0 +1,171 @@
+//! Closest-hit and any-hit traversal of a [`Bvh2`], generic over the primitive test.
+
+use crate::{Bvh2, Hit, Ray};
+
+/// Traversal stack: a fixed array for the common case, spilling to the heap only for
+/// trees deeper than its capacity (degenerate inputs can make very deep trees).
+struct Stack<T: Copy> {
+    inline: [T; 64],
+    len: usize,
+    spill: Vec<T>,
+}
+
+impl<T: Copy> Stack<T> {
+    #[inline]
+    fn new(fill: T) -> Self {
+        Self {
+            inline: [fill; 64],
+            len: 0,
+            spill: Vec::new(),
+        }
+    }
+
+    #[inline]
+    fn push(&mut self, item: T) {
+        if self.len < self.inline.len() {
+            self.inline[self.len] = item;
+            self.len += 1;
+        } else {
+            self.spill.push(item);
+        }
+    }
+
+    #[inline]
+    fn pop(&mut self) -> Option<T> {
+        if let Some(item) = self.spill.pop() {
+            return Some(item);
+        }
+        if self.len == 0 {
+            return None;
+        }
+        self.len -= 1;
+        Some(self.inline[self.len])
+    }
+}
+
+impl Bvh2 {
+    /// Closest hit along `ray` within `[t_min, t_max]`.
+    ///
+    /// `hit_prim(prim, ray)` tests one primitive and returns its hit distance, if any, in
+    /// `[ray.t_min, ray.t_max]`; the `ray` it sees has `t_max` shrunk to the closest hit so
+    /// far. Equal distances resolve to the lower primitive index (see [`Hit::is_before`]),
+    /// so the answer matches a brute-force loop exactly.
+    pub fn intersect<F>(&self, ray: &Ray, mut hit_prim: F) -> Option<Hit>
+    where
+        F: FnMut(u32, &Ray) -> Option<f32>,
+    {
+        let root = self.nodes.first()?;
+        let mut ray = *ray;
+        if root.bounds().ray_entry_or_inf(&ray) == f32::INFINITY {
+            return None;
+        }
+        let mut best: Option<Hit> = None;
+        let mut stack = Stack::new((0u32, 0f32));
+        let mut node = root;
+        loop {
+            if node.is_leaf() {
+                for &prim in self.leaf_prims(node) {
+                    if let Some(t) = hit_prim(prim, &ray) {
+                        let hit = Hit { t, prim };
+                        if best.is_none_or(|b| hit.is_before(&b)) {
+                            ray.t_max = t;
+                            best = Some(hit);
+                        }
+                    }
+                }
+            } else {
+                let (left, right) = (node.first, node.first + 1);
+                let t_left = self.nodes[left as usize].bounds().ray_entry_or_inf(&ray);
+                let t_right = self.nodes[right as usize].bounds().ray_entry_or_inf(&ray);
+                let (near, t_near, far, t_far) = if t_left <= t_right {
+                    (left, t_left, right, t_right)
+                } else {
+                    (right, t_right, left, t_left)
+                };
+                if t_near != f32::INFINITY {
+                    if t_far != f32::INFINITY {
+                        stack.push((far, t_far));
+                    }
+                    node = &self.nodes[near as usize];
+                    continue;
+                }
+            }
+            // Pop the next subtree that can still hold a closer (or equally close) hit.
+            loop {
+                match stack.pop() {
+                    None => return best,
+                    Some((index, t_entry)) if t_entry <= ray.t_max => {
+                        node = &self.nodes[index as usize];
+                        break;
+                    }
+                    Some(_) => {}
+                }
+            }
+        }
+    }
+
+    /// Whether anything blocks `ray` within `[t_min, t_max]` (any hit; for shadow rays).
+    pub fn occluded<F>(&self, ray: &Ray, mut hit_prim: F) -> bool
+    where
+        F: FnMut(u32, &Ray) -> bool,
+    {
+        let Some(root) = self.nodes.first() else {
+            return false;
+        };
+        if root.bounds().ray_entry_or_inf(ray) == f32::INFINITY {
+            return false;
+        }
+        let mut stack = Stack::new(0u32);
+        let mut node = root;
+        loop {
+            if node.is_leaf() {
+                if self.leaf_prims(node).iter().any(|&p| hit_prim(p, ray)) {
+                    return true;
+                }
+            } else {
+                let (left, right) = (node.first, node.first + 1);
+                let hit_left =
+                    self.nodes[left as usize].bounds().ray_entry_or_inf(ray) != f32::INFINITY;
+                let hit_right =
+                    self.nodes[right as usize].bounds().ray_entry_or_inf(ray) != f32::INFINITY;
+                match (hit_left, hit_right) {
+                    (true, true) => {
+                        stack.push(right);
+                        node = &self.nodes[left as usize];
+                        continue;
+                    }
+                    (true, false) => {
+                        node = &self.nodes[left as usize];
+                        continue;
+                    }
+                    (false, true) => {
+                        node = &self.nodes[right as usize];
+                        continue;
+                    }
+                    (false, false) => {}
+                }
+            }
+            match stack.pop() {
+                Some(index) => node = &self.nodes[index as usize],
+                None => return false,
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn stack_spills_past_inline_capacity_and_stays_lifo() {
+        let mut s = Stack::new(0u32);
+        for i in 0..200 {
+            s.push(i);
+        }
+        for i in (0..200).rev() {
+            assert_eq!(s.pop(), Some(i));
+        }
+        assert_eq!(s.pop(), None);
+    }
+}

@@ -1,0 +1,52 @@
+//! `canopy`: render scenes with a choice of BVH, list the built-in scenes.
+
+mod render;
+
+use clap::{Parser, Subcommand};
+use std::process::ExitCode;
+
+#[derive(Parser)]
+#[command(
+    name = "canopy",
+    version,
+    about = "A path tracer and laboratory of bounding volume hierarchies"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Render a built-in scene (see `canopy scenes`) or a scene file to PNG or EXR.
+    Render(render::RenderArgs),
+    /// List the built-in scenes.
+    Scenes,
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Render(args) => render::run(&args),
+        Command::Scenes => list_scenes(),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn list_scenes() -> anyhow::Result<()> {
+    for builtin in canopy_render::BUILTIN_SCENES {
+        let scene = builtin.load()?;
+        let counts = scene.shape_counts();
+        println!(
+            "{:<12} {:>4} spheres {:>5} triangles {:>3} cuboids  {}",
+            builtin.name, counts.spheres, counts.triangles, counts.cuboids, scene.description
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,165 @@
+//! `canopy render`: load, build the acceleration structure, render with a progress bar,
+//! write the image, print a summary.
+
+use anyhow::{bail, Context};
+use canopy_bvh::BuildParams;
+use canopy_render::{output::image_format, render, write_image, Accel, AccelKind, Scene};
+use clap::Args;
+use indicatif::{ProgressBar, ProgressStyle};
+use std::path::{Path, PathBuf};
+
+/// Largest image canopy agrees to render (pixels), to fail early instead of exhausting memory.
+const MAX_PIXELS: u64 = 1 << 28;
+
+#[derive(Args)]
+pub struct RenderArgs {
+    /// Built-in scene name (see `canopy scenes`) or path to a scene file.
+    scene: String,
+    /// Output image, .png (8-bit sRGB) or .exr (linear float) [default: <scene>.png].
+    #[arg(short, long)]
+    output: Option<PathBuf>,
+    /// Samples per pixel [default: from the scene].
+    #[arg(long)]
+    spp: Option<u32>,
+    /// Maximum ray segments per path, the camera ray included [default: from the scene].
+    #[arg(long)]
+    depth: Option<u32>,
+    /// Image size as WIDTHxHEIGHT [default: from the scene].
+    #[arg(long, value_parser = parse_size)]
+    size: Option<(u32, u32)>,
+    /// Seed of the random sampling.
+    #[arg(long)]
+    seed: Option<u64>,
+    /// Worker threads [default: all cores].
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Acceleration structure: `none` or a BVH builder.
+    #[arg(long, default_value = "binned-sah", value_parser = parse_accel)]
+    bvh: AccelKind,
+    /// Most primitives in a BVH leaf.
+    #[arg(long, default_value_t = BuildParams::default().max_leaf_size)]
+    max_leaf_size: u32,
+}
+
+fn parse_size(s: &str) -> Result<(u32, u32), String> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .ok_or_else(|| format!("`{s}` is not WIDTHxHEIGHT"))?;
+    let dim = |d: &str| d.trim().parse::<u32>().ok().filter(|&v| v > 0);
+    match (dim(w), dim(h)) {
+        (Some(w), Some(h)) => Ok((w, h)),
+        _ => Err(format!("`{s}`: width and height must be positive integers")),
+    }
+}
+
+fn parse_accel(s: &str) -> Result<AccelKind, String> {
+    s.parse()
+        .map_err(|e: canopy_bvh::UnknownBuilder| e.to_string())
+}
+
+pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
+    let mut scene = canopy_render::load_scene(&args.scene)?;
+    apply_overrides(&mut scene, args)?;
+    let output = args
+        .output
+        .clone()
+        .unwrap_or_else(|| default_output(&args.scene, &scene));
+    // Refuse a bad output path before spending minutes on the render.
+    image_format(&output)?;
+
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(args.threads.unwrap_or(0))
+        .build()
+        .context("cannot start the worker threads")?;
+    let params = BuildParams {
+        max_leaf_size: args.max_leaf_size,
+        ..BuildParams::default()
+    };
+    let accel = pool.install(|| Accel::build(args.bvh, &scene.primitives, &params));
+
+    let progress = ProgressBar::new(scene.settings.height as u64).with_style(
+        ProgressStyle::with_template(
+            "{spinner} rendering [{bar:40}] {percent:>3}%  {elapsed} elapsed, ETA {eta}",
+        )
+        .expect("valid template")
+        .progress_chars("=> "),
+    );
+    let (film, stats) = pool.install(|| render(&scene, &accel, &|| progress.inc(1)));
+    progress.finish_and_clear();
+    write_image(&film, &output)?;
+
+    let s = scene.settings;
+    let counts = scene.shape_counts();
+    println!(
+        "scene       {} ({}x{}, {} spp, depth {}, seed {})",
+        args.scene, s.width, s.height, s.spp, s.max_depth, s.seed
+    );
+    println!(
+        "primitives  {} ({} spheres, {} triangles, {} cuboids)",
+        scene.primitives.len(),
+        counts.spheres,
+        counts.triangles,
+        counts.cuboids
+    );
+    println!(
+        "bvh         {} built in {:.2} ms",
+        args.bvh,
+        accel.build_time.as_secs_f64() * 1e3
+    );
+    println!(
+        "render      {:.3} s on {} threads",
+        stats.elapsed.as_secs_f64(),
+        pool.current_num_threads()
+    );
+    println!(
+        "rays        {} ({:.2} Mrays/s)",
+        stats.rays,
+        stats.mrays_per_second()
+    );
+    if stats.invalid_samples > 0 {
+        println!(
+            "warning     {} samples with NaN/inf radiance were dropped",
+            stats.invalid_samples
+        );
+    }
+    println!("image       {}", output.display());
+    Ok(())
+}
+
+fn apply_overrides(scene: &mut Scene, args: &RenderArgs) -> anyhow::Result<()> {
+    let s = &mut scene.settings;
+    if let Some((w, h)) = args.size {
+        (s.width, s.height) = (w, h);
+    }
+    s.spp = args.spp.unwrap_or(s.spp);
+    s.max_depth = args.depth.unwrap_or(s.max_depth);
+    s.seed = args.seed.unwrap_or(s.seed);
+    if s.width == 0 || s.height == 0 {
+        bail!("image size {}x{} is empty", s.width, s.height);
+    }
+    if s.width as u64 * s.height as u64 > MAX_PIXELS {
+        bail!(
+            "image size {}x{} is too large (at most {MAX_PIXELS} pixels; this one needs {} MiB of film)",
+            s.width,
+            s.height,
+            s.width as u64 * s.height as u64 * 12 >> 20
+        );
+    }
+    if s.spp == 0 {
+        bail!("--spp must be at least 1");
+    }
+    Ok(())
+}
+
+/// `<scene name>.png` in the current directory.
+fn default_output(arg: &str, scene: &Scene) -> PathBuf {
+    let stem = if scene.name.is_empty() {
+        Path::new(arg)
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "render".into())
+    } else {
+        scene.name.clone()
+    };
+    PathBuf::from(format!("{stem}.png"))
+}

@@ -1,0 +1,59 @@
+//! Errors the renderer returns; each names the file, line or object at fault.
+
+use crate::mesh::MeshError;
+use std::path::PathBuf;
+use thiserror::Error;
+
+/// A scene that could not be loaded.
+#[derive(Debug, Error)]
+pub enum SceneError {
+    #[error("{file}: cannot read the file: {source}")]
+    Read {
+        file: String,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{file}:{line}:{column}: {message}\n    | {text}")]
+    Syntax {
+        file: String,
+        line: usize,
+        column: usize,
+        message: String,
+        text: String,
+    },
+    #[error("{file}:{line}: {message}")]
+    Invalid {
+        file: String,
+        line: usize,
+        message: String,
+    },
+    #[error("{file}:{line}: mesh `{mesh}`: {source}")]
+    Mesh {
+        file: String,
+        line: usize,
+        mesh: String,
+        #[source]
+        source: MeshError,
+    },
+    #[error("unknown scene `{0}`: neither a built-in scene (see `canopy scenes`) nor a file")]
+    Unknown(String),
+}
+
+/// An image that could not be written.
+#[derive(Debug, Error)]
+pub enum OutputError {
+    #[error("{}: unsupported image format (use .png or .exr)", path.display())]
+    UnsupportedFormat { path: PathBuf },
+    #[error("{}: cannot write the image: {source}", path.display())]
+    Write {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{}: cannot encode the image: {source}", path.display())]
+    Encode {
+        path: PathBuf,
+        #[source]
+        source: image::ImageError,
+    },
+}

@@ -1,0 +1,184 @@
+use super::{max_abs, Surface, POINT_ERROR_ULPS};
+use canopy_bvh::{Aabb, Ray};
+use glam::{Mat3, Vec3};
+
+/// A box given by its corners in its own frame, then rotated and translated into the
+/// world: `world = rotation * local + translation`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Cuboid {
+    pub local: Aabb,
+    pub rotation: Mat3,
+    pub translation: Vec3,
+}
+
+impl Cuboid {
+    pub fn axis_aligned(min: Vec3, max: Vec3) -> Self {
+        Self {
+            local: Aabb::new(min, max),
+            rotation: Mat3::IDENTITY,
+            translation: Vec3::ZERO,
+        }
+    }
+
+    fn to_world(&self, p: Vec3) -> Vec3 {
+        self.rotation * p + self.translation
+    }
+
+    pub fn bounds(&self) -> Aabb {
+        let (lo, hi) = (self.local.min, self.local.max);
+        Aabb::from_points((0..8).map(|i| {
+            let corner = Vec3::new(
+                if i & 1 == 0 { lo.x } else { hi.x },
+                if i & 2 == 0 { lo.y } else { hi.y },
+                if i & 4 == 0 { lo.z } else { hi.z },
+            );
+            self.to_world(corner)
+        }))
+    }
+
+    /// The ray in the box's frame (rotation keeps lengths, so `t` is unchanged).
+    #[inline]
+    fn local_ray(&self, ray: &Ray) -> Ray {
+        let to_local = self.rotation.transpose();
+        Ray::new(
+            to_local * (ray.origin - self.translation),
+            to_local * ray.dir,
+            ray.t_min,
+            ray.t_max,
+        )
+    }
+
+    /// Slab test in the box's frame, returning the exit distance too, so that a ray that
+    /// starts inside (refraction through a glass box) finds the far wall.
+    #[inline]
+    pub fn intersect(&self, ray: &Ray) -> Option<f32> {
+        let r = self.local_ray(ray);
+        let t0 = (self.local.min - r.origin) * r.inv_dir;
+        let t1 = (self.local.max - r.origin) * r.inv_dir;
+        let enter = t0.min(t1).max_element();
+        let exit = t0.max(t1).min_element();
+        if enter > exit {
+            return None;
+        }
+        let in_range = |t: f32| t >= ray.t_min && t <= ray.t_max;
+        if in_range(enter) {
+            Some(enter)
+        } else if in_range(exit) {
+            Some(exit)
+        } else {
+            None
+        }
+    }
+
+    pub fn surface(&self, ray: &Ray, t: f32) -> Surface {
+        let r = self.local_ray(ray);
+        let mut p = r.at(t);
+        // The face hit is the one the point is relatively closest to; a flat box's thin
+        // axis always wins.
+        let center = self.local.center();
+        let half = 0.5 * self.local.extent();
+        let offset = p - center;
+        let closeness = |i: usize| {
+            if half[i] > 0.0 {
+                offset[i].abs() / half[i]
+            } else {
+                f32::INFINITY
+            }
+        };
+        let axis = (0..3)
+            .max_by(|&a, &b| closeness(a).total_cmp(&closeness(b)))
+            .unwrap_or(0);
+        // A flat box has two faces in one plane: take the one facing the ray.
+        let positive = if half[axis] > 0.0 {
+            offset[axis] >= 0.0
+        } else {
+            r.dir[axis] < 0.0
+        };
+        let mut local_normal = Vec3::ZERO;
+        local_normal[axis] = if positive { 1.0 } else { -1.0 };
+        // Snap onto the face plane, which removes the error along the normal.
+        p[axis] = if positive {
+            self.local.max[axis]
+        } else {
+            self.local.min[axis]
+        };
+        let normal = self.rotation * local_normal;
+        let magnitude =
+            max_abs(self.translation) + max_abs(self.local.min).max(max_abs(self.local.max));
+        Surface {
+            p: self.to_world(p),
+            geometric_normal: normal,
+            shading_normal: normal,
+            error: POINT_ERROR_ULPS * magnitude,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ray(o: Vec3, d: Vec3) -> Ray {
+        Ray::new(o, d, 0.0, f32::INFINITY)
+    }
+
+    fn unit() -> Cuboid {
+        Cuboid::axis_aligned(Vec3::ZERO, Vec3::ONE)
+    }
+
+    #[test]
+    fn hit_from_outside_gives_entry_and_face_normal() {
+        let r = ray(Vec3::new(0.5, 0.5, -2.0), Vec3::Z);
+        let t = unit().intersect(&r).unwrap();
+        assert_eq!(t, 2.0);
+        assert_eq!(unit().surface(&r, t).geometric_normal, -Vec3::Z);
+    }
+
+    #[test]
+    fn origin_inside_hits_the_exit_wall() {
+        let r = ray(Vec3::splat(0.5), Vec3::X);
+        let t = unit().intersect(&r).unwrap();
+        assert_eq!(t, 0.5);
+        assert_eq!(unit().surface(&r, t).geometric_normal, Vec3::X);
+    }
+
+    #[test]
+    fn box_behind_the_origin_is_missed() {
+        assert_eq!(
+            unit().intersect(&ray(Vec3::new(0.5, 0.5, 2.0), Vec3::Z)),
+            None
+        );
+    }
+
+    #[test]
+    fn miss_beside_the_box() {
+        assert_eq!(
+            unit().intersect(&ray(Vec3::new(1.5, 0.5, -2.0), Vec3::Z)),
+            None
+        );
+    }
+
+    #[test]
+    fn rotated_box_is_hit_on_its_rotated_face() {
+        // Rotate 45 degrees about y: the corner now points at a ray coming along +x.
+        let c = Cuboid {
+            local: Aabb::new(Vec3::splat(-1.0), Vec3::splat(1.0)),
+            rotation: Mat3::from_rotation_y(std::f32::consts::FRAC_PI_4),
+            translation: Vec3::new(5.0, 0.0, 0.0),
+        };
+        let r = ray(Vec3::new(0.0, 0.0, 0.0), Vec3::X);
+        let t = c.intersect(&r).unwrap();
+        assert!((t - (5.0 - 2f32.sqrt())).abs() < 1e-5, "t = {t}");
+        let b = c.bounds();
+        assert!((b.min.x - (5.0 - 2f32.sqrt())).abs() < 1e-5);
+    }
+
+    #[test]
+    fn flat_box_gets_the_normal_of_its_thin_axis() {
+        let light = Cuboid::axis_aligned(Vec3::new(0.0, 2.0, 0.0), Vec3::new(1.0, 2.0, 1.0));
+        let r = ray(Vec3::new(0.5, 0.0, 0.5), Vec3::Y);
+        let t = light.intersect(&r).unwrap();
+        assert_eq!(t, 2.0);
+        assert_eq!(light.surface(&r, t).geometric_normal, -Vec3::Y);
+    }
+}

@@ -1,0 +1,122 @@
+//! Unidirectional path tracing over image rows, in parallel with rayon.
+
+use crate::accel::Accel;
+use crate::camera::Camera;
+use crate::film::Film;
+use crate::geometry::Surface;
+use crate::rng::Rng;
+use crate::scene::Scene;
+use canopy_bvh::Ray;
+use glam::Vec3;
+use rayon::prelude::*;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::{Duration, Instant};
+
+/// What a render did, for the closing summary.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct RenderStats {
+    /// Ray segments traced (camera and scattered rays).
+    pub rays: u64,
+    /// Samples whose radiance was NaN or infinite; they were dropped from the image.
+    pub invalid_samples: u64,
+    pub elapsed: Duration,
+}
+
+impl RenderStats {
+    pub fn mrays_per_second(&self) -> f64 {
+        self.rays as f64 / self.elapsed.as_secs_f64().max(1e-9) / 1e6
+    }
+}
+
+/// Renders `scene` with its own settings. `on_row_done` is called once per finished
+/// row (from worker threads), for progress reporting.
+///
+/// The result is bit-identical for any number of threads: every pixel is computed by one
+/// thread, its samples summed in order, each from its own random stream.
+pub fn render(
+    scene: &Scene,
+    accel: &Accel,
+    on_row_done: &(dyn Fn() + Sync),
+) -> (Film, RenderStats) {
+    let settings = scene.settings;
+    let camera = Camera::new(&scene.camera, settings.width, settings.height);
+    let mut film = Film::new(settings.width, settings.height);
+    let rays = AtomicU64::new(0);
+    let invalid = AtomicU64::new(0);
+    let start = Instant::now();
+    let width = settings.width as usize;
+    film.pixels
+        .par_chunks_mut(width.max(1))
+        .enumerate()
+        .for_each(|(y, row)| {
+            let mut row_rays = 0;
+            let mut row_invalid = 0;
+            for (x, pixel) in row.iter_mut().enumerate() {
+                let index = (y * width + x) as u64;
+                let mut sum = Vec3::ZERO;
+                for sample in 0..settings.spp {
+                    let mut rng = Rng::for_sample(settings.seed, index, sample as u64);
+                    let s = (x as f32 + rng.next_f32()) / settings.width as f32;
+                    let t = (y as f32 + rng.next_f32()) / settings.height as f32;
+                    let ray = camera.ray(s, t, &mut rng);
+                    let l = trace_path(scene, accel, ray, &mut rng, &mut row_rays);
+                    if l.is_finite() {
+                        sum += l;
+                    } else {
+                        row_invalid += 1;
+                    }
+                }
+                *pixel = sum / settings.spp.max(1) as f32;
+            }
+            rays.fetch_add(row_rays, Ordering::Relaxed);
+            invalid.fetch_add(row_invalid, Ordering::Relaxed);
+            on_row_done();
+        });
+    let stats = RenderStats {
+        rays: rays.into_inner(),
+        invalid_samples: invalid.into_inner(),
+        elapsed: start.elapsed(),
+    };
+    (film, stats)
+}
+
+/// Radiance arriving along `ray`, following one path of at most `max_depth` segments.
+fn trace_path(scene: &Scene, accel: &Accel, mut ray: Ray, rng: &mut Rng, rays: &mut u64) -> Vec3 {
+    let mut throughput = Vec3::ONE;
+    let mut radiance = Vec3::ZERO;
+    for _ in 0..scene.settings.max_depth {
+        *rays += 1;
+        let Some(hit) = accel.intersect(&scene.primitives, &ray) else {
+            radiance += throughput * scene.background.radiance(ray.dir);
+            break;
+        };
+        let primitive = &scene.primitives[hit.prim as usize];
+        let material = &scene.materials[primitive.material as usize];
+        let surface = primitive.shape.surface(&ray, hit.t, &scene.vertex_normals);
+        radiance += throughput * material.emitted();
+        let Some(scatter) = material.scatter(ray.dir, &surface, rng) else {
+            break;
+        };
+        throughput *= scatter.attenuation;
+        if throughput == Vec3::ZERO {
+            break;
+        }
+        ray = spawn_ray(&surface, scatter.direction);
+    }
+    radiance
+}
+
+/// A ray leaving `surface`, its origin pushed off the surface (to the side it leaves
+/// towards) by the bound on the hit point's rounding error, so it cannot re-hit the
+/// surface it starts on.
+#[inline]
+fn spawn_ray(surface: &Surface, direction: Vec3) -> Ray {
+    let n = surface.geometric_normal;
+    let offset = 2.0 * surface.error.max(f32::MIN_POSITIVE);
+    let side = if direction.dot(n) >= 0.0 {
+        offset
+    } else {
+        -offset
+    };
+    Ray::new(surface.p + side * n, direction, 0.0, f32::INFINITY)
+}

@@ -1,0 +1,105 @@
+//! The validated, in-memory scene that the integrator renders.
+
+use crate::camera::CameraSpec;
+use crate::geometry::Shape;
+use crate::material::Material;
+use canopy_bvh::Aabb;
+use glam::Vec3;
+
+/// What a ray that leaves the scene sees.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Background {
+    /// The report's sky: white at the horizon blending to light blue overhead.
+    Sky,
+    Constant(Vec3),
+}
+
+impl Background {
+    #[inline]
+    pub fn radiance(&self, dir: Vec3) -> Vec3 {
+        match *self {
+            Background::Sky => {
+                let a = 0.5 * (dir.normalize().y + 1.0);
+                (1.0 - a) * Vec3::ONE + a * Vec3::new(0.5, 0.7, 1.0)
+            }
+            Background::Constant(c) => c,
+        }
+    }
+}
+
+/// How an image is rendered; a scene file gives defaults, the command line overrides.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RenderSettings {
+    pub width: u32,
+    pub height: u32,
+    /// Samples per pixel.
+    pub spp: u32,
+    /// Most ray segments per path, the camera ray included (the report's "bounces").
+    pub max_depth: u32,
+    pub seed: u64,
+}
+
+impl Default for RenderSettings {
+    fn default() -> Self {
+        Self {
+            width: 480,
+            height: 480,
+            spp: 64,
+            max_depth: 8,
+            seed: 0,
+        }
+    }
+}
+
+/// One shape with its material.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Primitive {
+    pub shape: Shape,
+    pub material: u32,
+}
+
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Scene {
+    pub name: String,
+    pub description: String,
+    pub camera: CameraSpec,
+    pub settings: RenderSettings,
+    pub background: Background,
+    pub materials: Vec<Material>,
+    pub primitives: Vec<Primitive>,
+    /// Vertex normals of smooth triangles, indexed by `Triangle::normals`.
+    pub vertex_normals: Vec<[Vec3; 3]>,
+}
+
+impl Default for Background {
+    fn default() -> Self {
+        Background::Sky
+    }
+}
+
+impl Scene {
+    /// Bounding box of every primitive, in primitive order (the BVH builders' input).
+    pub fn primitive_bounds(&self) -> Vec<Aabb> {
+        self.primitives.iter().map(|p| p.shape.bounds()).collect()
+    }
+
+    /// Counts of spheres, triangles and cuboids.
+    pub fn shape_counts(&self) -> ShapeCounts {
+        let mut counts = ShapeCounts::default();
+        for p in &self.primitives {
+            match p.shape {
+                Shape::Sphere(_) => counts.spheres += 1,
+                Shape::Triangle(_) => counts.triangles += 1,
+                Shape::Cuboid(_) => counts.cuboids += 1,
+            }
+        }
+        counts
+    }
+}
+
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ShapeCounts {
+    pub spheres: usize,
+    pub triangles: usize,
+    pub cuboids: usize,
+}

@@ -1,0 +1,596 @@
+//! The TOML scene format (documented in `docs/scene-format.md`) and its translation into a
+//! validated [`Scene`]. Every error names the file and the line of the offending entry.
+
+use crate::camera::CameraSpec;
+use crate::error::SceneError;
+use crate::geometry::{Cuboid, Shape, Sphere, Triangle};
+use crate::material::Material;
+use crate::mesh::{parse_mesh, MeshFormat};
+use crate::scene::{Background, Primitive, RenderSettings, Scene};
+use canopy_bvh::Aabb;
+use glam::{EulerRot, Mat3, Mat4, Quat, Vec3};
+use serde::Deserialize;
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use toml::Spanned;
+
+/// Where a scene's mesh files come from.
+pub trait Assets {
+    /// The bytes of the file at `path` (as written in the scene), or why not.
+    fn read(&self, path: &str) -> Result<Vec<u8>, String>;
+}
+
+/// Files relative to a directory (the scene file's own).
+pub struct DirAssets(pub PathBuf);
+
+impl Assets for DirAssets {
+    fn read(&self, path: &str) -> Result<Vec<u8>, String> {
+        let full = self.0.join(path);
+        std::fs::read(&full).map_err(|e| format!("cannot read {}: {e}", full.display()))
+    }
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SceneDoc {
+    name: Option<String>,
+    description: Option<String>,
+    camera: Spanned<CameraDoc>,
+    #[serde(default)]
+    render: RenderDoc,
+    background: Option<Spanned<toml::Value>>,
+    #[serde(default)]
+    materials: BTreeMap<String, Spanned<toml::Value>>,
+    #[serde(default)]
+    spheres: Vec<Spanned<SphereDoc>>,
+    #[serde(default)]
+    cuboids: Vec<Spanned<CuboidDoc>>,
+    #[serde(default)]
+    meshes: Vec<Spanned<MeshDoc>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CameraDoc {
+    look_from: [f32; 3],
+    look_at: [f32; 3],
+    #[serde(default = "default_up")]
+    up: [f32; 3],
+    #[serde(default = "default_vfov")]
+    vfov: f32,
+    #[serde(default)]
+    aperture: f32,
+    focus_distance: Option<f32>,
+}
+
+fn default_up() -> [f32; 3] {
+    [0.0, 1.0, 0.0]
+}
+
+fn default_vfov() -> f32 {
+    40.0
+}
+
+#[derive(Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RenderDoc {
+    width: Option<u32>,
+    height: Option<u32>,
+    spp: Option<u32>,
+    max_depth: Option<u32>,
+    seed: Option<u64>,
+}
+
+#[derive(Deserialize)]
+#[serde(tag = "type", rename_all = "lowercase", deny_unknown_fields)]
+enum MaterialDoc {
+    Lambertian {
+        albedo: [f32; 3],
+    },
+    Metal {
+        albedo: [f32; 3],
+        #[serde(default)]
+        fuzz: f32,
+    },
+    Dielectric {
+        ior: f32,
+    },
+    Emissive {
+        radiance: [f32; 3],
+    },
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SphereDoc {
+    center: [f32; 3],
+    radius: f32,
+    material: Spanned<toml::Value>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CuboidDoc {
+    min: [f32; 3],
+    max: [f32; 3],
+    /// Degrees about x, then y, then z.
+    #[serde(default)]
+    rotate: [f32; 3],
+    #[serde(default)]
+    translate: [f32; 3],
+    material: Spanned<toml::Value>,
+}
+
+#[derive(Deserialize)]
+#[serde(untagged)]
+enum ScaleDoc {
+    Uniform(f32),
+    PerAxis([f32; 3]),
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct MeshDoc {
+    file: String,
+    material: Spanned<toml::Value>,
+    scale: Option<ScaleDoc>,
+    #[serde(default)]
+    rotate: [f32; 3],
+    #[serde(default)]
+    translate: [f32; 3],
+    /// Interpolate vertex normals: from the file, or computed when it has none.
+    /// Absent: smooth exactly when the file has normals.
+    smooth: Option<bool>,
+}
+
+/// Turns TOML spans into `file:line` errors.
+struct Context<'a> {
+    file: &'a str,
+    source: &'a str,
+}
+
+impl Context<'_> {
+    fn line_of(&self, offset: usize) -> usize {
+        let offset = offset.min(self.source.len());
+        self.source.as_bytes()[..offset]
+            .iter()
+            .filter(|&&b| b == b'\n')
+            .count()
+            + 1
+    }
+
+    fn invalid<T>(
+        &self,
+        span: std::ops::Range<usize>,
+        message: impl Into<String>,
+    ) -> Result<T, SceneError> {
+        Err(SceneError::Invalid {
+            file: self.file.to_owned(),
+            line: self.line_of(span.start),
+            message: message.into(),
+        })
+    }
+
+    fn syntax(&self, e: &toml::de::Error) -> SceneError {
+        let start = e.span().map_or(0, |s| s.start).min(self.source.len());
+        let line_start = self.source[..start].rfind('\n').map_or(0, |i| i + 1);
+        let text = self.source[line_start..]
+            .lines()
+            .next()
+            .unwrap_or("")
+            .to_owned();
+        SceneError::Syntax {
+            file: self.file.to_owned(),
+            line: self.line_of(start),
+            column: self.source[line_start..start].chars().count() + 1,
+            message: e.message().to_owned(),
+            text,
+        }
+    }
+}
+
+/// Parses and validates a scene. `file` names the source in error messages; mesh paths
+/// are resolved by `assets`.
+pub fn parse_scene(source: &str, file: &str, assets: &dyn Assets) -> Result<Scene, SceneError> {
+    let cx = Context { file, source };
+    let doc: SceneDoc = toml::from_str(source).map_err(|e| cx.syntax(&e))?;
+    let mut builder = SceneBuilder {
+        cx: &cx,
+        scene: Scene {
+            name: doc.name.clone().unwrap_or_default(),
+            description: doc.description.clone().unwrap_or_default(),
+            ..Scene::default()
+        },
+        named: BTreeMap::new(),
+    };
+    builder.camera(&doc.camera)?;
+    builder.settings(&doc.render);
+    if let Some(bg) = &doc.background {
+        builder.background(bg)?;
+    }
+    for (name, value) in &doc.materials {
+        let material = builder.material_from_table(value)?;
+        builder.scene.materials.push(material);
+        builder
+            .named
+            .insert(name.clone(), builder.scene.materials.len() as u32 - 1);
+    }
+    for sphere in &doc.spheres {
+        builder.sphere(sphere)?;
+    }
+    for cuboid in &doc.cuboids {
+        builder.cuboid(cuboid)?;
+    }
+    for mesh in &doc.meshes {
+        builder.mesh(mesh, assets)?;
+    }
+    Ok(builder.scene)
+}
+
+struct SceneBuilder<'a> {
+    cx: &'a Context<'a>,
+    scene: Scene,
+    named: BTreeMap<String, u32>,
+}
+
+fn finite(values: &[f32]) -> bool {
+    values.iter().all(|v| v.is_finite())
+}
+
+impl SceneBuilder<'_> {
+    fn camera(&mut self, doc: &Spanned<CameraDoc>) -> Result<(), SceneError> {
+        let c = doc.get_ref();
+        let span = doc.span();
+        let numbers = [&c.look_from[..], &c.look_at, &c.up, &[c.vfov, c.aperture]].concat();
+        if !finite(&numbers) || c.focus_distance.is_some_and(|f| !f.is_finite()) {
+            return self.cx.invalid(span, "camera: every number must be finite");
+        }
+        let (from, at, up) = (
+            Vec3::from(c.look_from),
+            Vec3::from(c.look_at),
+            Vec3::from(c.up),
+        );
+        if from == at {
+            return self
+                .cx
+                .invalid(span, "camera: `look_from` and `look_at` are the same point");
+        }
+        if up.cross(at - from).length_squared() == 0.0 {
+            return self
+                .cx
+                .invalid(span, "camera: `up` is parallel to the viewing direction");
+        }
+        if !(c.vfov > 0.0 && c.vfov < 180.0) {
+            return self.cx.invalid(
+                span,
+                format!("camera: `vfov` must be in (0, 180) degrees, not {}", c.vfov),
+            );
+        }
+        if c.aperture < 0.0 || c.focus_distance.is_some_and(|f| f <= 0.0) {
+            return self.cx.invalid(
+                span,
+                "camera: `aperture` must be >= 0 and `focus_distance` > 0",
+            );
+        }
+        self.scene.camera = CameraSpec {
+            look_from: from,
+            look_at: at,
+            up,
+            vfov: c.vfov,
+            aperture: c.aperture,
+            focus_distance: c.focus_distance,
+        };
+        Ok(())
+    }
+
+    fn settings(&mut self, doc: &RenderDoc) {
+        let d = RenderSettings::default();
+        self.scene.settings = RenderSettings {
+            width: doc.width.unwrap_or(d.width),
+            height: doc.height.unwrap_or(d.height),
+            spp: doc.spp.unwrap_or(d.spp),
+            max_depth: doc.max_depth.unwrap_or(d.max_depth),
+            seed: doc.seed.unwrap_or(d.seed),
+        };
+    }
+
+    fn background(&mut self, value: &Spanned<toml::Value>) -> Result<(), SceneError> {
+        let span = value.span();
+        self.scene.background = match value.get_ref() {
+            toml::Value::String(s) if s == "sky" => Background::Sky,
+            other => match other.clone().try_into::<[f32; 3]>() {
+                Ok(c) if finite(&c) && c.iter().all(|&v| v >= 0.0) => {
+                    Background::Constant(Vec3::from(c))
+                }
+                _ => return self.cx.invalid(
+                    span,
+                    "background: expected \"sky\" or an [r, g, b] colour of non-negative numbers",
+                ),
+            },
+        };
+        Ok(())
+    }
+
+    fn material_from_table(&self, value: &Spanned<toml::Value>) -> Result<Material, SceneError> {
+        let span = value.span();
+        let doc: MaterialDoc = match value.get_ref().clone().try_into() {
+            Ok(doc) => doc,
+            Err(e) => return self.cx.invalid(span, format!("material: {}", e.message())),
+        };
+        let colour_ok = |c: &[f32; 3]| finite(c) && c.iter().all(|&v| v >= 0.0);
+        let material = match doc {
+            MaterialDoc::Lambertian { albedo } if colour_ok(&albedo) => Material::Lambertian {
+                albedo: albedo.into(),
+            },
+            MaterialDoc::Metal { albedo, fuzz }
+                if colour_ok(&albedo) && (0.0..=1.0).contains(&fuzz) =>
+            {
+                Material::Metal {
+                    albedo: albedo.into(),
+                    fuzz,
+                }
+            }
+            MaterialDoc::Dielectric { ior } if ior.is_finite() && ior > 0.0 => {
+                Material::Dielectric { ior }
+            }
+            MaterialDoc::Emissive { radiance } if colour_ok(&radiance) => Material::Emissive {
+                radiance: radiance.into(),
+            },
+            _ => {
+                return self.cx.invalid(
+                    span,
+                    "material: colours must be finite and >= 0, `fuzz` in [0, 1], `ior` > 0",
+                )
+            }
+        };
+        Ok(material)
+    }
+
+    /// A material given by name or inline as a table.
+    fn material_ref(&mut self, value: &Spanned<toml::Value>) -> Result<u32, SceneError> {
+        match value.get_ref() {
+            toml::Value::String(name) => match self.named.get(name) {
+                Some(&index) => Ok(index),
+                None => {
+                    let known: Vec<&str> = self.named.keys().map(String::as_str).collect();
+                    self.cx.invalid(
+                        value.span(),
+                        format!(
+                            "unknown material `{name}` (defined: {})",
+                            if known.is_empty() {
+                                "none".into()
+                            } else {
+                                known.join(", ")
+                            }
+                        ),
+                    )
+                }
+            },
+            toml::Value::Table(_) => {
+                let material = self.material_from_table(value)?;
+                self.scene.materials.push(material);
+                Ok(self.scene.materials.len() as u32 - 1)
+            }
+            _ => self.cx.invalid(
+                value.span(),
+                "`material` must be a material name or a table",
+            ),
+        }
+    }
+
+    fn push(&mut self, shape: Shape, material: u32) {
+        self.scene.primitives.push(Primitive { shape, material });
+    }
+
+    fn sphere(&mut self, doc: &Spanned<SphereDoc>) -> Result<(), SceneError> {
+        let s = doc.get_ref();
+        if !finite(&s.center) || !(s.radius.is_finite() && s.radius > 0.0) {
+            return self.cx.invalid(
+                doc.span(),
+                format!(
+                    "sphere: `center` must be finite and `radius` > 0 (got {})",
+                    s.radius
+                ),
+            );
+        }
+        let material = self.material_ref(&s.material)?;
+        self.push(
+            Shape::Sphere(Sphere::new(s.center.into(), s.radius)),
+            material,
+        );
+        Ok(())
+    }
+
+    fn cuboid(&mut self, doc: &Spanned<CuboidDoc>) -> Result<(), SceneError> {
+        let c = doc.get_ref();
+        if !finite(&[&c.min[..], &c.max, &c.rotate, &c.translate].concat()) {
+            return self
+                .cx
+                .invalid(doc.span(), "cuboid: every number must be finite");
+        }
+        let (min, max) = (Vec3::from(c.min), Vec3::from(c.max));
+        if min.cmpgt(max).any() {
+            return self.cx.invalid(
+                doc.span(),
+                "cuboid: `min` must not exceed `max` on any axis",
+            );
+        }
+        let material = self.material_ref(&c.material)?;
+        let cuboid = Cuboid {
+            local: Aabb::new(min, max),
+            rotation: Mat3::from_quat(rotation(c.rotate)),
+            translation: c.translate.into(),
+        };
+        self.push(Shape::Cuboid(cuboid), material);
+        Ok(())
+    }
+
+    fn mesh(&mut self, doc: &Spanned<MeshDoc>, assets: &dyn Assets) -> Result<(), SceneError> {
+        let m = doc.get_ref();
+        let line = self.cx.line_of(doc.span().start);
+        let mesh_error = |source| SceneError::Mesh {
+            file: self.cx.file.to_owned(),
+            line,
+            mesh: m.file.clone(),
+            source,
+        };
+        let scale = match m.scale {
+            None => Vec3::ONE,
+            Some(ScaleDoc::Uniform(s)) => Vec3::splat(s),
+            Some(ScaleDoc::PerAxis(s)) => s.into(),
+        };
+        if !finite(&[&scale.to_array()[..], &m.rotate, &m.translate].concat())
+            || scale.cmpeq(Vec3::ZERO).any()
+        {
+            return self.cx.invalid(
+                doc.span(),
+                "mesh: transform numbers must be finite and `scale` non-zero",
+            );
+        }
+        let format = MeshFormat::from_path(&m.file).map_err(mesh_error)?;
+        let bytes = assets
+            .read(&m.file)
+            .map_err(|e| mesh_error(crate::mesh::MeshError::Invalid(e)))?;
+        let mut data = parse_mesh(&bytes, format).map_err(mesh_error)?;
+        data.transform(&Mat4::from_scale_rotation_translation(
+            scale,
+            rotation(m.rotate),
+            m.translate.into(),
+        ));
+        match m.smooth {
+            Some(false) => data.normals.clear(),
+            Some(true) if data.normals.is_empty() => data.compute_vertex_normals(),
+            _ => {}
+        }
+        let material = self.material_ref(&m.material)?;
+        for &[a, b, c] in &data.triangles {
+            let [pa, pb, pc] = [a, b, c].map(|i| data.positions[i as usize]);
+            let mut triangle = Triangle::new(pa, pb, pc);
+            if !data.normals.is_empty() {
+                triangle.normals = self.scene.vertex_normals.len() as u32;
+                self.scene
+                    .vertex_normals
+                    .push([a, b, c].map(|i| data.normals[i as usize]));
+            }
+            self.push(Shape::Triangle(triangle), material);
+        }
+        Ok(())
+    }
+}
+
+/// Rotation by Euler angles in degrees: about x first, then y, then z.
+fn rotation(degrees: [f32; 3]) -> Quat {
+    let [x, y, z] = degrees.map(f32::to_radians);
+    Quat::from_euler(EulerRot::ZYX, z, y, x)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    struct NoAssets;
+    impl Assets for NoAssets {
+        fn read(&self, path: &str) -> Result<Vec<u8>, String> {
+            if path == "quad.obj" {
+                Ok(b"v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n".to_vec())
+            } else {
+                Err(format!("no such file {path}"))
+            }
+        }
+    }
+
+    const CAMERA: &str = "[camera]\nlook_from = [0, 0, 5]\nlook_at = [0, 0, 0]\n";
+
+    fn parse(body: &str) -> Result<Scene, SceneError> {
+        parse_scene(&format!("{CAMERA}{body}"), "test.toml", &NoAssets)
+    }
+
+    fn error(body: &str) -> String {
+        parse(body).unwrap_err().to_string()
+    }
+
+    #[test]
+    fn minimal_scene_with_every_shape() {
+        let scene = parse(
+            "[materials.red]\ntype = \"lambertian\"\nalbedo = [0.8, 0.1, 0.1]\n\
+             [[spheres]]\ncenter = [0, 0, 0]\nradius = 1\nmaterial = \"red\"\n\
+             [[cuboids]]\nmin = [0, 0, 0]\nmax = [1, 2, 3]\nrotate = [0, 15, 0]\nmaterial = { type = \"metal\", albedo = [1, 1, 1], fuzz = 0.1 }\n\
+             [[meshes]]\nfile = \"quad.obj\"\nmaterial = \"red\"\nscale = 2\nsmooth = true\n",
+        )
+        .unwrap();
+        let counts = scene.shape_counts();
+        assert_eq!(
+            (counts.spheres, counts.cuboids, counts.triangles),
+            (1, 1, 2)
+        );
+        assert_eq!(scene.materials.len(), 2);
+        assert_eq!(scene.vertex_normals.len(), 2);
+        assert_eq!(scene.camera.look_from, Vec3::new(0.0, 0.0, 5.0));
+    }
+
+    #[test]
+    fn unknown_key_names_line_and_key() {
+        let e = error("[[spheres]]\ncenter = [0, 0, 0]\nradus = 1\nmaterial = \"x\"\n");
+        assert!(e.starts_with("test.toml:6:"), "{e}");
+        assert!(e.contains("radus"), "{e}");
+    }
+
+    #[test]
+    fn unknown_material_names_line_and_name() {
+        let e = error("[[spheres]]\ncenter = [0, 0, 0]\nradius = 1\nmaterial = \"glass\"\n");
+        assert!(e.starts_with("test.toml:7:"), "{e}");
+        assert!(e.contains("unknown material `glass`"), "{e}");
+    }
+
+    #[test]
+    fn negative_radius_is_rejected_with_its_line() {
+        let e = error("\n[[spheres]]\ncenter = [0, 0, 0]\nradius = -1\nmaterial = {type = \"dielectric\", ior = 1.5}\n");
+        assert!(e.starts_with("test.toml:5:") && e.contains("radius"), "{e}");
+    }
+
+    #[test]
+    fn bad_material_type_is_reported() {
+        let e = error("[materials.x]\ntype = \"plastic\"\nalbedo = [1, 1, 1]\n");
+        assert!(e.contains("test.toml:4") && e.contains("plastic"), "{e}");
+    }
+
+    #[test]
+    fn toml_syntax_error_has_line_and_column() {
+        let e = parse_scene("[camera\nlook_from = 1", "bad.toml", &NoAssets).unwrap_err();
+        assert!(matches!(e, SceneError::Syntax { line: 1, .. }), "{e}");
+    }
+
+    #[test]
+    fn missing_mesh_file_names_the_mesh() {
+        let e = error("[[meshes]]\nfile = \"gone.ply\"\nmaterial = {type = \"lambertian\", albedo = [1, 1, 1]}\n");
+        assert!(e.contains("test.toml:4") && e.contains("gone.ply"), "{e}");
+    }
+
+    #[test]
+    fn missing_camera_is_reported() {
+        let e = parse_scene("name = \"no camera\"\n", "c.toml", &NoAssets)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("camera"), "{e}");
+    }
+
+    #[test]
+    fn constant_background_and_settings_are_read() {
+        let source =
+            format!("background = [0.1, 0.2, 0.3]\n{CAMERA}[render]\nwidth = 32\nspp = 3\n");
+        let scene = parse_scene(&source, "test.toml", &NoAssets).unwrap();
+        assert_eq!(
+            scene.background,
+            Background::Constant(Vec3::new(0.1, 0.2, 0.3))
+        );
+        assert_eq!((scene.settings.width, scene.settings.spp), (32, 3));
+        assert_eq!(scene.settings.height, RenderSettings::default().height);
+    }
+
+    #[test]
+    fn rotation_applies_x_then_y_then_z() {
+        let q = rotation([90.0, 90.0, 0.0]);
+        // x first takes +y to +z; then y takes +z to +x.
+        assert!((q * Vec3::Y - Vec3::X).length() < 1e-6);
+    }
+}
