@@ -142,7 +142,7 @@ fn apply_overrides(scene: &mut Scene, args: &RenderArgs) -> anyhow::Result<()> {
             "image size {}x{} is too large (at most {MAX_PIXELS} pixels; this one needs {} MiB of film)",
             s.width,
             s.height,
-            s.width as u64 * s.height as u64 * 12 >> 20
+            (s.width as u64 * s.height as u64 * 12) >> 20
         );
     }
     if s.spp == 0 {

@@ -1,4 +1,7 @@
 //! Errors the renderer returns; each names the file, line or object at fault.
+//!
+//! Each message is complete on its own (the underlying cause is part of it), so callers
+//! print it once rather than walking a source chain.
 
 use crate::mesh::MeshError;
 use std::path::PathBuf;
@@ -7,12 +10,8 @@ use thiserror::Error;
 /// A scene that could not be loaded.
 #[derive(Debug, Error)]
 pub enum SceneError {
-    #[error("{file}: cannot read the file: {source}")]
-    Read {
-        file: String,
-        #[source]
-        source: std::io::Error,
-    },
+    #[error("{file}: cannot read the file: {cause}")]
+    Read { file: String, cause: std::io::Error },
     #[error("{file}:{line}:{column}: {message}\n    | {text}")]
     Syntax {
         file: String,
@@ -27,13 +26,12 @@ pub enum SceneError {
         line: usize,
         message: String,
     },
-    #[error("{file}:{line}: mesh `{mesh}`: {source}")]
+    #[error("{file}:{line}: mesh `{mesh}`: {cause}")]
     Mesh {
         file: String,
         line: usize,
         mesh: String,
-        #[source]
-        source: MeshError,
+        cause: MeshError,
     },
     #[error("unknown scene `{0}`: neither a built-in scene (see `canopy scenes`) nor a file")]
     Unknown(String),
@@ -44,16 +42,14 @@ pub enum SceneError {
 pub enum OutputError {
     #[error("{}: unsupported image format (use .png or .exr)", path.display())]
     UnsupportedFormat { path: PathBuf },
-    #[error("{}: cannot write the image: {source}", path.display())]
+    #[error("{}: cannot write the image: {cause}", path.display())]
     Write {
         path: PathBuf,
-        #[source]
-        source: std::io::Error,
+        cause: std::io::Error,
     },
-    #[error("{}: cannot encode the image: {source}", path.display())]
+    #[error("{}: cannot encode the image: {cause}", path.display())]
     Encode {
         path: PathBuf,
-        #[source]
-        source: image::ImageError,
+        cause: image::ImageError,
     },
 }

@@ -32,9 +32,9 @@ use std::path::Path;
 /// Loads a scene file; its meshes are found relative to its directory.
 pub fn load_scene_file(path: &Path) -> Result<Scene, SceneError> {
     let display = path.display().to_string();
-    let source = std::fs::read_to_string(path).map_err(|source| SceneError::Read {
+    let source = std::fs::read_to_string(path).map_err(|cause| SceneError::Read {
         file: display.clone(),
-        source,
+        cause,
     })?;
     let dir = path.parent().unwrap_or(Path::new(".")).to_owned();
     parse_scene(&source, &display, &DirAssets(dir))

@@ -26,9 +26,9 @@ pub fn write_image(film: &Film, path: &Path) -> Result<(), OutputError> {
     let format = image_format(path)?;
     let temp = temp_path(path);
     let result = write_to(film, format, &temp, path).and_then(|()| {
-        std::fs::rename(&temp, path).map_err(|source| OutputError::Write {
+        std::fs::rename(&temp, path).map_err(|cause| OutputError::Write {
             path: path.to_owned(),
-            source,
+            cause,
         })
     });
     if result.is_err() {
@@ -47,13 +47,13 @@ fn temp_path(path: &Path) -> PathBuf {
 }
 
 fn write_to(film: &Film, format: ImageFormat, temp: &Path, path: &Path) -> Result<(), OutputError> {
-    let io_error = |source| OutputError::Write {
+    let io_error = |cause| OutputError::Write {
         path: path.to_owned(),
-        source,
+        cause,
     };
-    let encode_error = |source| OutputError::Encode {
+    let encode_error = |cause| OutputError::Encode {
         path: path.to_owned(),
-        source,
+        cause,
     };
     let mut out = BufWriter::new(File::create(temp).map_err(io_error)?);
     match format {

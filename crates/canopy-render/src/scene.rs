@@ -7,9 +7,10 @@ use canopy_bvh::Aabb;
 use glam::Vec3;
 
 /// What a ray that leaves the scene sees.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub enum Background {
     /// The report's sky: white at the horizon blending to light blue overhead.
+    #[default]
     Sky,
     Constant(Vec3),
 }
@@ -69,12 +70,6 @@ pub struct Scene {
     pub primitives: Vec<Primitive>,
     /// Vertex normals of smooth triangles, indexed by `Triangle::normals`.
     pub vertex_normals: Vec<[Vec3; 3]>,
-}
-
-impl Default for Background {
-    fn default() -> Self {
-        Background::Sky
-    }
 }
 
 impl Scene {

@@ -384,7 +384,7 @@ impl SceneBuilder<'_> {
 
     fn sphere(&mut self, doc: &Spanned<SphereDoc>) -> Result<(), SceneError> {
         let s = doc.get_ref();
-        if !finite(&s.center) || !(s.radius.is_finite() && s.radius > 0.0) {
+        if !(finite(&s.center) && s.radius.is_finite() && s.radius > 0.0) {
             return self.cx.invalid(
                 doc.span(),
                 format!(
@@ -428,11 +428,11 @@ impl SceneBuilder<'_> {
     fn mesh(&mut self, doc: &Spanned<MeshDoc>, assets: &dyn Assets) -> Result<(), SceneError> {
         let m = doc.get_ref();
         let line = self.cx.line_of(doc.span().start);
-        let mesh_error = |source| SceneError::Mesh {
+        let mesh_error = |cause| SceneError::Mesh {
             file: self.cx.file.to_owned(),
             line,
             mesh: m.file.clone(),
-            source,
+            cause,
         };
         let scale = match m.scale {
             None => Vec3::ONE,

@@ -20,7 +20,7 @@ impl Cuboid {
         }
     }
 
-    fn to_world(&self, p: Vec3) -> Vec3 {
+    fn transform_point(&self, p: Vec3) -> Vec3 {
         self.rotation * p + self.translation
     }
 
@@ -32,7 +32,7 @@ impl Cuboid {
                 if i & 2 == 0 { lo.y } else { hi.y },
                 if i & 4 == 0 { lo.z } else { hi.z },
             );
-            self.to_world(corner)
+            self.transform_point(corner)
         }))
     }
 
@@ -106,7 +106,7 @@ impl Cuboid {
         let magnitude =
             max_abs(self.translation) + max_abs(self.local.min).max(max_abs(self.local.max));
         Surface {
-            p: self.to_world(p),
+            p: self.transform_point(p),
             geometric_normal: normal,
             shading_normal: normal,
             error: POINT_ERROR_ULPS * magnitude,

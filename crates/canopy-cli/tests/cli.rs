@@ -1,0 +1,212 @@
+//! Runs the `canopy` binary as a user would: a tiny render, and bad inputs that must give
+//! one clear message, a non-zero exit and no output file.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn canopy(args: &[&str], dir: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_canopy"))
+        .args(args)
+        .current_dir(dir)
+        .output()
+        .expect("canopy runs")
+}
+
+/// A fresh scratch directory per test.
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("canopy-cli-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn stderr(out: &Output) -> String {
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+/// Files in `dir` other than the inputs a test wrote.
+fn outputs(dir: &Path) -> Vec<String> {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| !n.ends_with(".toml") && !n.ends_with(".ply") && !n.ends_with(".obj"))
+        .collect()
+}
+
+const CAMERA: &str = "[camera]\nlook_from = [0, 0, 5]\nlook_at = [0, 0, 0]\n";
+
+/// Writes a scene file and renders it; the render must fail with `expected` in stderr.
+fn assert_scene_fails(name: &str, scene: &str, expected: &[&str]) {
+    let dir = scratch(name);
+    std::fs::write(dir.join("bad.toml"), scene).unwrap();
+    let out = canopy(
+        &[
+            "render", "bad.toml", "-o", "out.png", "--size", "8x8", "--spp", "1",
+        ],
+        &dir,
+    );
+    let err = stderr(&out);
+    assert!(!out.status.success(), "{name}: should fail");
+    for e in expected {
+        assert!(err.contains(e), "{name}: `{e}` not in: {err}");
+    }
+    assert!(!err.contains("panicked"), "{name}: {err}");
+    assert_eq!(
+        outputs(&dir),
+        Vec::<String>::new(),
+        "{name}: left files behind"
+    );
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+#[test]
+fn tiny_render_writes_a_png_and_a_summary() {
+    let dir = scratch("tiny");
+    let out = canopy(
+        &[
+            "render",
+            "paper-1",
+            "-o",
+            "tiny.png",
+            "--size",
+            "32x24",
+            "--spp",
+            "2",
+            "--threads",
+            "2",
+        ],
+        &dir,
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    let summary = String::from_utf8_lossy(&out.stdout);
+    for key in [
+        "primitives  485",
+        "bvh         binned-sah",
+        "render",
+        "Mrays/s",
+    ] {
+        assert!(
+            summary.contains(key),
+            "`{key}` missing from summary:\n{summary}"
+        );
+    }
+    let img = image::open(dir.join("tiny.png")).unwrap();
+    assert_eq!((img.width(), img.height()), (32, 24));
+    assert_eq!(
+        outputs(&dir),
+        vec!["tiny.png".to_string()],
+        "no temporary files left"
+    );
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+#[test]
+fn exr_output_and_brute_force_mode() {
+    let dir = scratch("exr");
+    let out = canopy(
+        &[
+            "render", "cornell", "-o", "c.exr", "--size", "8x8", "--spp", "1", "--bvh", "none",
+        ],
+        &dir,
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(String::from_utf8_lossy(&out.stdout).contains("bvh         none"));
+    assert_eq!(image::open(dir.join("c.exr")).unwrap().width(), 8);
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+#[test]
+fn scenes_lists_every_builtin() {
+    let out = canopy(&["scenes"], &std::env::temp_dir());
+    let list = String::from_utf8_lossy(&out.stdout);
+    for name in ["paper-1", "paper-6", "rtiow-final", "cornell"] {
+        assert!(list.contains(name), "{list}");
+    }
+}
+
+#[test]
+fn unknown_key_is_reported_with_file_line_and_key() {
+    let scene = format!("{CAMERA}[[spheres]]\ncenter = [0, 0, 0]\nradus = 1\n");
+    assert_scene_fails("key", &scene, &["bad.toml:6:", "radus"]);
+}
+
+#[test]
+fn unknown_material_is_reported_with_its_line() {
+    let scene =
+        format!("{CAMERA}[[spheres]]\ncenter = [0, 0, 0]\nradius = 1\nmaterial = \"chrome\"\n");
+    assert_scene_fails(
+        "material",
+        &scene,
+        &["bad.toml:7:", "unknown material `chrome`"],
+    );
+}
+
+#[test]
+fn toml_syntax_error_is_reported() {
+    assert_scene_fails(
+        "syntax",
+        "[camera\nlook_from = [0, 0, 5]\n",
+        &["bad.toml:1:"],
+    );
+}
+
+#[test]
+fn missing_mesh_file_is_named() {
+    let scene = format!("{CAMERA}[[meshes]]\nfile = \"nowhere.ply\"\nmaterial = {{ type = \"lambertian\", albedo = [1, 1, 1] }}\n");
+    assert_scene_fails("missing-mesh", &scene, &["bad.toml:4:", "nowhere.ply"]);
+}
+
+#[test]
+fn malformed_mesh_is_named_with_what_is_wrong() {
+    let dir_name = "malformed-mesh";
+    let scene = format!("{CAMERA}[[meshes]]\nfile = \"broken.ply\"\nmaterial = {{ type = \"lambertian\", albedo = [1, 1, 1] }}\n");
+    let dir = scratch(dir_name);
+    std::fs::write(dir.join("broken.ply"), "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n").unwrap();
+    std::fs::write(dir.join("bad.toml"), scene).unwrap();
+    let out = canopy(
+        &["render", "bad.toml", "-o", "out.png", "--size", "8x8"],
+        &dir,
+    );
+    let err = stderr(&out);
+    assert!(!out.status.success());
+    assert!(
+        err.contains("broken.ply") && err.contains("vertex 7"),
+        "{err}"
+    );
+    assert_eq!(outputs(&dir), Vec::<String>::new());
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+#[test]
+fn unknown_scene_and_bad_options_fail_cleanly() {
+    let dir = scratch("options");
+    let cases: [(&[&str], &str); 4] = [
+        (
+            &["render", "no-such-scene"],
+            "unknown scene `no-such-scene`",
+        ),
+        (
+            &["render", "paper-1", "-o", "out.bmp"],
+            "unsupported image format",
+        ),
+        (
+            &["render", "paper-1", "--bvh", "octree"],
+            "unknown BVH builder `octree`",
+        ),
+        (
+            &["render", "paper-1", "--size", "0x10"],
+            "positive integers",
+        ),
+    ];
+    for (args, expected) in cases {
+        let out = canopy(args, &dir);
+        assert!(!out.status.success(), "{args:?}");
+        assert!(
+            stderr(&out).contains(expected),
+            "{args:?}: {}",
+            stderr(&out)
+        );
+    }
+    assert_eq!(outputs(&dir), Vec::<String>::new());
+    std::fs::remove_dir_all(dir).unwrap();
+}
