@@ -99,12 +99,65 @@ impl Aabb {
     /// the plane of a face (`0 * inf = NaN`) may be reported either way.
     #[inline(always)]
     pub fn ray_entry_or_inf(&self, ray: &Ray) -> f32 {
-        let t0 = (self.min - ray.origin) * ray.inv_dir;
-        let t1 = (self.max - ray.origin) * ray.inv_dir;
-        let near = t0.min(t1);
-        let far = t0.max(t1);
-        let enter = near.x.max(near.y).max(near.z).max(ray.t_min);
-        let exit = (far.x.min(far.y).min(far.z) * FAR_SLACK).min(ray.t_max);
+        SlabRay::new(ray).entry_or_inf(self.min, self.max)
+    }
+}
+
+/// A ray prepared for many slab tests.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct SlabRay {
+    origin: Vec3,
+    inv_dir: Vec3,
+    pub t_min: f32,
+    pub t_max: f32,
+}
+
+/// `min` and `max` as plain compare-and-select, which compile to single `minss`/`maxss`
+/// instructions (`f32::min` must also order NaNs, which costs several more). When an
+/// argument is NaN they return the second one.
+#[inline(always)]
+fn fast_min(a: f32, b: f32) -> f32 {
+    if a < b {
+        a
+    } else {
+        b
+    }
+}
+
+#[inline(always)]
+fn fast_max(a: f32, b: f32) -> f32 {
+    if a > b {
+        a
+    } else {
+        b
+    }
+}
+
+impl SlabRay {
+    #[inline(always)]
+    pub fn new(ray: &Ray) -> Self {
+        Self {
+            origin: ray.origin,
+            inv_dir: ray.inv_dir,
+            t_min: ray.t_min,
+            t_max: ray.t_max,
+        }
+    }
+
+    /// Entry distance into the box `[min, max]` within `[t_min, t_max]`, or `+inf`.
+    #[inline(always)]
+    pub fn entry_or_inf(&self, min: Vec3, max: Vec3) -> f32 {
+        let t0 = (min - self.origin) * self.inv_dir;
+        let t1 = (max - self.origin) * self.inv_dir;
+        let near_x = fast_min(t0.x, t1.x);
+        let near_y = fast_min(t0.y, t1.y);
+        let near_z = fast_min(t0.z, t1.z);
+        let far_x = fast_max(t0.x, t1.x);
+        let far_y = fast_max(t0.y, t1.y);
+        let far_z = fast_max(t0.z, t1.z);
+        let enter = fast_max(fast_max(near_x, near_y), fast_max(near_z, self.t_min));
+        let exit = fast_min(fast_min(far_x, far_y), far_z) * FAR_SLACK;
+        let exit = fast_min(exit, self.t_max);
         if enter <= exit {
             enter
         } else {

@@ -32,3 +32,4 @@ pub use build::{build, BuildParams, Builder, SahCosts, UnknownBuilder};
 pub use bvh2::{Bvh2, Bvh2Node, BvhError};
 pub use ray::{Hit, Ray};
 pub use stats::TreeStats;
+pub use traverse::{TraversalCounter, TraversalStats};

@@ -1,36 +1,39 @@
 //! Closest-hit and any-hit traversal of a [`Bvh2`], generic over the primitive test.
 
+use crate::aabb::SlabRay;
 use crate::{Bvh2, Hit, Ray};
+use std::mem::MaybeUninit;
 
 /// Traversal stack: a fixed array for the common case, spilling to the heap only for
-/// trees deeper than its capacity (degenerate inputs can make very deep trees).
+/// trees deeper than its capacity (degenerate inputs can make very deep trees). The array
+/// is left uninitialised: clearing it would cost more than a short traversal.
 struct Stack<T: Copy> {
-    inline: [T; 64],
+    inline: [MaybeUninit<T>; 64],
     len: usize,
     spill: Vec<T>,
 }
 
 impl<T: Copy> Stack<T> {
-    #[inline]
-    fn new(fill: T) -> Self {
+    #[inline(always)]
+    fn new() -> Self {
         Self {
-            inline: [fill; 64],
+            inline: [const { MaybeUninit::uninit() }; 64],
             len: 0,
             spill: Vec::new(),
         }
     }
 
-    #[inline]
+    #[inline(always)]
     fn push(&mut self, item: T) {
         if self.len < self.inline.len() {
-            self.inline[self.len] = item;
+            self.inline[self.len].write(item);
             self.len += 1;
         } else {
             self.spill.push(item);
         }
     }
 
-    #[inline]
+    #[inline(always)]
     fn pop(&mut self) -> Option<T> {
         if let Some(item) = self.spill.pop() {
             return Some(item);
@@ -39,7 +42,38 @@ impl<T: Copy> Stack<T> {
             return None;
         }
         self.len -= 1;
-        Some(self.inline[self.len])
+        // SAFETY: entries below `len` were written by `push` and not yet popped.
+        Some(unsafe { self.inline[self.len].assume_init() })
+    }
+}
+
+/// Receives traversal events; `()` ignores them and compiles to nothing.
+pub trait TraversalCounter {
+    /// A node's children were box-tested (interior) or its primitives tested (leaf).
+    #[inline(always)]
+    fn visit_node(&mut self) {}
+    /// One primitive test.
+    #[inline(always)]
+    fn test_primitive(&mut self) {}
+}
+
+impl TraversalCounter for () {}
+
+/// Counts of traversal work, summed over any number of rays.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct TraversalStats {
+    pub nodes_visited: u64,
+    pub primitives_tested: u64,
+}
+
+impl TraversalCounter for TraversalStats {
+    #[inline(always)]
+    fn visit_node(&mut self) {
+        self.nodes_visited += 1;
+    }
+    #[inline(always)]
+    fn test_primitive(&mut self) {
+        self.primitives_tested += 1;
     }
 }
 
@@ -50,33 +84,53 @@ impl Bvh2 {
     /// `[ray.t_min, ray.t_max]`; the `ray` it sees has `t_max` shrunk to the closest hit so
     /// far. Equal distances resolve to the lower primitive index (see [`Hit::is_before`]),
     /// so the answer matches a brute-force loop exactly.
-    pub fn intersect<F>(&self, ray: &Ray, mut hit_prim: F) -> Option<Hit>
+    #[inline]
+    pub fn intersect<F>(&self, ray: &Ray, hit_prim: F) -> Option<Hit>
     where
         F: FnMut(u32, &Ray) -> Option<f32>,
     {
+        self.intersect_counted(ray, hit_prim, &mut ())
+    }
+
+    /// [`Bvh2::intersect`], reporting its work to `counter`.
+    pub fn intersect_counted<F, C>(
+        &self,
+        ray: &Ray,
+        mut hit_prim: F,
+        counter: &mut C,
+    ) -> Option<Hit>
+    where
+        F: FnMut(u32, &Ray) -> Option<f32>,
+        C: TraversalCounter,
+    {
         let root = self.nodes.first()?;
         let mut ray = *ray;
-        if root.bounds().ray_entry_or_inf(&ray) == f32::INFINITY {
+        let mut slab = SlabRay::new(&ray);
+        if slab.entry_or_inf(root.min, root.max) == f32::INFINITY {
             return None;
         }
         let mut best: Option<Hit> = None;
-        let mut stack = Stack::new((0u32, 0f32));
+        let mut stack = Stack::<(u32, f32)>::new();
         let mut node = root;
         loop {
+            counter.visit_node();
             if node.is_leaf() {
                 for &prim in self.leaf_prims(node) {
+                    counter.test_primitive();
                     if let Some(t) = hit_prim(prim, &ray) {
                         let hit = Hit { t, prim };
                         if best.is_none_or(|b| hit.is_before(&b)) {
                             ray.t_max = t;
+                            slab.t_max = t;
                             best = Some(hit);
                         }
                     }
                 }
             } else {
                 let (left, right) = (node.first, node.first + 1);
-                let t_left = self.nodes[left as usize].bounds().ray_entry_or_inf(&ray);
-                let t_right = self.nodes[right as usize].bounds().ray_entry_or_inf(&ray);
+                let (l, r) = (&self.nodes[left as usize], &self.nodes[right as usize]);
+                let t_left = slab.entry_or_inf(l.min, l.max);
+                let t_right = slab.entry_or_inf(r.min, r.max);
                 let (near, t_near, far, t_far) = if t_left <= t_right {
                     (left, t_left, right, t_right)
                 } else {
@@ -112,10 +166,11 @@ impl Bvh2 {
         let Some(root) = self.nodes.first() else {
             return false;
         };
-        if root.bounds().ray_entry_or_inf(ray) == f32::INFINITY {
+        let slab = SlabRay::new(ray);
+        if slab.entry_or_inf(root.min, root.max) == f32::INFINITY {
             return false;
         }
-        let mut stack = Stack::new(0u32);
+        let mut stack = Stack::<u32>::new();
         let mut node = root;
         loop {
             if node.is_leaf() {
@@ -159,7 +214,7 @@ mod tests {
 
     #[test]
     fn stack_spills_past_inline_capacity_and_stays_lifo() {
-        let mut s = Stack::new(0u32);
+        let mut s = Stack::<u32>::new();
         for i in 0..200 {
             s.push(i);
         }
