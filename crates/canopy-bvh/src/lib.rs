@@ -26,6 +26,7 @@ mod bvh2;
 mod ray;
 mod stats;
 mod traverse;
+mod wide;
 
 pub use aabb::Aabb;
 pub use build::{build, BuildParams, Builder, SahCosts, UnknownBuilder};
@@ -33,3 +34,4 @@ pub use bvh2::{Bvh2, Bvh2Node, BvhError};
 pub use ray::{Hit, Ray};
 pub use stats::TreeStats;
 pub use traverse::{TraversalCounter, TraversalStats};
+pub use wide::{Bvh4, Bvh8, BvhN, WideNode, EMPTY_SLOT};

@@ -7,15 +7,15 @@ use std::mem::MaybeUninit;
 /// Traversal stack: a fixed array for the common case, spilling to the heap only for
 /// trees deeper than its capacity (degenerate inputs can make very deep trees). The array
 /// is left uninitialised: clearing it would cost more than a short traversal.
-struct Stack<T: Copy> {
+pub(crate) struct TraversalStack<T: Copy> {
     inline: [MaybeUninit<T>; 64],
     len: usize,
     spill: Vec<T>,
 }
 
-impl<T: Copy> Stack<T> {
+impl<T: Copy> TraversalStack<T> {
     #[inline(always)]
-    fn new() -> Self {
+    pub(crate) fn new() -> Self {
         Self {
             inline: [const { MaybeUninit::uninit() }; 64],
             len: 0,
@@ -24,7 +24,7 @@ impl<T: Copy> Stack<T> {
     }
 
     #[inline(always)]
-    fn push(&mut self, item: T) {
+    pub(crate) fn push(&mut self, item: T) {
         if self.len < self.inline.len() {
             self.inline[self.len].write(item);
             self.len += 1;
@@ -34,7 +34,7 @@ impl<T: Copy> Stack<T> {
     }
 
     #[inline(always)]
-    fn pop(&mut self) -> Option<T> {
+    pub(crate) fn pop(&mut self) -> Option<T> {
         if let Some(item) = self.spill.pop() {
             return Some(item);
         }
@@ -110,7 +110,7 @@ impl Bvh2 {
             return None;
         }
         let mut best: Option<Hit> = None;
-        let mut stack = Stack::<(u32, f32)>::new();
+        let mut stack = TraversalStack::<(u32, f32)>::new();
         let mut node = root;
         loop {
             counter.visit_node();
@@ -170,7 +170,7 @@ impl Bvh2 {
         if slab.entry_or_inf(root.min, root.max) == f32::INFINITY {
             return false;
         }
-        let mut stack = Stack::<u32>::new();
+        let mut stack = TraversalStack::<u32>::new();
         let mut node = root;
         loop {
             if node.is_leaf() {
@@ -214,7 +214,7 @@ mod tests {
 
     #[test]
     fn stack_spills_past_inline_capacity_and_stays_lifo() {
-        let mut s = Stack::<u32>::new();
+        let mut s = TraversalStack::<u32>::new();
         for i in 0..200 {
             s.push(i);
         }

@@ -1,7 +1,7 @@
 //! Every builder must answer closest-hit and any-hit queries exactly as a loop over all
 //! primitives does. Primitives here are boxes, tested with the same slab test.
 
-use canopy_bvh::{build, Aabb, BuildParams, Builder, Hit, Ray};
+use canopy_bvh::{build, Aabb, BuildParams, Builder, Bvh4, Bvh8, Hit, Ray};
 use glam::Vec3;
 use proptest::prelude::*;
 
@@ -25,15 +25,46 @@ fn check_against_brute_force(boxes: &[Aabb], rays: &[Ray], params: &BuildParams)
             .unwrap_or_else(|e| panic!("{builder}: {e}"));
         let stats = bvh.stats(&params.sah);
         assert!(stats.max_leaf_size <= params.max_leaf_size.max(1) as usize);
+        let bvh4 = Bvh4::from_bvh2(&bvh);
+        let bvh8 = Bvh8::from_bvh2(&bvh);
+        bvh4.validate(boxes)
+            .unwrap_or_else(|e| panic!("{builder} x4: {e}"));
+        bvh8.validate(boxes)
+            .unwrap_or_else(|e| panic!("{builder} x8: {e}"));
+        let closest = |p: u32, r: &Ray| boxes[p as usize].ray_entry(r);
+        let any = |p: u32, r: &Ray| boxes[p as usize].ray_entry(r).is_some();
         for ray in rays {
             let expected = brute_force_closest(boxes, ray);
-            let got = bvh.intersect(ray, |p, r| boxes[p as usize].ray_entry(r));
-            assert_eq!(got, expected, "{builder}: closest hit for {ray:?}");
-            let occluded = bvh.occluded(ray, |p, r| boxes[p as usize].ray_entry(r).is_some());
             assert_eq!(
-                occluded,
-                expected.is_some(),
-                "{builder}: any hit for {ray:?}"
+                bvh.intersect(ray, closest),
+                expected,
+                "{builder} x2: closest hit for {ray:?}"
+            );
+            assert_eq!(
+                bvh4.intersect(ray, closest),
+                expected,
+                "{builder} x4: closest hit for {ray:?}"
+            );
+            assert_eq!(
+                bvh8.intersect(ray, closest),
+                expected,
+                "{builder} x8: closest hit for {ray:?}"
+            );
+            let hit = expected.is_some();
+            assert_eq!(
+                bvh.occluded(ray, any),
+                hit,
+                "{builder} x2: any hit for {ray:?}"
+            );
+            assert_eq!(
+                bvh4.occluded(ray, any),
+                hit,
+                "{builder} x4: any hit for {ray:?}"
+            );
+            assert_eq!(
+                bvh8.occluded(ray, any),
+                hit,
+                "{builder} x8: any hit for {ray:?}"
             );
         }
     }
@@ -123,19 +154,80 @@ proptest! {
 
 #[test]
 fn empty_input_gives_an_empty_tree_that_never_hits() {
-    let bvh = build(Builder::BinnedSah, &[], &BuildParams::default());
-    assert_eq!(bvh.validate(&[]), Ok(()));
-    let ray = Ray::new(Vec3::ZERO, Vec3::X, 0.0, f32::INFINITY);
-    assert_eq!(bvh.intersect(&ray, |_, _| Some(1.0)), None);
-    assert!(!bvh.occluded(&ray, |_, _| true));
+    for &builder in Builder::ALL {
+        let bvh = build(builder, &[], &BuildParams::default());
+        assert_eq!(bvh.validate(&[]), Ok(()));
+        let ray = Ray::new(Vec3::ZERO, Vec3::X, 0.0, f32::INFINITY);
+        assert_eq!(bvh.intersect(&ray, |_, _| Some(1.0)), None);
+        assert!(!bvh.occluded(&ray, |_, _| true));
+        assert_eq!(
+            Bvh4::from_bvh2(&bvh).intersect(&ray, |_, _| Some(1.0)),
+            None
+        );
+    }
 }
 
 #[test]
 fn one_primitive_gives_a_single_leaf() {
     let boxes = [Aabb::new(Vec3::ZERO, Vec3::ONE)];
-    let bvh = build(Builder::BinnedSah, &boxes, &BuildParams::default());
-    assert_eq!(bvh.nodes().len(), 1);
-    assert!(bvh.nodes()[0].is_leaf());
+    for &builder in Builder::ALL {
+        let bvh = build(builder, &boxes, &BuildParams::default());
+        assert_eq!(bvh.nodes().len(), 1, "{builder}");
+        assert!(bvh.nodes()[0].is_leaf());
+        let ray = Ray::new(Vec3::new(0.5, 0.5, -1.0), Vec3::Z, 0.0, f32::INFINITY);
+        let hit = Bvh8::from_bvh2(&bvh).intersect(&ray, |p, r| boxes[p as usize].ray_entry(r));
+        assert_eq!(hit, Some(Hit { t: 1.0, prim: 0 }));
+    }
+}
+
+/// The i-th box of a pattern.
+type BoxPattern = fn(usize) -> Aabb;
+
+/// Sizes 1..=100 of several degenerate patterns, every builder: well-formed trees.
+#[test]
+fn every_builder_makes_valid_trees_on_degenerate_patterns_of_every_size() {
+    let patterns: [(&str, BoxPattern); 4] = [
+        ("same box", |_| Aabb::new(Vec3::ZERO, Vec3::ONE)),
+        ("points on a line", |i| {
+            Aabb::new(Vec3::new(i as f32, 0.0, 0.0), Vec3::new(i as f32, 0.0, 0.0))
+        }),
+        ("flat grid", |i| {
+            let p = Vec3::new((i % 7) as f32, (i / 7) as f32, 0.0);
+            Aabb::new(p, p + Vec3::new(1.0, 1.0, 0.0))
+        }),
+        ("exponential sizes", |i| {
+            Aabb::new(
+                Vec3::splat(-(1.5f32).powi(i as i32 % 40)),
+                Vec3::splat((1.5f32).powi(i as i32 % 40)),
+            )
+        }),
+    ];
+    for (name, pattern) in patterns {
+        for n in 1..=100 {
+            let boxes: Vec<Aabb> = (0..n).map(pattern).collect();
+            for &builder in Builder::ALL {
+                for max_leaf_size in [1, 4] {
+                    let params = BuildParams {
+                        max_leaf_size,
+                        ..BuildParams::default()
+                    };
+                    let bvh = build(builder, &boxes, &params);
+                    bvh.validate(&boxes)
+                        .unwrap_or_else(|e| panic!("{builder} on {name} x{n}: {e}"));
+                    assert!(
+                        bvh.stats(&params.sah).max_leaf_size <= max_leaf_size as usize,
+                        "{builder} on {name} x{n}"
+                    );
+                    Bvh4::from_bvh2(&bvh)
+                        .validate(&boxes)
+                        .unwrap_or_else(|e| panic!("{builder} x4 on {name} x{n}: {e}"));
+                    Bvh8::from_bvh2(&bvh)
+                        .validate(&boxes)
+                        .unwrap_or_else(|e| panic!("{builder} x8 on {name} x{n}: {e}"));
+                }
+            }
+        }
+    }
 }
 
 #[test]
@@ -160,13 +252,19 @@ fn every_leaf_respects_max_leaf_size_on_a_large_input() {
             Aabb::new(p, p + Vec3::splat(0.5))
         })
         .collect();
-    for max_leaf_size in [1, 2, 4, 16] {
-        let params = BuildParams {
-            max_leaf_size,
-            ..BuildParams::default()
-        };
-        let bvh = build(Builder::BinnedSah, &boxes, &params);
-        bvh.validate(&boxes).unwrap();
-        assert!(bvh.stats(&params.sah).max_leaf_size <= max_leaf_size as usize);
+    for &builder in Builder::ALL {
+        for max_leaf_size in [1, 2, 4, 16] {
+            let params = BuildParams {
+                max_leaf_size,
+                ..BuildParams::default()
+            };
+            let bvh = build(builder, &boxes, &params);
+            bvh.validate(&boxes)
+                .unwrap_or_else(|e| panic!("{builder}: {e}"));
+            assert!(
+                bvh.stats(&params.sah).max_leaf_size <= max_leaf_size as usize,
+                "{builder}"
+            );
+        }
     }
 }

@@ -40,15 +40,46 @@ pub fn load_scene_file(path: &Path) -> Result<Scene, SceneError> {
     parse_scene(&source, &display, &DirAssets(dir))
 }
 
-/// A built-in scene by name, else a scene file by path.
+/// A built-in scene by name, else a scene file by path, else a bare OBJ or PLY mesh
+/// (see [`scene_from_mesh`]).
 pub fn load_scene(name_or_path: &str) -> Result<Scene, SceneError> {
     if let Some(builtin) = BuiltinScene::find(name_or_path) {
         return builtin.load();
     }
     let path = Path::new(name_or_path);
-    if path.exists() {
-        load_scene_file(path)
-    } else {
-        Err(SceneError::Unknown(name_or_path.to_owned()))
+    if !path.exists() {
+        return Err(SceneError::Unknown(name_or_path.to_owned()));
     }
+    if mesh::MeshFormat::from_path(name_or_path).is_ok() {
+        scene_from_mesh(path)
+    } else {
+        load_scene_file(path)
+    }
+}
+
+/// A scene of one mesh file: grey, smooth-shaded, under the sky, seen from the front.
+pub fn scene_from_mesh(path: &Path) -> Result<Scene, SceneError> {
+    let file = path
+        .file_name()
+        .map(|f| f.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let dir = path.parent().unwrap_or(Path::new(".")).to_owned();
+    let source = format!(
+        "name = {name:?}\n[camera]\nlook_from = [0, 0, 1]\nlook_at = [0, 0, 0]\n\
+         [[meshes]]\nfile = {file:?}\nmaterial = {{ type = \"lambertian\", albedo = [0.7, 0.7, 0.7] }}\n",
+        name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default(),
+    );
+    let mut scene = parse_scene(&source, &path.display().to_string(), &DirAssets(dir))?;
+    // Frame the mesh: look at its centre from the front, a little above.
+    let bounds = scene
+        .primitive_bounds()
+        .into_iter()
+        .fold(canopy_bvh::Aabb::EMPTY, canopy_bvh::Aabb::union);
+    let radius = 0.5 * bounds.extent().length();
+    let centre = bounds.center();
+    scene.camera.look_at = centre;
+    scene.camera.vfov = 40.0;
+    let distance = radius / (0.5 * scene.camera.vfov.to_radians()).tan() * 1.1;
+    scene.camera.look_from = centre + distance * glam::Vec3::new(0.0, 0.3, 1.0).normalize();
+    Ok(scene)
 }

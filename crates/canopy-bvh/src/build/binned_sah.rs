@@ -3,10 +3,10 @@
 //!
 //! Each node bins its primitives' centroids into `params.bins` equal slots along each
 //! axis, evaluates the SAH at every slot boundary and splits at the cheapest one, or
-//! makes a leaf when that is cheaper and allowed. Nodes are processed from an explicit
-//! work list, so degenerate inputs that make deep trees cannot overflow the call stack.
+//! makes a leaf when that is cheaper and allowed.
 
-use crate::{Aabb, BuildParams, Bvh2, Bvh2Node};
+use super::top_down::{self, Splitter};
+use crate::{Aabb, BuildParams, Bvh2};
 use glam::Vec3;
 
 #[derive(Clone, Copy)]
@@ -28,52 +28,26 @@ struct Split {
 }
 
 pub(crate) fn build(boxes: &[Aabb], params: &BuildParams) -> Bvh2 {
-    if boxes.is_empty() {
-        return Bvh2::default();
-    }
-    let centroids: Vec<Vec3> = boxes.iter().map(Aabb::center).collect();
-    let mut prim_indices: Vec<u32> = (0..boxes.len() as u32).collect();
-    let mut nodes = Vec::with_capacity(2 * boxes.len());
-    nodes.push(Bvh2Node::leaf(Aabb::EMPTY, 0, 1));
+    let splitter = BinnedSah {
+        boxes,
+        centroids: boxes.iter().map(Aabb::center).collect(),
+        params,
+    };
+    top_down::build(boxes, params, &splitter)
+}
 
-    // (node index, start, end) of primitives still to place.
-    let mut work = vec![(0usize, 0usize, boxes.len())];
-    while let Some((node, start, end)) = work.pop() {
-        let prims = &mut prim_indices[start..end];
-        let bounds = prims
-            .iter()
-            .fold(Aabb::EMPTY, |b, &p| b.union(boxes[p as usize]));
-        let count = prims.len();
-        let leaf_cost = count as f32 * params.sah.intersection;
+struct BinnedSah<'a> {
+    boxes: &'a [Aabb],
+    centroids: Vec<Vec3>,
+    params: &'a BuildParams,
+}
 
-        let split = find_split(prims, boxes, &centroids, bounds, params);
-        let mid = match split {
-            Some(s) if s.cost < leaf_cost || count > params.max_leaf_size as usize => {
-                partition(prims, &centroids, &s, params.bins as usize)
-            }
-            _ if count > params.max_leaf_size as usize => count / 2,
-            _ => {
-                nodes[node] = Bvh2Node::leaf(bounds, start as u32, count as u32);
-                continue;
-            }
-        };
-        // Every centroid in one bin (or a degenerate partition): split by index.
-        let mid = if mid == 0 || mid == count {
-            count / 2
-        } else {
-            mid
-        };
-
-        let left = nodes.len();
-        nodes.push(Bvh2Node::leaf(Aabb::EMPTY, 0, 1));
-        nodes.push(Bvh2Node::leaf(Aabb::EMPTY, 0, 1));
-        nodes[node] = Bvh2Node::interior(bounds, left as u32);
-        work.push((left + 1, start + mid, end));
-        work.push((left, start, start + mid));
-    }
-    Bvh2 {
-        nodes,
-        prim_indices,
+impl Splitter for BinnedSah<'_> {
+    fn split(&self, prims: &mut [u32], bounds: Aabb, must_split: bool) -> Option<usize> {
+        let leaf_cost = prims.len() as f32 * self.params.sah.intersection;
+        let split = find_split(prims, self.boxes, &self.centroids, bounds, self.params)?;
+        (split.cost < leaf_cost || must_split)
+            .then(|| partition(prims, &self.centroids, &split, self.params.bins as usize))
     }
 }
 

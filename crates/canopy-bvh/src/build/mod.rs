@@ -1,35 +1,93 @@
 //! BVH builders. Each is a pure function from primitive boxes to a [`Bvh2`].
 
+mod aac;
+mod agglomerative;
 mod binned_sah;
+mod lbvh;
+mod median;
+mod merge_tree;
+mod morton;
+mod ploc;
+mod sweep_sah;
+mod top_down;
 
 use crate::{Aabb, Bvh2};
 use std::fmt;
 use std::str::FromStr;
 use thiserror::Error;
 
-/// Which algorithm builds the tree.
+/// Which algorithm builds the tree. Every one yields the same [`Bvh2`] format and honours
+/// [`BuildParams::max_leaf_size`].
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub enum Builder {
+    /// The report's first method: sort centroids along one axis (0 = x, 1 = y, 2 = z),
+    /// split at the median, recursively.
+    SortAxis(u8),
+    /// The report's second method: sort by the Morton code of the centroids, split at
+    /// the median.
+    MortonMedian,
+    /// Karras 2012 radix tree over 63-bit Morton codes, built in parallel.
+    Lbvh,
     /// Top-down surface area heuristic with binned split candidates on all three axes
-    /// (Wald, "On fast construction of SAH-based BVHs", 2007).
+    /// (Wald, "On fast construction of SAH-based BVHs", 2007), subtrees in parallel.
     #[default]
     BinnedSah,
+    /// Top-down SAH sweeping every split position of all three sorted axes.
+    SweepSah,
+    /// The report's bottom-up greedy clustering (Walter et al. 2008), exact, by the
+    /// nearest-neighbour chain.
+    Agglomerative,
+    /// Approximate agglomerative clustering (Gu et al. 2013).
+    Aac,
+    /// Parallel locally-ordered clustering (Meister and Bittner 2018).
+    Ploc,
 }
 
 impl Builder {
-    pub const ALL: &'static [Builder] = &[Builder::BinnedSah];
+    pub const ALL: &'static [Builder] = &[
+        Builder::SortAxis(0),
+        Builder::SortAxis(1),
+        Builder::SortAxis(2),
+        Builder::MortonMedian,
+        Builder::Lbvh,
+        Builder::BinnedSah,
+        Builder::SweepSah,
+        Builder::Agglomerative,
+        Builder::Aac,
+        Builder::Ploc,
+    ];
 
-    /// The name used on the command line and in scene files.
+    /// The name used on the command line.
     pub fn name(self) -> &'static str {
         match self {
+            Builder::SortAxis(0) => "sort-x",
+            Builder::SortAxis(1) => "sort-y",
+            Builder::SortAxis(_) => "sort-z",
+            Builder::MortonMedian => "morton-median",
+            Builder::Lbvh => "lbvh",
             Builder::BinnedSah => "binned-sah",
+            Builder::SweepSah => "sweep-sah",
+            Builder::Agglomerative => "agglomerative",
+            Builder::Aac => "aac",
+            Builder::Ploc => "ploc",
         }
     }
 
     /// One line for `--help` texts.
     pub fn description(self) -> &'static str {
         match self {
-            Builder::BinnedSah => "top-down SAH, binned split candidates on all axes",
+            Builder::SortAxis(_) => {
+                "report's top-down: sort centroids on one axis, split at the median"
+            }
+            Builder::MortonMedian => "report's top-down: sort by Morton code, split at the median",
+            Builder::Lbvh => "Karras 2012 radix tree on 63-bit Morton codes (parallel)",
+            Builder::BinnedSah => "top-down SAH, binned split candidates on all axes (parallel)",
+            Builder::SweepSah => "top-down SAH, full sweep over all three sorted axes",
+            Builder::Agglomerative => {
+                "report's bottom-up: exact greedy SAH clustering (Walter 2008)"
+            }
+            Builder::Aac => "approximate agglomerative clustering (Gu 2013)",
+            Builder::Ploc => "parallel locally-ordered clustering (Meister & Bittner 2018)",
         }
     }
 }
@@ -91,6 +149,8 @@ pub struct BuildParams {
     pub sah: SahCosts,
     /// Split candidates per axis for binned builders.
     pub bins: u32,
+    /// How many neighbours on each side PLOC searches.
+    pub ploc_radius: u32,
 }
 
 impl Default for BuildParams {
@@ -99,6 +159,7 @@ impl Default for BuildParams {
             max_leaf_size: 4,
             sah: SahCosts::default(),
             bins: 16,
+            ploc_radius: 16,
         }
     }
 }
@@ -113,7 +174,14 @@ pub fn build(builder: Builder, boxes: &[Aabb], params: &BuildParams) -> Bvh2 {
         ..*params
     };
     let bvh = match builder {
+        Builder::SortAxis(axis) => median::build_sort_axis(boxes, &params, axis.min(2) as usize),
+        Builder::MortonMedian => median::build_morton_median(boxes, &params),
+        Builder::Lbvh => lbvh::build(boxes, &params),
         Builder::BinnedSah => binned_sah::build(boxes, &params),
+        Builder::SweepSah => sweep_sah::build(boxes, &params),
+        Builder::Agglomerative => agglomerative::build(boxes, &params),
+        Builder::Aac => aac::build(boxes, &params),
+        Builder::Ploc => ploc::build(boxes, &params),
     };
     debug_assert_eq!(bvh.validate(boxes), Ok(()));
     bvh

@@ -1,0 +1,74 @@
+//! Top-down SAH with a full sweep: every node sorts its primitives along each axis and
+//! prices every split position between neighbours (MacDonald and Booth 1990; Wald et al.
+//! 2007). The slowest top-down builder and the quality reference for the others.
+
+use super::top_down::{self, Splitter};
+use crate::{Aabb, BuildParams, Bvh2};
+use glam::Vec3;
+
+pub(crate) fn build(boxes: &[Aabb], params: &BuildParams) -> Bvh2 {
+    let splitter = SweepSah {
+        boxes,
+        centroids: boxes.iter().map(Aabb::center).collect(),
+        params,
+    };
+    top_down::build(boxes, params, &splitter)
+}
+
+struct SweepSah<'a> {
+    boxes: &'a [Aabb],
+    centroids: Vec<Vec3>,
+    params: &'a BuildParams,
+}
+
+impl Splitter for SweepSah<'_> {
+    fn split(&self, prims: &mut [u32], bounds: Aabb, must_split: bool) -> Option<usize> {
+        let n = prims.len();
+        if n < 2 {
+            return None;
+        }
+        let inv_area = 1.0 / bounds.surface_area().max(f32::MIN_POSITIVE);
+        let sah = &self.params.sah;
+        let mut best: Option<(f32, usize, Vec<u32>)> = None;
+        let mut right_area = vec![0f32; n];
+        for axis in 0..3 {
+            let mut sorted = prims.to_vec();
+            sorted.sort_unstable_by(|&a, &b| {
+                let (ca, cb) = (
+                    self.centroids[a as usize][axis],
+                    self.centroids[b as usize][axis],
+                );
+                ca.total_cmp(&cb).then(a.cmp(&b))
+            });
+            // right_area[i]: area of the box of sorted[i..].
+            let mut acc = Aabb::EMPTY;
+            for i in (1..n).rev() {
+                acc = acc.union(self.boxes[sorted[i] as usize]);
+                right_area[i] = acc.surface_area();
+            }
+            let mut acc = Aabb::EMPTY;
+            let mut axis_best: Option<(f32, usize)> = None;
+            for i in 1..n {
+                acc = acc.union(self.boxes[sorted[i - 1] as usize]);
+                let cost = sah.traversal
+                    + sah.intersection
+                        * inv_area
+                        * (acc.surface_area() * i as f32 + right_area[i] * (n - i) as f32);
+                if axis_best.is_none_or(|(c, _)| cost < c) {
+                    axis_best = Some((cost, i));
+                }
+            }
+            if let Some((cost, i)) = axis_best {
+                if best.as_ref().is_none_or(|(c, _, _)| cost < *c) {
+                    best = Some((cost, i, sorted));
+                }
+            }
+        }
+        let (cost, mid, sorted) = best?;
+        let leaf_cost = n as f32 * sah.intersection;
+        (cost < leaf_cost || must_split).then(|| {
+            prims.copy_from_slice(&sorted);
+            mid
+        })
+    }
+}

@@ -1,0 +1,144 @@
+//! The driver shared by top-down builders: a splitter decides how to cut one node's
+//! primitives, the driver makes leaves, enforces the leaf size and lays out nodes.
+//!
+//! Subtrees whose two halves are both large are built in parallel (rayon) into their own
+//! node arrays and spliced together; everything else is built serially from an explicit
+//! work list, so even a degenerate, very deep tree cannot overflow the call stack.
+
+use crate::{Aabb, BuildParams, Bvh2, Bvh2Node};
+
+/// Below this many primitives on either side, a subtree is built on one thread.
+const PARALLEL_THRESHOLD: usize = 4096;
+
+/// Cuts a node: reorders `prims` so that the left child's come first and returns how many
+/// there are, or `None` to make a leaf. `must_split` is set when the node holds more
+/// primitives than a leaf may; the driver then splits at the middle if the splitter
+/// declines or returns an empty side.
+pub(crate) trait Splitter: Sync {
+    fn split(&self, prims: &mut [u32], bounds: Aabb, must_split: bool) -> Option<usize>;
+}
+
+pub(crate) fn build(boxes: &[Aabb], params: &BuildParams, splitter: &impl Splitter) -> Bvh2 {
+    build_with_order(boxes, params, splitter, (0..boxes.len() as u32).collect())
+}
+
+/// As [`build`], starting from a given primitive order (for builders that sort first).
+pub(crate) fn build_with_order(
+    boxes: &[Aabb],
+    params: &BuildParams,
+    splitter: &impl Splitter,
+    mut prim_indices: Vec<u32>,
+) -> Bvh2 {
+    if boxes.is_empty() {
+        return Bvh2::default();
+    }
+    let driver = Driver {
+        boxes,
+        max_leaf: params.max_leaf_size as usize,
+        splitter,
+    };
+    let nodes = driver.subtree(&mut prim_indices, 0);
+    Bvh2 {
+        nodes,
+        prim_indices,
+    }
+}
+
+struct Driver<'a, S> {
+    boxes: &'a [Aabb],
+    max_leaf: usize,
+    splitter: &'a S,
+}
+
+impl<S: Splitter> Driver<'_, S> {
+    fn bounds(&self, prims: &[u32]) -> Aabb {
+        prims
+            .iter()
+            .fold(Aabb::EMPTY, |b, &p| b.union(self.boxes[p as usize]))
+    }
+
+    /// Where to cut `prims`, or `None` for a leaf.
+    fn cut(&self, prims: &mut [u32], bounds: Aabb) -> Option<usize> {
+        let count = prims.len();
+        let must_split = count > self.max_leaf;
+        match self.splitter.split(prims, bounds, must_split) {
+            Some(mid) if mid > 0 && mid < count => Some(mid),
+            _ if must_split => Some(count / 2),
+            _ => None,
+        }
+    }
+
+    /// Nodes of the subtree over `prims` (which start at `first` in the final index
+    /// array), root first.
+    fn subtree(&self, prims: &mut [u32], first: usize) -> Vec<Bvh2Node> {
+        let bounds = self.bounds(prims);
+        match self.cut(prims, bounds) {
+            Some(mid) if mid >= PARALLEL_THRESHOLD && prims.len() - mid >= PARALLEL_THRESHOLD => {
+                let (left_prims, right_prims) = prims.split_at_mut(mid);
+                let (left, right) = rayon::join(
+                    || self.subtree(left_prims, first),
+                    || self.subtree(right_prims, first + mid),
+                );
+                splice(bounds, left, right)
+            }
+            cut => self.serial(prims, first, bounds, cut),
+        }
+    }
+
+    /// Builds a subtree on this thread; its root's cut is already decided.
+    fn serial(
+        &self,
+        prims: &mut [u32],
+        first: usize,
+        bounds: Aabb,
+        root_cut: Option<usize>,
+    ) -> Vec<Bvh2Node> {
+        let mut nodes = Vec::with_capacity(2 * prims.len() / self.max_leaf.max(1) + 1);
+        nodes.push(Bvh2Node::leaf(bounds, first as u32, prims.len() as u32));
+        // (node, start, end, bounds, cut) with start/end relative to `prims`.
+        let mut work = vec![(0usize, 0usize, prims.len(), bounds, root_cut)];
+        while let Some((node, start, end, bounds, cut)) = work.pop() {
+            let Some(mid) = cut else {
+                nodes[node] = Bvh2Node::leaf(bounds, (first + start) as u32, (end - start) as u32);
+                continue;
+            };
+            let left = nodes.len();
+            nodes[node] = Bvh2Node::interior(bounds, left as u32);
+            for (child, (s, e)) in [(left, (start, start + mid)), (left + 1, (start + mid, end))] {
+                let child_bounds = self.bounds(&prims[s..e]);
+                let child_cut = self.cut(&mut prims[s..e], child_bounds);
+                nodes.push(Bvh2Node::leaf(
+                    child_bounds,
+                    (first + s) as u32,
+                    (e - s) as u32,
+                ));
+                work.push((child, s, e, child_bounds, child_cut));
+            }
+        }
+        nodes
+    }
+}
+
+/// Joins two subtrees under a new root: `[root, left root, right root, left rest, right
+/// rest]`, renumbering child links.
+fn splice(bounds: Aabb, left: Vec<Bvh2Node>, right: Vec<Bvh2Node>) -> Vec<Bvh2Node> {
+    let left_rest = left.len() as u32 - 1;
+    // Where node i of each subtree lands (its root goes to 1 or 2).
+    let place_left = |i: u32| if i == 0 { 1 } else { 2 + i };
+    let place_right = |i: u32| if i == 0 { 2 } else { 2 + left_rest + i };
+    let mut nodes = vec![Bvh2Node::interior(bounds, 1); 3];
+    nodes.resize(left.len() + right.len() + 1, nodes[0]);
+    for (tree, place) in [
+        (&left, &place_left as &dyn Fn(u32) -> u32),
+        (&right, &place_right),
+    ] {
+        for (i, node) in tree.iter().enumerate() {
+            let mut node = *node;
+            if !node.is_leaf() {
+                node.first = place(node.first);
+            }
+            nodes[place(i as u32) as usize] = node;
+        }
+    }
+    nodes
+}
