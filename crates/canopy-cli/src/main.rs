@@ -1,5 +1,7 @@
 //! `canopy`: render scenes with a choice of BVH, list the built-in scenes.
 
+mod build_args;
+mod bvh;
 mod render;
 
 use clap::{Parser, Subcommand};
@@ -20,6 +22,8 @@ struct Cli {
 enum Command {
     /// Render a built-in scene (see `canopy scenes`) or a scene file to PNG or EXR.
     Render(render::RenderArgs),
+    /// Build BVHs over a scene or mesh and tabulate build time, size and SAH cost.
+    Bvh(bvh::BvhArgs),
     /// List the built-in scenes.
     Scenes,
 }
@@ -28,6 +32,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Render(args) => render::run(&args),
+        Command::Bvh(args) => bvh::run(&args),
         Command::Scenes => list_scenes(),
     };
     match result {

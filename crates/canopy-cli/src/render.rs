@@ -1,9 +1,9 @@
 //! `canopy render`: load, build the acceleration structure, render with a progress bar,
 //! write the image, print a summary.
 
+use crate::build_args::{builders_help, BuildArgs};
 use anyhow::{bail, Context};
-use canopy_bvh::BuildParams;
-use canopy_render::{output::image_format, render, write_image, Accel, AccelKind, Scene};
+use canopy_render::{output::image_format, render, write_image, Accel, AccelKind, BvhWidth, Scene};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::{Path, PathBuf};
@@ -33,12 +33,14 @@ pub struct RenderArgs {
     /// Worker threads [default: all cores].
     #[arg(long)]
     threads: Option<usize>,
-    /// Acceleration structure: `none` or a BVH builder.
-    #[arg(long, default_value = "binned-sah", value_parser = parse_accel)]
+    /// Acceleration structure: `none` or a BVH builder (see --help).
+    #[arg(long, default_value = "binned-sah", value_parser = parse_accel, long_help = builders_help())]
     bvh: AccelKind,
-    /// Most primitives in a BVH leaf.
-    #[arg(long, default_value_t = BuildParams::default().max_leaf_size)]
-    max_leaf_size: u32,
+    /// Children per BVH node: 2, or the binary tree collapsed to 4 or 8.
+    #[arg(long, default_value = "2")]
+    width: BvhWidth,
+    #[command(flatten)]
+    build: BuildArgs,
 }
 
 fn parse_size(s: &str) -> Result<(u32, u32), String> {
@@ -71,11 +73,8 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         .num_threads(args.threads.unwrap_or(0))
         .build()
         .context("cannot start the worker threads")?;
-    let params = BuildParams {
-        max_leaf_size: args.max_leaf_size,
-        ..BuildParams::default()
-    };
-    let accel = pool.install(|| Accel::build(args.bvh, &scene.primitives, &params));
+    let params = args.build.params()?;
+    let accel = pool.install(|| Accel::build(args.bvh, args.width, &scene.primitives, &params));
 
     let progress = ProgressBar::new(scene.settings.height as u64).with_style(
         ProgressStyle::with_template(
@@ -101,11 +100,15 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         counts.triangles,
         counts.cuboids
     );
-    println!(
-        "bvh         {} built in {:.2} ms",
-        args.bvh,
-        accel.build_time.as_secs_f64() * 1e3
-    );
+    match args.bvh {
+        AccelKind::None => println!("bvh         none"),
+        AccelKind::Bvh(_) => println!(
+            "bvh         {} (width {}) built in {:.2} ms",
+            args.bvh,
+            args.width,
+            accel.build_time.as_secs_f64() * 1e3
+        ),
+    }
     println!(
         "render      {:.3} s on {} threads",
         stats.elapsed.as_secs_f64(),

@@ -1,20 +1,24 @@
 //! The acceleration structure a render uses: none (a loop over all primitives, the
-//! report's baseline) or a BVH from any builder.
+//! report's baseline) or a BVH from any builder, binary or collapsed to 4 or 8 wide.
 
 use crate::scene::Primitive;
-use canopy_bvh::{build, BuildParams, Builder, Bvh2, Hit, Ray};
+use canopy_bvh::{build, BuildParams, Builder, Bvh2, Bvh4, Bvh8, Hit, Ray};
 use std::fmt;
 use std::str::FromStr;
 use std::time::{Duration, Instant};
 
 /// Which acceleration structure to build.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum AccelKind {
     /// Test every primitive for every ray.
     None,
     Bvh(Builder),
-    #[default]
-    DefaultBvh,
+}
+
+impl Default for AccelKind {
+    fn default() -> Self {
+        AccelKind::Bvh(Builder::default())
+    }
 }
 
 impl AccelKind {
@@ -24,21 +28,13 @@ impl AccelKind {
             .chain(Builder::ALL.iter().map(|b| b.name()))
             .collect()
     }
-
-    fn resolved(self) -> Option<Builder> {
-        match self {
-            AccelKind::None => None,
-            AccelKind::Bvh(b) => Some(b),
-            AccelKind::DefaultBvh => Some(Builder::default()),
-        }
-    }
 }
 
 impl fmt::Display for AccelKind {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self.resolved() {
-            None => f.write_str("none"),
-            Some(b) => f.write_str(b.name()),
+        match self {
+            AccelKind::None => f.write_str("none"),
+            AccelKind::Bvh(b) => f.write_str(b.name()),
         }
     }
 }
@@ -57,27 +53,94 @@ impl FromStr for AccelKind {
     }
 }
 
+/// Children per BVH node: the binary tree as built, or collapsed to 4 or 8 wide.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum BvhWidth {
+    #[default]
+    Two,
+    Four,
+    Eight,
+}
+
+impl BvhWidth {
+    pub const ALL: [BvhWidth; 3] = [BvhWidth::Two, BvhWidth::Four, BvhWidth::Eight];
+
+    pub fn children(self) -> u32 {
+        match self {
+            BvhWidth::Two => 2,
+            BvhWidth::Four => 4,
+            BvhWidth::Eight => 8,
+        }
+    }
+}
+
+impl fmt::Display for BvhWidth {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}", self.children())
+    }
+}
+
+impl FromStr for BvhWidth {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "2" => Ok(BvhWidth::Two),
+            "4" => Ok(BvhWidth::Four),
+            "8" => Ok(BvhWidth::Eight),
+            _ => Err(format!("BVH width must be 2, 4 or 8, not `{s}`")),
+        }
+    }
+}
+
+#[derive(Clone, Debug)]
+enum Structure {
+    Linear,
+    Binary,
+    Four(Bvh4),
+    Eight(Bvh8),
+}
+
 /// A built acceleration structure over a scene's primitives.
 #[derive(Clone, Debug)]
 pub struct Accel {
+    /// The builder's binary tree (kept for statistics and pictures even when collapsed).
     bvh: Option<Bvh2>,
-    /// Wall-clock time the build took.
+    structure: Structure,
+    /// Wall-clock time of the build, collapse included.
     pub build_time: Duration,
 }
 
 impl Accel {
-    pub fn build(kind: AccelKind, primitives: &[Primitive], params: &BuildParams) -> Self {
+    pub fn build(
+        kind: AccelKind,
+        width: BvhWidth,
+        primitives: &[Primitive],
+        params: &BuildParams,
+    ) -> Self {
         let start = Instant::now();
-        let bvh = kind.resolved().map(|builder| {
-            let boxes: Vec<_> = primitives.iter().map(|p| p.shape.bounds()).collect();
-            build(builder, &boxes, params)
-        });
+        let AccelKind::Bvh(builder) = kind else {
+            return Self {
+                bvh: None,
+                structure: Structure::Linear,
+                build_time: start.elapsed(),
+            };
+        };
+        let boxes: Vec<_> = primitives.iter().map(|p| p.shape.bounds()).collect();
+        let bvh = build(builder, &boxes, params);
+        let structure = match width {
+            BvhWidth::Two => Structure::Binary,
+            BvhWidth::Four => Structure::Four(Bvh4::from_bvh2(&bvh)),
+            BvhWidth::Eight => Structure::Eight(Bvh8::from_bvh2(&bvh)),
+        };
         Self {
-            bvh,
+            bvh: Some(bvh),
+            structure,
             build_time: start.elapsed(),
         }
     }
 
+    /// The binary tree, unless this is the brute-force structure.
     pub fn bvh(&self) -> Option<&Bvh2> {
         self.bvh.as_ref()
     }
@@ -86,22 +149,29 @@ impl Accel {
     #[inline]
     pub fn intersect(&self, primitives: &[Primitive], ray: &Ray) -> Option<Hit> {
         let test = |prim: u32, ray: &Ray| primitives[prim as usize].shape.intersect(ray);
-        match &self.bvh {
-            Some(bvh) => bvh.intersect(ray, test),
-            None => {
-                let mut best: Option<Hit> = None;
-                let mut ray = *ray;
-                for prim in 0..primitives.len() as u32 {
-                    if let Some(t) = test(prim, &ray) {
-                        let hit = Hit { t, prim };
-                        if best.is_none_or(|b| hit.is_before(&b)) {
-                            ray.t_max = t;
-                            best = Some(hit);
-                        }
-                    }
-                }
-                best
+        match (&self.structure, &self.bvh) {
+            (Structure::Binary, Some(bvh)) => bvh.intersect(ray, test),
+            (Structure::Four(bvh), _) => bvh.intersect(ray, test),
+            (Structure::Eight(bvh), _) => bvh.intersect(ray, test),
+            _ => brute_force(primitives, ray),
+        }
+    }
+}
+
+fn brute_force(primitives: &[Primitive], ray: &Ray) -> Option<Hit> {
+    let mut best: Option<Hit> = None;
+    let mut ray = *ray;
+    for (prim, p) in primitives.iter().enumerate() {
+        if let Some(t) = p.shape.intersect(&ray) {
+            let hit = Hit {
+                t,
+                prim: prim as u32,
+            };
+            if best.is_none_or(|b| hit.is_before(&b)) {
+                ray.t_max = t;
+                best = Some(hit);
             }
         }
     }
+    best
 }

@@ -18,7 +18,7 @@ pub mod rng;
 pub mod scene;
 pub mod scene_file;
 
-pub use accel::{Accel, AccelKind};
+pub use accel::{Accel, AccelKind, BvhWidth};
 pub use builtin::{BuiltinScene, BUILTIN_SCENES};
 pub use error::{OutputError, SceneError};
 pub use film::Film;

@@ -1,5 +1,6 @@
 //! End-to-end checks of the integrator: energy conservation (white furnace), exact
-//! determinism across thread counts, and identical images with and without a BVH.
+//! determinism across thread counts, and identical images with and without a BVH (every
+//! builder, every width).
 
 use canopy_bvh::{BuildParams, Builder};
 use canopy_render::camera::CameraSpec;
@@ -7,7 +8,7 @@ use canopy_render::geometry::{Cuboid, Shape, Sphere, Triangle};
 use canopy_render::material::Material;
 use canopy_render::scene::Primitive;
 use canopy_render::{
-    render, Accel, AccelKind, Background, BuiltinScene, Film, RenderSettings, Scene,
+    render, Accel, AccelKind, Background, BuiltinScene, BvhWidth, Film, RenderSettings, Scene,
 };
 use glam::Vec3;
 
@@ -38,7 +39,11 @@ fn furnace(shapes: Vec<Shape>, material: Material, max_depth: u32) -> Scene {
 }
 
 fn render_with(scene: &Scene, kind: AccelKind) -> Film {
-    let accel = Accel::build(kind, &scene.primitives, &BuildParams::default());
+    render_wide(scene, kind, BvhWidth::Two)
+}
+
+fn render_wide(scene: &Scene, kind: AccelKind, width: BvhWidth) -> Film {
+    let accel = Accel::build(kind, width, &scene.primitives, &BuildParams::default());
     render(scene, &accel, &|| {}).0
 }
 
@@ -165,11 +170,10 @@ fn bvh_and_brute_force_render_the_same_image() {
         let scene = small(name);
         let linear = render_with(&scene, AccelKind::None);
         for &builder in Builder::ALL {
-            assert_eq!(
-                linear,
-                render_with(&scene, AccelKind::Bvh(builder)),
-                "{name} with {builder}"
-            );
+            for width in BvhWidth::ALL {
+                let image = render_wide(&scene, AccelKind::Bvh(builder), width);
+                assert_eq!(linear, image, "{name} with {builder} x{width}");
+            }
         }
     }
 }

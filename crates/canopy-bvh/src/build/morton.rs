@@ -4,6 +4,7 @@
 
 use crate::Aabb;
 use glam::Vec3;
+use rayon::prelude::*;
 
 /// Spreads the low 21 bits of `v` so that two zero bits follow each one.
 #[inline]
@@ -39,7 +40,8 @@ pub(crate) fn morton_codes(boxes: &[Aabb]) -> Vec<u64> {
 /// Primitive indices sorted by Morton code (ties by index, so the order is total).
 pub(crate) fn morton_order(codes: &[u64]) -> Vec<u32> {
     let mut order: Vec<u32> = (0..codes.len() as u32).collect();
-    order.sort_unstable_by_key(|&i| (codes[i as usize], i));
+    // Keys are unique (index breaks ties), so the parallel sort is deterministic.
+    order.par_sort_unstable_by_key(|&i| (codes[i as usize], i));
     order
 }
 

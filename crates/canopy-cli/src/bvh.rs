@@ -1,0 +1,178 @@
+//! `canopy bvh`: build BVHs over a scene or mesh with several builders and widths and
+//! tabulate their shape, quality and build time.
+
+use crate::build_args::{builders_help, BuildArgs};
+use anyhow::bail;
+use canopy_bvh::{build, Aabb, BuildParams, Builder, Bvh4, Bvh8};
+use canopy_render::BvhWidth;
+use clap::Args;
+use serde::Serialize;
+use std::time::Instant;
+
+#[derive(Args)]
+pub struct BvhArgs {
+    /// Built-in scene name, scene file, or a bare OBJ/PLY mesh.
+    input: String,
+    /// Builders, comma-separated, or `all`.
+    #[arg(long, default_value = "all", long_help = builders_help() + "Comma-separated, or `all`.")]
+    bvh: String,
+    /// Widths to collapse to, comma-separated (2, 4, 8).
+    #[arg(long, value_delimiter = ',', default_value = "2")]
+    width: Vec<BvhWidth>,
+    /// Builds per measurement; the median time is reported.
+    #[arg(long, default_value_t = 5)]
+    runs: u32,
+    /// Print JSON instead of a table.
+    #[arg(long)]
+    json: bool,
+    #[command(flatten)]
+    build: BuildArgs,
+}
+
+/// One builder at one width.
+#[derive(Serialize)]
+struct Row {
+    builder: &'static str,
+    width: u32,
+    /// Median wall-clock build time (collapse included), milliseconds.
+    build_ms: f64,
+    nodes: usize,
+    leaves: usize,
+    mean_leaf_size: f32,
+    max_leaf_size: usize,
+    max_depth: usize,
+    /// SAH cost with the root's surface area normalised to 1.
+    sah_cost: f32,
+    memory_bytes: usize,
+}
+
+#[derive(Serialize)]
+struct Report {
+    input: String,
+    primitives: usize,
+    threads: usize,
+    rows: Vec<Row>,
+}
+
+fn parse_builders(list: &str) -> anyhow::Result<Vec<Builder>> {
+    if list == "all" {
+        return Ok(Builder::ALL.to_vec());
+    }
+    list.split(',')
+        .map(|name| Ok(name.trim().parse::<Builder>()?))
+        .collect()
+}
+
+pub fn run(args: &BvhArgs) -> anyhow::Result<()> {
+    let builders = parse_builders(&args.bvh)?;
+    if args.runs == 0 {
+        bail!("--runs must be at least 1");
+    }
+    let params = args.build.params()?;
+    let scene = canopy_render::load_scene(&args.input)?;
+    let boxes = scene.primitive_bounds();
+    let mut rows = Vec::new();
+    for &builder in &builders {
+        for &width in &args.width {
+            rows.push(measure(builder, width, &boxes, &params, args.runs));
+        }
+    }
+    let report = Report {
+        input: args.input.clone(),
+        primitives: boxes.len(),
+        threads: rayon::current_num_threads(),
+        rows,
+    };
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        print_table(&report);
+    }
+    Ok(())
+}
+
+fn measure(
+    builder: Builder,
+    width: BvhWidth,
+    boxes: &[Aabb],
+    params: &BuildParams,
+    runs: u32,
+) -> Row {
+    // Timed: the build and the collapse to the requested width.
+    let build_once = || {
+        let bvh = build(builder, boxes, params);
+        let wide = match width {
+            BvhWidth::Two => Wide::Two,
+            BvhWidth::Four => Wide::Four(Bvh4::from_bvh2(&bvh)),
+            BvhWidth::Eight => Wide::Eight(Bvh8::from_bvh2(&bvh)),
+        };
+        (bvh, wide)
+    };
+    let mut times = Vec::new();
+    let mut last = None;
+    for _ in 0..runs {
+        let start = Instant::now();
+        let built = build_once();
+        times.push(start.elapsed().as_secs_f64() * 1e3);
+        last = Some(built);
+    }
+    times.sort_by(f64::total_cmp);
+    let (bvh, wide) = last.expect("at least one run");
+    let stats = match wide {
+        Wide::Two => bvh.stats(&params.sah),
+        Wide::Four(w) => w.stats(&params.sah),
+        Wide::Eight(w) => w.stats(&params.sah),
+    };
+    Row {
+        builder: builder.name(),
+        width: width.children(),
+        build_ms: times[times.len() / 2],
+        nodes: stats.nodes,
+        leaves: stats.leaves,
+        mean_leaf_size: stats.mean_leaf_size(boxes.len()),
+        max_leaf_size: stats.max_leaf_size,
+        max_depth: stats.max_depth,
+        sah_cost: stats.sah_cost,
+        memory_bytes: stats.memory_bytes,
+    }
+}
+
+enum Wide {
+    Two,
+    Four(Bvh4),
+    Eight(Bvh8),
+}
+
+fn print_table(report: &Report) {
+    println!(
+        "{}: {} primitives, {} threads",
+        report.input, report.primitives, report.threads
+    );
+    println!(
+        "{:<14} {:>5} {:>10} {:>8} {:>8} {:>6} {:>5} {:>6} {:>9} {:>10}",
+        "builder", "width", "build ms", "nodes", "leaves", "leaf", "max", "depth", "SAH", "memory"
+    );
+    for r in &report.rows {
+        println!(
+            "{:<14} {:>5} {:>10.2} {:>8} {:>8} {:>6.2} {:>5} {:>6} {:>9.2} {:>10}",
+            r.builder,
+            r.width,
+            r.build_ms,
+            r.nodes,
+            r.leaves,
+            r.mean_leaf_size,
+            r.max_leaf_size,
+            r.max_depth,
+            r.sah_cost,
+            human_bytes(r.memory_bytes)
+        );
+    }
+}
+
+fn human_bytes(bytes: usize) -> String {
+    match bytes {
+        b if b >= 1 << 20 => format!("{:.1} MiB", b as f64 / (1 << 20) as f64),
+        b if b >= 1 << 10 => format!("{:.1} KiB", b as f64 / 1024.0),
+        b => format!("{b} B"),
+    }
+}
