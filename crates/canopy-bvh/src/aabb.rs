@@ -36,12 +36,25 @@ impl Aabb {
 
     #[inline]
     pub fn grow(self, p: Vec3) -> Self {
-        Self::new(self.min.min(p), self.max.max(p))
+        self.union(Aabb::new(p, p))
     }
 
+    /// The smallest box holding both. Boxes are NaN-free (builders' inputs are checked
+    /// upstream), so plain compare-and-select suffices and keeps this hot call short.
     #[inline]
     pub fn union(self, other: Aabb) -> Self {
-        Self::new(self.min.min(other.min), self.max.max(other.max))
+        Self::new(
+            Vec3::new(
+                fast_min(self.min.x, other.min.x),
+                fast_min(self.min.y, other.min.y),
+                fast_min(self.min.z, other.min.z),
+            ),
+            Vec3::new(
+                fast_max(self.max.x, other.max.x),
+                fast_max(self.max.y, other.max.y),
+                fast_max(self.max.z, other.max.z),
+            ),
+        )
     }
 
     #[inline]

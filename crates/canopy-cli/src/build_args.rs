@@ -37,11 +37,9 @@ impl BuildArgs {
     }
 }
 
-/// The builders, one per line, for `--help`.
-pub fn builders_help() -> String {
-    let mut help = String::from(
-        "Acceleration structure: `none` (loop over all primitives) or a BVH builder:\n",
-    );
+/// `intro`, then the builders one per line, for `--help`.
+pub fn builders_help(intro: &str) -> String {
+    let mut help = format!("{intro}\n");
     for b in Builder::ALL {
         help.push_str(&format!("  {:<14} {}\n", b.name(), b.description()));
     }

@@ -14,7 +14,7 @@ pub struct BvhArgs {
     /// Built-in scene name, scene file, or a bare OBJ/PLY mesh.
     input: String,
     /// Builders, comma-separated, or `all`.
-    #[arg(long, default_value = "all", long_help = builders_help() + "Comma-separated, or `all`.")]
+    #[arg(long, default_value = "all", long_help = builders_help("BVH builders, comma-separated, or `all`:"))]
     bvh: String,
     /// Widths to collapse to, comma-separated (2, 4, 8).
     #[arg(long, value_delimiter = ',', default_value = "2")]

@@ -34,7 +34,7 @@ pub struct RenderArgs {
     #[arg(long)]
     threads: Option<usize>,
     /// Acceleration structure: `none` or a BVH builder (see --help).
-    #[arg(long, default_value = "binned-sah", value_parser = parse_accel, long_help = builders_help())]
+    #[arg(long, default_value = "binned-sah", value_parser = parse_accel, long_help = builders_help("Acceleration structure: `none` (loop over all primitives) or a BVH builder:"))]
     bvh: AccelKind,
     /// Children per BVH node: 2, or the binary tree collapsed to 4 or 8.
     #[arg(long, default_value = "2")]

@@ -9,6 +9,9 @@ use super::top_down::{self, Splitter};
 use crate::{Aabb, BuildParams, Bvh2};
 use glam::Vec3;
 
+/// Most split candidates per axis (the arrays live on the stack, cleared per node).
+pub(crate) const MAX_BINS: usize = 32;
+
 #[derive(Clone, Copy)]
 struct Bin {
     bounds: Aabb,
@@ -20,10 +23,13 @@ const EMPTY_BIN: Bin = Bin {
     count: 0,
 };
 
-/// The cheapest split found for a node: axis and the first bin of the right side.
+/// The cheapest split found for a node: the axis, the first bin of the right side, and
+/// the binning that defines bins (centroid `lo` on the axis and bins per unit length).
 struct Split {
     axis: usize,
     bin: usize,
+    lo: f32,
+    scale: f32,
     cost: f32,
 }
 
@@ -45,88 +51,89 @@ struct BinnedSah<'a> {
 impl Splitter for BinnedSah<'_> {
     fn split(&self, prims: &mut [u32], bounds: Aabb, must_split: bool) -> Option<usize> {
         let leaf_cost = prims.len() as f32 * self.params.sah.intersection;
-        let split = find_split(prims, self.boxes, &self.centroids, bounds, self.params)?;
-        (split.cost < leaf_cost || must_split)
-            .then(|| partition(prims, &self.centroids, &split, self.params.bins as usize))
+        let split = self.find_split(prims, bounds)?;
+        (split.cost < leaf_cost || must_split).then(|| self.partition(prims, &split))
     }
 }
 
-/// Bin index of a centroid along an axis, for a node whose centroid bounds start at `lo`
-/// and have `scale = bins / extent`.
-#[inline]
-fn bin_of(c: f32, lo: f32, scale: f32, bins: usize) -> usize {
-    (((c - lo) * scale) as usize).min(bins - 1)
-}
+impl BinnedSah<'_> {
+    /// Bin index of a centroid coordinate.
+    #[inline]
+    fn bin_of(&self, c: f32, lo: f32, scale: f32) -> usize {
+        (((c - lo) * scale) as usize).min(self.params.bins as usize - 1)
+    }
 
-/// The cheapest SAH split over all axes, or `None` when all centroids coincide.
-fn find_split(
-    prims: &[u32],
-    boxes: &[Aabb],
-    centroids: &[Vec3],
-    bounds: Aabb,
-    params: &BuildParams,
-) -> Option<Split> {
-    let bins = params.bins as usize;
-    let centroid_bounds = Aabb::from_points(prims.iter().map(|&p| centroids[p as usize]));
-    let extent = centroid_bounds.extent();
-    let inv_area = 1.0 / bounds.surface_area().max(f32::MIN_POSITIVE);
-    let mut best: Option<Split> = None;
-    let mut bin_array = [EMPTY_BIN; 256];
-    let mut right_area = [0f32; 256];
-    let mut right_count = [0u32; 256];
-    for axis in 0..3 {
-        if extent[axis] <= 0.0 {
-            continue;
-        }
-        let lo = centroid_bounds.min[axis];
-        let scale = bins as f32 / extent[axis];
-        let bin_array = &mut bin_array[..bins];
-        bin_array.fill(EMPTY_BIN);
+    /// The cheapest SAH split over all axes, or `None` when all centroids coincide.
+    fn find_split(&self, prims: &[u32], bounds: Aabb) -> Option<Split> {
+        let bins = self.params.bins as usize;
+        let centroid_bounds = Aabb::from_points(prims.iter().map(|&p| self.centroids[p as usize]));
+        let extent = centroid_bounds.extent();
+        let lo = centroid_bounds.min;
+        let scale = Vec3::select(extent.cmpgt(Vec3::ZERO), bins as f32 / extent, Vec3::ZERO);
+        // Bin all three axes in one pass over the primitives.
+        let mut axis_bins = [[EMPTY_BIN; MAX_BINS]; 3];
         for &p in prims {
-            let bin = &mut bin_array[bin_of(centroids[p as usize][axis], lo, scale, bins)];
-            bin.bounds = bin.bounds.union(boxes[p as usize]);
-            bin.count += 1;
+            let c = self.centroids[p as usize];
+            let b = self.boxes[p as usize];
+            for (axis, bins_of_axis) in axis_bins.iter_mut().enumerate() {
+                let bin = &mut bins_of_axis[self.bin_of(c[axis], lo[axis], scale[axis])];
+                bin.bounds = bin.bounds.union(b);
+                bin.count += 1;
+            }
         }
-        // Sweep from the right to record the right side of every boundary...
-        let (mut acc, mut n) = (Aabb::EMPTY, 0);
-        for b in (1..bins).rev() {
-            acc = acc.union(bin_array[b].bounds);
-            n += bin_array[b].count;
-            right_area[b] = acc.surface_area();
-            right_count[b] = n;
-        }
-        // ...then from the left, pricing each boundary.
-        let (mut acc, mut n) = (Aabb::EMPTY, 0);
-        for b in 1..bins {
-            acc = acc.union(bin_array[b - 1].bounds);
-            n += bin_array[b - 1].count;
-            if n == 0 || right_count[b] == 0 {
+        let inv_area = 1.0 / bounds.surface_area().max(f32::MIN_POSITIVE);
+        let sah = &self.params.sah;
+        let mut best: Option<Split> = None;
+        for (axis, bin_array) in axis_bins.iter().enumerate() {
+            if extent[axis] <= 0.0 {
                 continue;
             }
-            let cost = params.sah.traversal
-                + params.sah.intersection
-                    * inv_area
-                    * (acc.surface_area() * n as f32 + right_area[b] * right_count[b] as f32);
-            if best.as_ref().is_none_or(|s| cost < s.cost) {
-                best = Some(Split { axis, bin: b, cost });
+            // Sweep from the right to record the right side of every boundary...
+            let mut right_area = [0f32; MAX_BINS];
+            let mut right_count = [0u32; MAX_BINS];
+            let (mut acc, mut n) = (Aabb::EMPTY, 0);
+            for b in (1..bins).rev() {
+                acc = acc.union(bin_array[b].bounds);
+                n += bin_array[b].count;
+                right_area[b] = acc.surface_area();
+                right_count[b] = n;
+            }
+            // ...then from the left, pricing each boundary.
+            let (mut acc, mut n) = (Aabb::EMPTY, 0);
+            for b in 1..bins {
+                acc = acc.union(bin_array[b - 1].bounds);
+                n += bin_array[b - 1].count;
+                if n == 0 || right_count[b] == 0 {
+                    continue;
+                }
+                let cost = sah.traversal
+                    + sah.intersection
+                        * inv_area
+                        * (acc.surface_area() * n as f32 + right_area[b] * right_count[b] as f32);
+                if best.as_ref().is_none_or(|s| cost < s.cost) {
+                    best = Some(Split {
+                        axis,
+                        bin: b,
+                        lo: lo[axis],
+                        scale: scale[axis],
+                        cost,
+                    });
+                }
             }
         }
+        best
     }
-    best
-}
 
-/// Moves primitives left of the split to the front; returns how many there are.
-fn partition(prims: &mut [u32], centroids: &[Vec3], split: &Split, bins: usize) -> usize {
-    let centroid_bounds = Aabb::from_points(prims.iter().map(|&p| centroids[p as usize]));
-    let lo = centroid_bounds.min[split.axis];
-    let scale = bins as f32 / centroid_bounds.extent()[split.axis];
-    let mut mid = 0;
-    for i in 0..prims.len() {
-        let c = centroids[prims[i] as usize][split.axis];
-        if bin_of(c, lo, scale, bins) < split.bin {
-            prims.swap(i, mid);
-            mid += 1;
+    /// Moves primitives left of the split to the front; returns how many there are.
+    fn partition(&self, prims: &mut [u32], split: &Split) -> usize {
+        let mut mid = 0;
+        for i in 0..prims.len() {
+            let c = self.centroids[prims[i] as usize][split.axis];
+            if self.bin_of(c, split.lo, split.scale) < split.bin {
+                prims.swap(i, mid);
+                mid += 1;
+            }
         }
+        mid
     }
-    mid
 }

@@ -76,9 +76,9 @@ impl Builder {
     /// One line for `--help` texts.
     pub fn description(self) -> &'static str {
         match self {
-            Builder::SortAxis(_) => {
-                "report's top-down: sort centroids on one axis, split at the median"
-            }
+            Builder::SortAxis(0) => "report's top-down: sort centroids by x, split at the median",
+            Builder::SortAxis(1) => "report's top-down: sort centroids by y, split at the median",
+            Builder::SortAxis(_) => "report's top-down: sort centroids by z, split at the median",
             Builder::MortonMedian => "report's top-down: sort by Morton code, split at the median",
             Builder::Lbvh => "Karras 2012 radix tree on 63-bit Morton codes (parallel)",
             Builder::BinnedSah => "top-down SAH, binned split candidates on all axes (parallel)",
@@ -147,7 +147,7 @@ pub struct BuildParams {
     /// No leaf holds more primitives than this (at least 1).
     pub max_leaf_size: u32,
     pub sah: SahCosts,
-    /// Split candidates per axis for binned builders.
+    /// Split candidates per axis for binned builders (2 to 32).
     pub bins: u32,
     /// How many neighbours on each side PLOC searches.
     pub ploc_radius: u32,
@@ -170,7 +170,7 @@ impl Default for BuildParams {
 pub fn build(builder: Builder, boxes: &[Aabb], params: &BuildParams) -> Bvh2 {
     let params = BuildParams {
         max_leaf_size: params.max_leaf_size.max(1),
-        bins: params.bins.clamp(2, 256),
+        bins: params.bins.clamp(2, binned_sah::MAX_BINS as u32),
         ..*params
     };
     let bvh = match builder {

@@ -1,0 +1,130 @@
+//! BVH benchmarks: build time of every builder on meshes and a reference scene, and
+//! closest-hit throughput of the resulting trees at every width.
+//!
+//! `cargo bench -p canopy-render --bench bvh` (add a filter such as `build/dragon-202k`).
+//! The dragons are read from `$CANOPY_MESHES`, else `../shared/assets/meshes` next to
+//! the repository; without them those inputs are skipped with a note.
+
+use canopy_bvh::{build, Aabb, BuildParams, Builder, Bvh4, Bvh8, Ray};
+use canopy_render::camera::Camera;
+use canopy_render::rng::Rng;
+use canopy_render::{load_scene, Scene};
+use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
+use std::path::PathBuf;
+use std::time::Duration;
+
+fn mesh_dir() -> PathBuf {
+    std::env::var_os("CANOPY_MESHES")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| {
+            PathBuf::from(concat!(
+                env!("CARGO_MANIFEST_DIR"),
+                "/../../../shared/assets/meshes"
+            ))
+        })
+}
+
+/// (label, scene) for every input that is available.
+fn inputs() -> Vec<(&'static str, Scene)> {
+    let bunny = concat!(env!("CARGO_MANIFEST_DIR"), "/../../scenes/meshes/bunny.ply").to_string();
+    let dir = mesh_dir();
+    let candidates = [
+        ("bunny-3.7k", bunny),
+        (
+            "dragon-48k",
+            dir.join("dragon_res3.ply").display().to_string(),
+        ),
+        (
+            "dragon-202k",
+            dir.join("dragon_res2.ply").display().to_string(),
+        ),
+        ("paper-5", "paper-5".to_string()),
+    ];
+    candidates
+        .into_iter()
+        .filter_map(|(label, source)| match load_scene(&source) {
+            Ok(scene) => Some((label, scene)),
+            Err(e) => {
+                eprintln!("skipping {label}: {e}");
+                None
+            }
+        })
+        .collect()
+}
+
+fn build_times(c: &mut Criterion) {
+    let params = BuildParams::default();
+    for (label, scene) in inputs() {
+        let boxes: Vec<Aabb> = scene.primitive_bounds();
+        let mut group = c.benchmark_group(format!("build/{label}"));
+        group
+            .sample_size(10)
+            .warm_up_time(Duration::from_millis(500));
+        group.throughput(Throughput::Elements(boxes.len() as u64));
+        for &builder in Builder::ALL {
+            group.bench_with_input(BenchmarkId::from_parameter(builder), &boxes, |b, boxes| {
+                b.iter(|| build(builder, boxes, &params))
+            });
+        }
+        group.finish();
+    }
+}
+
+/// Camera rays through a 256x256 grid, one per pixel.
+fn camera_rays(scene: &Scene) -> Vec<Ray> {
+    let (w, h) = (256, 256);
+    let camera = Camera::new(&scene.camera, w, h);
+    let mut rng = Rng::for_sample(0, 0, 0);
+    (0..w * h)
+        .map(|i| {
+            camera.ray(
+                ((i % w) as f32 + 0.5) / w as f32,
+                ((i / w) as f32 + 0.5) / h as f32,
+                &mut rng,
+            )
+        })
+        .collect()
+}
+
+fn closest_hit(c: &mut Criterion) {
+    let params = BuildParams::default();
+    for (label, scene) in inputs() {
+        let boxes = scene.primitive_bounds();
+        let rays = camera_rays(&scene);
+        let test = |p: u32, r: &Ray| scene.primitives[p as usize].shape.intersect(r);
+        let mut group = c.benchmark_group(format!("trace/{label}"));
+        group
+            .sample_size(10)
+            .warm_up_time(Duration::from_millis(500));
+        group.throughput(Throughput::Elements(rays.len() as u64));
+        for builder in [Builder::BinnedSah, Builder::Ploc, Builder::Lbvh] {
+            let bvh = build(builder, &boxes, &params);
+            let (bvh4, bvh8) = (Bvh4::from_bvh2(&bvh), Bvh8::from_bvh2(&bvh));
+            group.bench_function(format!("{builder}/x2"), |b| {
+                b.iter(|| {
+                    rays.iter()
+                        .filter(|r| bvh.intersect(r, test).is_some())
+                        .count()
+                })
+            });
+            group.bench_function(format!("{builder}/x4"), |b| {
+                b.iter(|| {
+                    rays.iter()
+                        .filter(|r| bvh4.intersect(r, test).is_some())
+                        .count()
+                })
+            });
+            group.bench_function(format!("{builder}/x8"), |b| {
+                b.iter(|| {
+                    rays.iter()
+                        .filter(|r| bvh8.intersect(r, test).is_some())
+                        .count()
+                })
+            });
+        }
+        group.finish();
+    }
+}
+
+criterion_group!(benches, build_times, closest_hit);
+criterion_main!(benches);
