@@ -3,6 +3,8 @@
 
 use crate::build_args::{builders_help, BuildArgs};
 use anyhow::{bail, Context};
+use canopy_render::camera::Camera;
+use canopy_render::visualize::{draw_bvh, render_heatmap, LevelRange};
 use canopy_render::{output::image_format, render, write_image, Accel, AccelKind, BvhWidth, Scene};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -41,6 +43,16 @@ pub struct RenderArgs {
     width: BvhWidth,
     #[command(flatten)]
     build: BuildArgs,
+    /// Draw the BVH's boxes over the image as wireframes, coloured by tree level.
+    #[arg(long)]
+    show_bvh: bool,
+    /// Tree levels --show-bvh draws: `a..b` (inclusive), `a..` or `a`; the root is 0.
+    #[arg(long, default_value = "0..", requires = "show_bvh")]
+    levels: LevelRange,
+    /// Instead of rendering, write each pixel's primary-ray traversal cost (node visits
+    /// plus primitive tests) as a false-colour image with a scale bar.
+    #[arg(long, conflicts_with = "show_bvh")]
+    heatmap: bool,
 }
 
 fn parse_size(s: &str) -> Result<(u32, u32), String> {
@@ -76,6 +88,21 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     let params = args.build.params()?;
     let accel = pool.install(|| Accel::build(args.bvh, args.width, &scene.primitives, &params));
 
+    if args.show_bvh && accel.bvh().is_none() {
+        bail!("--show-bvh needs a BVH; choose a builder with --bvh");
+    }
+    print_scene_summary(args, &scene, &accel);
+    if args.heatmap {
+        let map = pool.install(|| render_heatmap(&scene, &accel));
+        write_image(&map.film, &output)?;
+        println!(
+            "heatmap     primary-ray cost: mean {:.1}, max {} (node visits + primitive tests)",
+            map.mean_cost, map.max_cost
+        );
+        println!("image       {}", output.display());
+        return Ok(());
+    }
+
     let progress = ProgressBar::new(scene.settings.height as u64).with_style(
         ProgressStyle::with_template(
             "{spinner} rendering [{bar:40}] {percent:>3}%  {elapsed} elapsed, ETA {eta}",
@@ -83,10 +110,46 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         .expect("valid template")
         .progress_chars("=> "),
     );
-    let (film, stats) = pool.install(|| render(&scene, &accel, &|| progress.inc(1)));
+    let (mut film, stats) = pool.install(|| render(&scene, &accel, &|| progress.inc(1)));
     progress.finish_and_clear();
+    if let (true, Some(bvh)) = (args.show_bvh, accel.bvh()) {
+        let camera = Camera::new(&scene.camera, film.width, film.height);
+        let drawn = draw_bvh(&mut film, &camera, bvh, args.levels);
+        println!(
+            "overlay     {drawn} boxes of tree levels {}",
+            describe_levels(args.levels)
+        );
+    }
     write_image(&film, &output)?;
 
+    println!(
+        "render      {:.3} s on {} threads",
+        stats.elapsed.as_secs_f64(),
+        pool.current_num_threads()
+    );
+    println!(
+        "rays        {} ({:.2} Mrays/s)",
+        stats.rays,
+        stats.mrays_per_second()
+    );
+    if stats.invalid_samples > 0 {
+        println!(
+            "warning     {} samples with NaN/inf radiance were dropped",
+            stats.invalid_samples
+        );
+    }
+    println!("image       {}", output.display());
+    Ok(())
+}
+
+fn describe_levels(levels: LevelRange) -> String {
+    match levels.last {
+        usize::MAX => format!("{}..", levels.first),
+        last => format!("{}..{last}", levels.first),
+    }
+}
+
+fn print_scene_summary(args: &RenderArgs, scene: &Scene, accel: &Accel) {
     let s = scene.settings;
     let counts = scene.shape_counts();
     println!(
@@ -109,24 +172,6 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
             accel.build_time.as_secs_f64() * 1e3
         ),
     }
-    println!(
-        "render      {:.3} s on {} threads",
-        stats.elapsed.as_secs_f64(),
-        pool.current_num_threads()
-    );
-    println!(
-        "rays        {} ({:.2} Mrays/s)",
-        stats.rays,
-        stats.mrays_per_second()
-    );
-    if stats.invalid_samples > 0 {
-        println!(
-            "warning     {} samples with NaN/inf radiance were dropped",
-            stats.invalid_samples
-        );
-    }
-    println!("image       {}", output.display());
-    Ok(())
 }
 
 fn apply_overrides(scene: &mut Scene, args: &RenderArgs) -> anyhow::Result<()> {

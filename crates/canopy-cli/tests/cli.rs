@@ -297,3 +297,63 @@ fn wide_render_matches_binary_render() {
     assert_eq!(a, b);
     std::fs::remove_dir_all(dir).unwrap();
 }
+
+#[test]
+fn heatmap_and_bvh_overlay_write_images() {
+    let dir = scratch("pictures");
+    let heat = canopy(
+        &[
+            "render",
+            "paper-3",
+            "-o",
+            "heat.png",
+            "--size",
+            "40x30",
+            "--heatmap",
+        ],
+        &dir,
+    );
+    assert!(heat.status.success(), "{}", stderr(&heat));
+    assert!(String::from_utf8_lossy(&heat.stdout).contains("heatmap     primary-ray cost: mean"));
+    let overlay = canopy(
+        &[
+            "render",
+            "paper-3",
+            "-o",
+            "boxes.png",
+            "--size",
+            "40x30",
+            "--spp",
+            "1",
+            "--show-bvh",
+            "--levels",
+            "0",
+        ],
+        &dir,
+    );
+    assert!(overlay.status.success(), "{}", stderr(&overlay));
+    assert!(String::from_utf8_lossy(&overlay.stdout)
+        .contains("overlay     1 boxes of tree levels 0..0"));
+    for name in ["heat.png", "boxes.png"] {
+        assert_eq!(image::open(dir.join(name)).unwrap().width(), 40);
+    }
+    let no_bvh = canopy(
+        &[
+            "render",
+            "paper-3",
+            "-o",
+            "x.png",
+            "--bvh",
+            "none",
+            "--show-bvh",
+        ],
+        &dir,
+    );
+    assert!(!no_bvh.status.success());
+    assert!(
+        stderr(&no_bvh).contains("--show-bvh needs a BVH"),
+        "{}",
+        stderr(&no_bvh)
+    );
+    std::fs::remove_dir_all(dir).unwrap();
+}

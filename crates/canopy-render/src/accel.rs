@@ -2,7 +2,7 @@
 //! report's baseline) or a BVH from any builder, binary or collapsed to 4 or 8 wide.
 
 use crate::scene::Primitive;
-use canopy_bvh::{build, BuildParams, Builder, Bvh2, Bvh4, Bvh8, Hit, Ray};
+use canopy_bvh::{build, BuildParams, Builder, Bvh2, Bvh4, Bvh8, Hit, Ray, TraversalStats};
 use std::fmt;
 use std::str::FromStr;
 use std::time::{Duration, Instant};
@@ -143,6 +143,25 @@ impl Accel {
     /// The binary tree, unless this is the brute-force structure.
     pub fn bvh(&self) -> Option<&Bvh2> {
         self.bvh.as_ref()
+    }
+
+    /// The work a closest-hit query does for `ray`: node visits and primitive tests.
+    pub fn traversal_cost(&self, primitives: &[Primitive], ray: &Ray) -> TraversalStats {
+        let test = |prim: u32, ray: &Ray| primitives[prim as usize].shape.intersect(ray);
+        let mut work = TraversalStats::default();
+        match (&self.structure, &self.bvh) {
+            (Structure::Binary, Some(bvh)) => {
+                bvh.intersect_counted(ray, test, &mut work);
+            }
+            (Structure::Four(bvh), _) => {
+                bvh.intersect_counted(ray, test, &mut work);
+            }
+            (Structure::Eight(bvh), _) => {
+                bvh.intersect_counted(ray, test, &mut work);
+            }
+            _ => work.primitives_tested = primitives.len() as u64,
+        }
+        work
     }
 
     /// Closest hit; ties go to the lower primitive index whatever the structure.

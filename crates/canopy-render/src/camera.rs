@@ -40,7 +40,10 @@ pub struct Camera {
     vertical: Vec3,
     u: Vec3,
     v: Vec3,
+    w: Vec3,
     lens_radius: f32,
+    width: u32,
+    height: u32,
 }
 
 impl Camera {
@@ -63,8 +66,33 @@ impl Camera {
             vertical,
             u,
             v,
+            w,
             lens_radius: spec.aperture / 2.0,
+            width,
+            height,
         }
+    }
+
+    /// Depth of `p` in front of the camera (along the viewing direction).
+    #[inline]
+    pub fn depth(&self, p: Vec3) -> f32 {
+        -(p - self.origin).dot(self.w)
+    }
+
+    /// Pixel coordinates (x right, y down, in pixels) where the pinhole camera sees `p`,
+    /// or `None` for points not in front of it.
+    pub fn project(&self, p: Vec3) -> Option<(f32, f32)> {
+        let depth = self.depth(p);
+        if depth <= 0.0 {
+            return None;
+        }
+        // Where the line of sight crosses the image plane (at the focus distance).
+        let focus = -(self.upper_left + 0.5 * self.horizontal - 0.5 * self.vertical - self.origin)
+            .dot(self.w);
+        let on_plane = self.origin + (p - self.origin) * (focus / depth) - self.upper_left;
+        let s = on_plane.dot(self.horizontal) / self.horizontal.length_squared();
+        let t = -on_plane.dot(self.vertical) / self.vertical.length_squared();
+        Some((s * self.width as f32, t * self.height as f32))
     }
 
     /// The ray through image position (`s`, `t`) in [0, 1]², `t` going down.
@@ -102,6 +130,30 @@ mod tests {
         let mut rng = Rng::for_sample(0, 0, 0);
         assert!(cam.ray(0.5, 0.0, &mut rng).dir.y > 0.0);
         assert!(cam.ray(0.0, 0.5, &mut rng).dir.x < 0.0);
+    }
+
+    #[test]
+    fn projection_inverts_ray_generation() {
+        let spec = CameraSpec {
+            look_from: Vec3::new(1.0, 2.0, 5.0),
+            vfov: 50.0,
+            ..CameraSpec::default()
+        };
+        let cam = Camera::new(&spec, 200, 100);
+        let mut rng = Rng::for_sample(0, 0, 0);
+        for (s, t) in [(0.5, 0.5), (0.1, 0.9), (0.8, 0.25)] {
+            let r = cam.ray(s, t, &mut rng);
+            let (x, y) = cam.project(r.at(7.0)).unwrap();
+            assert!(
+                (x - s * 200.0).abs() < 1e-3 && (y - t * 100.0).abs() < 1e-3,
+                "{x} {y}"
+            );
+        }
+        assert_eq!(
+            cam.project(Vec3::new(1.0, 2.0, 9.0)),
+            None,
+            "behind the camera"
+        );
     }
 
     #[test]

@@ -17,6 +17,7 @@ pub mod output;
 pub mod rng;
 pub mod scene;
 pub mod scene_file;
+pub mod visualize;
 
 pub use accel::{Accel, AccelKind, BvhWidth};
 pub use builtin::{BuiltinScene, BUILTIN_SCENES};
