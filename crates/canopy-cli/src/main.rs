@@ -1,5 +1,6 @@
 //! `canopy`: render scenes with a choice of BVH, list the built-in scenes.
 
+mod bench;
 mod build_args;
 mod bvh;
 mod render;
@@ -24,6 +25,8 @@ enum Command {
     Render(render::RenderArgs),
     /// Build BVHs over a scene or mesh and tabulate build time, size and SAH cost.
     Bvh(bvh::BvhArgs),
+    /// Benchmarks: `canopy bench paper` reproduces the report's evaluation.
+    Bench(bench::BenchArgs),
     /// List the built-in scenes.
     Scenes,
 }
@@ -33,6 +36,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Render(args) => render::run(&args),
         Command::Bvh(args) => bvh::run(&args),
+        Command::Bench(args) => bench::run(&args),
         Command::Scenes => list_scenes(),
     };
     match result {

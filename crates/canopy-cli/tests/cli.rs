@@ -357,3 +357,65 @@ fn heatmap_and_bvh_overlay_write_images() {
     );
     std::fs::remove_dir_all(dir).unwrap();
 }
+
+#[test]
+fn bench_paper_quick_writes_consistent_tables() {
+    let dir = scratch("bench");
+    let out = canopy(
+        &[
+            "bench",
+            "paper",
+            "--quick",
+            "--scenes",
+            "1,3",
+            "--methods",
+            "report",
+            "--out",
+            "results",
+        ],
+        &dir,
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    let read = |name: &str| std::fs::read_to_string(dir.join("results").join(name)).unwrap();
+    let (md, csv) = (read("results.md"), read("results.csv"));
+    let json: serde_json::Value = serde_json::from_str(&read("results.json")).unwrap();
+    let measurements = json["measurements"].as_array().unwrap();
+    assert_eq!(
+        measurements.len(),
+        2 * 6,
+        "2 scenes x the report's 6 methods"
+    );
+    let csv_rows: Vec<&str> = csv.lines().skip(1).collect();
+    assert_eq!(csv_rows.len(), measurements.len());
+    for (m, row) in measurements.iter().zip(&csv_rows) {
+        let (scene, method) = (m["scene"].as_str().unwrap(), m["method"].as_str().unwrap());
+        let mean = m["mean_s"].as_f64().unwrap();
+        assert_eq!(m["seconds"].as_array().unwrap().len(), 2, "two runs");
+        // Speedup is the no-BVH mean over this mean, in the same scene.
+        let none = measurements
+            .iter()
+            .find(|n| n["scene"] == scene && n["method"] == "No BVH")
+            .unwrap();
+        let expected = none["mean_s"].as_f64().unwrap() / mean;
+        assert!((m["speedup"].as_f64().unwrap() - expected).abs() < 1e-9 * expected);
+        // The CSV row and the Markdown table carry the same mean.
+        let fields: Vec<&str> = row.split(',').collect();
+        assert_eq!((fields[0], fields[1]), (scene, method));
+        let mean_text = fields[5];
+        assert!(
+            (mean_text.parse::<f64>().unwrap() - mean).abs() <= 1e-3 * mean,
+            "{mean_text} vs {mean}"
+        );
+        let table_row = md
+            .lines()
+            .find(|l| l.starts_with(&format!("| {method} |")))
+            .unwrap();
+        assert!(
+            table_row.contains(&format!("{mean_text} ± ")),
+            "`{mean_text}` not in `{table_row}`"
+        );
+        assert!(m["report_speedup"].as_f64().unwrap() >= 1.0);
+    }
+    assert!(md.contains("## Table 2: speedup over no BVH"));
+    std::fs::remove_dir_all(dir).unwrap();
+}

@@ -2,7 +2,9 @@
 //! report's baseline) or a BVH from any builder, binary or collapsed to 4 or 8 wide.
 
 use crate::scene::Primitive;
-use canopy_bvh::{build, BuildParams, Builder, Bvh2, Bvh4, Bvh8, Hit, Ray, TraversalStats};
+use canopy_bvh::{
+    build, BuildParams, Builder, Bvh2, Bvh4, Bvh8, Hit, Ray, TraversalCounter, TraversalStats,
+};
 use std::fmt;
 use std::str::FromStr;
 use std::time::{Duration, Instant};
@@ -147,32 +149,37 @@ impl Accel {
 
     /// The work a closest-hit query does for `ray`: node visits and primitive tests.
     pub fn traversal_cost(&self, primitives: &[Primitive], ray: &Ray) -> TraversalStats {
-        let test = |prim: u32, ray: &Ray| primitives[prim as usize].shape.intersect(ray);
         let mut work = TraversalStats::default();
-        match (&self.structure, &self.bvh) {
-            (Structure::Binary, Some(bvh)) => {
-                bvh.intersect_counted(ray, test, &mut work);
-            }
-            (Structure::Four(bvh), _) => {
-                bvh.intersect_counted(ray, test, &mut work);
-            }
-            (Structure::Eight(bvh), _) => {
-                bvh.intersect_counted(ray, test, &mut work);
-            }
-            _ => work.primitives_tested = primitives.len() as u64,
-        }
+        self.intersect_counted(primitives, ray, &mut work);
         work
     }
 
     /// Closest hit; ties go to the lower primitive index whatever the structure.
     #[inline]
     pub fn intersect(&self, primitives: &[Primitive], ray: &Ray) -> Option<Hit> {
+        self.intersect_counted(primitives, ray, &mut ())
+    }
+
+    /// [`Accel::intersect`], reporting its work to `counter` (brute force counts one
+    /// primitive test per primitive and no nodes).
+    #[inline]
+    pub fn intersect_counted<C: TraversalCounter>(
+        &self,
+        primitives: &[Primitive],
+        ray: &Ray,
+        counter: &mut C,
+    ) -> Option<Hit> {
         let test = |prim: u32, ray: &Ray| primitives[prim as usize].shape.intersect(ray);
         match (&self.structure, &self.bvh) {
-            (Structure::Binary, Some(bvh)) => bvh.intersect(ray, test),
-            (Structure::Four(bvh), _) => bvh.intersect(ray, test),
-            (Structure::Eight(bvh), _) => bvh.intersect(ray, test),
-            _ => brute_force(primitives, ray),
+            (Structure::Binary, Some(bvh)) => bvh.intersect_counted(ray, test, counter),
+            (Structure::Four(bvh), _) => bvh.intersect_counted(ray, test, counter),
+            (Structure::Eight(bvh), _) => bvh.intersect_counted(ray, test, counter),
+            _ => {
+                for _ in primitives {
+                    counter.test_primitive();
+                }
+                brute_force(primitives, ray)
+            }
         }
     }
 }

@@ -6,7 +6,7 @@ use crate::film::Film;
 use crate::geometry::Surface;
 use crate::rng::Rng;
 use crate::scene::Scene;
-use canopy_bvh::Ray;
+use canopy_bvh::{Ray, TraversalCounter, TraversalStats};
 use glam::Vec3;
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -17,6 +17,9 @@ use std::time::{Duration, Instant};
 pub struct RenderStats {
     /// Ray segments traced (camera and scattered rays).
     pub rays: u64,
+    /// Node visits and primitive tests over all rays; zero unless counted
+    /// ([`render_counted`]).
+    pub traversal: TraversalStats,
     /// Samples whose radiance was NaN or infinite; they were dropped from the image.
     pub invalid_samples: u64,
     pub elapsed: Duration,
@@ -38,11 +41,48 @@ pub fn render(
     accel: &Accel,
     on_row_done: &(dyn Fn() + Sync),
 ) -> (Film, RenderStats) {
+    render_with::<()>(scene, accel, on_row_done)
+}
+
+/// [`render`], also counting the BVH work of every ray into [`RenderStats::traversal`]
+/// (slightly slower; the image is the same).
+pub fn render_counted(
+    scene: &Scene,
+    accel: &Accel,
+    on_row_done: &(dyn Fn() + Sync),
+) -> (Film, RenderStats) {
+    render_with::<TraversalStats>(scene, accel, on_row_done)
+}
+
+/// A traversal counter that can report its totals (nothing, for `()`).
+trait RowCounter: TraversalCounter + Default {
+    fn totals(&self) -> TraversalStats;
+}
+
+impl RowCounter for () {
+    fn totals(&self) -> TraversalStats {
+        TraversalStats::default()
+    }
+}
+
+impl RowCounter for TraversalStats {
+    fn totals(&self) -> TraversalStats {
+        *self
+    }
+}
+
+fn render_with<C: RowCounter>(
+    scene: &Scene,
+    accel: &Accel,
+    on_row_done: &(dyn Fn() + Sync),
+) -> (Film, RenderStats) {
     let settings = scene.settings;
     let camera = Camera::new(&scene.camera, settings.width, settings.height);
     let mut film = Film::new(settings.width, settings.height);
     let rays = AtomicU64::new(0);
     let invalid = AtomicU64::new(0);
+    let nodes = AtomicU64::new(0);
+    let prims = AtomicU64::new(0);
     let start = Instant::now();
     let width = settings.width as usize;
     film.pixels
@@ -51,6 +91,7 @@ pub fn render(
         .for_each(|(y, row)| {
             let mut row_rays = 0;
             let mut row_invalid = 0;
+            let mut counter = C::default();
             for (x, pixel) in row.iter_mut().enumerate() {
                 let index = (y * width + x) as u64;
                 let mut sum = Vec3::ZERO;
@@ -59,7 +100,7 @@ pub fn render(
                     let s = (x as f32 + rng.next_f32()) / settings.width as f32;
                     let t = (y as f32 + rng.next_f32()) / settings.height as f32;
                     let ray = camera.ray(s, t, &mut rng);
-                    let l = trace_path(scene, accel, ray, &mut rng, &mut row_rays);
+                    let l = trace_path(scene, accel, ray, &mut rng, &mut row_rays, &mut counter);
                     if l.is_finite() {
                         sum += l;
                     } else {
@@ -70,23 +111,37 @@ pub fn render(
             }
             rays.fetch_add(row_rays, Ordering::Relaxed);
             invalid.fetch_add(row_invalid, Ordering::Relaxed);
+            let work = counter.totals();
+            nodes.fetch_add(work.nodes_visited, Ordering::Relaxed);
+            prims.fetch_add(work.primitives_tested, Ordering::Relaxed);
             on_row_done();
         });
     let stats = RenderStats {
         rays: rays.into_inner(),
         invalid_samples: invalid.into_inner(),
+        traversal: TraversalStats {
+            nodes_visited: nodes.into_inner(),
+            primitives_tested: prims.into_inner(),
+        },
         elapsed: start.elapsed(),
     };
     (film, stats)
 }
 
 /// Radiance arriving along `ray`, following one path of at most `max_depth` segments.
-fn trace_path(scene: &Scene, accel: &Accel, mut ray: Ray, rng: &mut Rng, rays: &mut u64) -> Vec3 {
+fn trace_path<C: TraversalCounter>(
+    scene: &Scene,
+    accel: &Accel,
+    mut ray: Ray,
+    rng: &mut Rng,
+    rays: &mut u64,
+    counter: &mut C,
+) -> Vec3 {
     let mut throughput = Vec3::ONE;
     let mut radiance = Vec3::ZERO;
     for _ in 0..scene.settings.max_depth {
         *rays += 1;
-        let Some(hit) = accel.intersect(&scene.primitives, &ray) else {
+        let Some(hit) = accel.intersect_counted(&scene.primitives, &ray, counter) else {
             radiance += throughput * scene.background.radiance(ray.dir);
             break;
         };

@@ -23,7 +23,7 @@ pub use accel::{Accel, AccelKind, BvhWidth};
 pub use builtin::{BuiltinScene, BUILTIN_SCENES};
 pub use error::{OutputError, SceneError};
 pub use film::Film;
-pub use integrator::{render, RenderStats};
+pub use integrator::{render, render_counted, RenderStats};
 pub use output::write_image;
 pub use scene::{Background, RenderSettings, Scene};
 

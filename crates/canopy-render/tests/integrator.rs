@@ -185,3 +185,32 @@ fn different_seeds_give_different_noise() {
     scene.settings.seed += 1;
     assert_ne!(a, render_with(&scene, AccelKind::default()));
 }
+
+#[test]
+fn counted_render_is_the_same_image_and_counts_the_work() {
+    let scene = small("paper-3");
+    let none = Accel::build(
+        AccelKind::None,
+        BvhWidth::Two,
+        &scene.primitives,
+        &BuildParams::default(),
+    );
+    let (plain, _) = render(&scene, &none, &|| {});
+    let (counted, stats) = canopy_render::render_counted(&scene, &none, &|| {});
+    assert_eq!(plain, counted);
+    // Brute force tests every primitive for every ray and visits no node.
+    assert_eq!(
+        stats.traversal.primitives_tested,
+        stats.rays * scene.primitives.len() as u64
+    );
+    assert_eq!(stats.traversal.nodes_visited, 0);
+    let bvh = Accel::build(
+        AccelKind::default(),
+        BvhWidth::Four,
+        &scene.primitives,
+        &BuildParams::default(),
+    );
+    let (_, stats) = canopy_render::render_counted(&scene, &bvh, &|| {});
+    assert!(stats.traversal.nodes_visited > 0);
+    assert!(stats.traversal.primitives_tested < stats.rays * scene.primitives.len() as u64 / 10);
+}

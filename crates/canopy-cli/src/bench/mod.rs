@@ -1,0 +1,331 @@
+//! `canopy bench paper`: the report's evaluation (its section 4) reproduced on this
+//! machine — every reference scene rendered with the report's methods and canopy's other
+//! builders at every width, repeated, timed and tabulated.
+
+mod report_figures;
+mod tables;
+
+use crate::build_args::BuildArgs;
+use anyhow::{bail, Context};
+use canopy_bvh::{Builder, Bvh4, Bvh8};
+use canopy_render::{render, render_counted, Accel, AccelKind, BuiltinScene, BvhWidth, Scene};
+use clap::{Args, Subcommand};
+use indicatif::{ProgressBar, ProgressStyle};
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+
+#[derive(Args)]
+pub struct BenchArgs {
+    #[command(subcommand)]
+    what: BenchCommand,
+}
+
+#[derive(Subcommand)]
+enum BenchCommand {
+    /// Reproduce the report's Tables 1 and 2 (and more) on this machine.
+    Paper(PaperArgs),
+}
+
+#[derive(Args)]
+struct PaperArgs {
+    /// Tiny images, 2 spp, 2 runs: a smoke test of the whole pipeline in seconds.
+    #[arg(long)]
+    quick: bool,
+    /// Renders per measurement [default: 6, as in the report; 2 with --quick].
+    #[arg(long)]
+    runs: Option<u32>,
+    /// Folder for results.md, results.csv and results.json.
+    #[arg(short, long, default_value = "bench-paper")]
+    out: PathBuf,
+    /// Which reference scenes, comma-separated numbers 1 to 6 [default: all].
+    #[arg(long, value_delimiter = ',')]
+    scenes: Vec<usize>,
+    /// `report` for the report's six methods only, `all` to add canopy's builders.
+    #[arg(long, default_value = "all", value_parser = ["report", "all"])]
+    methods: String,
+    /// Image size WIDTHxHEIGHT [default: 480x480, as in the report; 32x32 with --quick].
+    #[arg(long)]
+    size: Option<String>,
+    /// Samples per pixel [default: 128; 2 with --quick].
+    #[arg(long)]
+    spp: Option<u32>,
+    /// Worker threads [default: all cores].
+    #[arg(long)]
+    threads: Option<usize>,
+    #[command(flatten)]
+    build: BuildArgs,
+}
+
+/// One way to accelerate a render, as the tables name it.
+struct Method {
+    label: String,
+    kind: AccelKind,
+    width: BvhWidth,
+    /// Row of the report's Table 1, for the methods the report measured.
+    report_row: Option<usize>,
+}
+
+fn methods(all: bool) -> Vec<Method> {
+    let method = |label: &str, kind, width, report_row| Method {
+        label: label.to_string(),
+        kind,
+        width,
+        report_row,
+    };
+    let agglomerative = AccelKind::Bvh(Builder::Agglomerative);
+    let mut list = vec![
+        method("No BVH", AccelKind::None, BvhWidth::Two, Some(0)),
+        method(
+            "Top Down x sorted",
+            AccelKind::Bvh(Builder::SortAxis(0)),
+            BvhWidth::Two,
+            Some(1),
+        ),
+        method(
+            "Top Down Morton",
+            AccelKind::Bvh(Builder::MortonMedian),
+            BvhWidth::Two,
+            Some(2),
+        ),
+        method("Agglom. 2 children", agglomerative, BvhWidth::Two, Some(3)),
+        method("Agglom. 4 children", agglomerative, BvhWidth::Four, Some(4)),
+        method(
+            "Agglom. 8 children",
+            agglomerative,
+            BvhWidth::Eight,
+            Some(5),
+        ),
+    ];
+    if all {
+        for builder in [
+            Builder::Lbvh,
+            Builder::BinnedSah,
+            Builder::SweepSah,
+            Builder::Ploc,
+        ] {
+            for width in BvhWidth::ALL {
+                list.push(method(
+                    &format!("{builder} x{width}"),
+                    AccelKind::Bvh(builder),
+                    width,
+                    None,
+                ));
+            }
+        }
+    }
+    list
+}
+
+/// One scene rendered with one method.
+#[derive(Clone, Debug, Serialize)]
+pub struct Measurement {
+    pub scene: String,
+    pub method: String,
+    pub builder: String,
+    pub width: u32,
+    /// Render time of every run, seconds.
+    pub seconds: Vec<f64>,
+    pub mean_s: f64,
+    /// Sample standard deviation of the runs (0 for one run).
+    pub std_s: f64,
+    /// Mean time without a BVH over this mean (when no BVH was measured too).
+    pub speedup: Option<f64>,
+    pub report_mean_s: Option<f64>,
+    pub report_speedup: Option<f64>,
+    pub build_ms: f64,
+    pub sah_cost: f32,
+    /// Ray segments per render.
+    pub rays: u64,
+    pub mrays_per_s: f64,
+    pub nodes_per_ray: f64,
+    pub prims_per_ray: f64,
+}
+
+fn mean_and_std(xs: &[f64]) -> (f64, f64) {
+    let n = xs.len() as f64;
+    let mean = xs.iter().sum::<f64>() / n;
+    let var = if xs.len() > 1 {
+        xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0)
+    } else {
+        0.0
+    };
+    (mean, var.sqrt())
+}
+
+pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
+    let BenchCommand::Paper(args) = &args.what;
+    let runs = args.runs.unwrap_or(if args.quick { 2 } else { 6 });
+    if runs == 0 {
+        bail!("--runs must be at least 1");
+    }
+    let scene_numbers: Vec<usize> = if args.scenes.is_empty() {
+        (1..=6).collect()
+    } else {
+        args.scenes.clone()
+    };
+    if let Some(bad) = scene_numbers.iter().find(|&&n| !(1..=6).contains(&n)) {
+        bail!("--scenes: the report has scenes 1 to 6, not {bad}");
+    }
+    let (width, height) = match &args.size {
+        Some(s) => parse_size(s)?,
+        None if args.quick => (32, 32),
+        None => (480, 480),
+    };
+    let spp = args.spp.unwrap_or(if args.quick { 2 } else { 128 });
+    let params = args.build.params()?;
+    let methods = methods(args.methods == "all");
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(args.threads.unwrap_or(0))
+        .build()
+        .context("cannot start the worker threads")?;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create {}", args.out.display()))?;
+
+    let total = (scene_numbers.len() * methods.len()) as u64 * runs as u64;
+    let progress = ProgressBar::new(total).with_style(
+        ProgressStyle::with_template("{spinner} [{bar:30}] {pos}/{len} renders  {msg}  ETA {eta}")
+            .expect("valid template")
+            .progress_chars("=> "),
+    );
+    let mut measurements = Vec::new();
+    for &n in &scene_numbers {
+        let name = format!("paper-{n}");
+        let mut scene = BuiltinScene::find(&name)
+            .expect("paper scenes are built in")
+            .load()?;
+        scene.settings.width = width;
+        scene.settings.height = height;
+        scene.settings.spp = spp;
+        let mut none_mean = None;
+        for method in &methods {
+            let m = pool.install(|| measure(&scene, n, method, &params, runs, &progress));
+            if method.kind == AccelKind::None {
+                none_mean = Some(m.mean_s);
+            }
+            let mut m = m;
+            m.speedup = none_mean.map(|none| none / m.mean_s);
+            measurements.push(m);
+        }
+    }
+    progress.finish_and_clear();
+
+    let settings = format!(
+        "{width}x{height}, {spp} spp, depth {}, {runs} runs per measurement, {} threads ({} cores), canopy {}.",
+        BuiltinScene::find("paper-1").expect("built in").load()?.settings.max_depth,
+        pool.current_num_threads(),
+        std::thread::available_parallelism().map_or(0, |n| n.get()),
+        env!("CARGO_PKG_VERSION")
+    );
+    let command = std::env::args().collect::<Vec<_>>().join(" ");
+    write_atomic(
+        &args.out.join("results.md"),
+        &tables::markdown(&measurements, &settings, &command),
+    )?;
+    write_atomic(&args.out.join("results.csv"), &tables::csv(&measurements))?;
+    let json = serde_json::json!({ "settings": settings, "command": command, "measurements": measurements });
+    write_atomic(
+        &args.out.join("results.json"),
+        &serde_json::to_string_pretty(&json)?,
+    )?;
+    println!(
+        "wrote {} measurements to {}",
+        measurements.len(),
+        args.out.display()
+    );
+    Ok(())
+}
+
+fn measure(
+    scene: &Scene,
+    number: usize,
+    method: &Method,
+    params: &canopy_bvh::BuildParams,
+    runs: u32,
+    progress: &ProgressBar,
+) -> Measurement {
+    let accel = Accel::build(method.kind, method.width, &scene.primitives, params);
+    let sah_cost = match (accel.bvh(), method.width) {
+        (None, _) => 0.0,
+        (Some(bvh), BvhWidth::Two) => bvh.stats(&params.sah).sah_cost,
+        (Some(bvh), BvhWidth::Four) => Bvh4::from_bvh2(bvh).stats(&params.sah).sah_cost,
+        (Some(bvh), BvhWidth::Eight) => Bvh8::from_bvh2(bvh).stats(&params.sah).sah_cost,
+    };
+    let mut seconds = Vec::new();
+    let mut rays = 0;
+    for run in 1..=runs {
+        progress.set_message(format!(
+            "{} · {} · run {run}/{runs}",
+            scene.name, method.label
+        ));
+        let (_, stats) = render(scene, &accel, &|| {});
+        seconds.push(stats.elapsed.as_secs_f64());
+        rays = stats.rays;
+        progress.inc(1);
+    }
+    // Traversal work per ray, from a separate 1-spp render (counting slows rendering).
+    let mut one_spp = scene.clone();
+    one_spp.settings.spp = 1;
+    let (_, counted) = render_counted(&one_spp, &accel, &|| {});
+    let per_ray = |x: u64| x as f64 / counted.rays.max(1) as f64;
+    let (mean_s, std_s) = mean_and_std(&seconds);
+    Measurement {
+        scene: scene.name.clone(),
+        method: method.label.clone(),
+        builder: method.kind.to_string(),
+        width: method.width.children(),
+        seconds,
+        mean_s,
+        std_s,
+        speedup: None,
+        report_mean_s: method
+            .report_row
+            .map(|row| report_figures::report_seconds(row, number)),
+        report_speedup: method
+            .report_row
+            .map(|row| report_figures::report_speedup(row, number)),
+        build_ms: accel.build_time.as_secs_f64() * 1e3,
+        sah_cost,
+        rays,
+        mrays_per_s: rays as f64 / mean_s.max(1e-9) / 1e6,
+        nodes_per_ray: per_ray(counted.traversal.nodes_visited),
+        prims_per_ray: per_ray(counted.traversal.primitives_tested),
+    }
+}
+
+fn parse_size(s: &str) -> anyhow::Result<(u32, u32)> {
+    let parsed = s
+        .split_once(['x', 'X'])
+        .and_then(|(w, h)| Some((w.parse().ok()?, h.parse().ok()?)));
+    match parsed {
+        Some((w, h)) if w > 0 && h > 0 => Ok((w, h)),
+        _ => bail!("--size `{s}` is not WIDTHxHEIGHT with positive numbers"),
+    }
+}
+
+/// Writes a text file through a temporary sibling, so a failure leaves no partial file.
+fn write_atomic(path: &Path, text: &str) -> anyhow::Result<()> {
+    let temp = path.with_extension("tmp");
+    std::fs::write(&temp, text)
+        .and_then(|()| std::fs::rename(&temp, path))
+        .with_context(|| format!("cannot write {}", path.display()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sample_standard_deviation() {
+        let (mean, std) = mean_and_std(&[2.0, 4.0, 4.0, 4.0, 5.0, 5.0, 7.0, 9.0]);
+        assert_eq!(mean, 5.0);
+        assert!((std - 2.138).abs() < 1e-3);
+        assert_eq!(mean_and_std(&[3.0]), (3.0, 0.0));
+    }
+
+    #[test]
+    fn report_methods_come_first_and_all_adds_twelve() {
+        assert_eq!(methods(false).len(), 6);
+        assert_eq!(methods(true).len(), 18);
+        assert_eq!(methods(true)[0].kind, AccelKind::None);
+    }
+}
