@@ -47,6 +47,45 @@ impl<T: Copy> TraversalStack<T> {
     }
 }
 
+/// The state of a closest-hit search: the ray (its `t_max` shrinking to the best hit so
+/// far), the same ray prepared for slab tests, and the best hit.
+pub(crate) struct ClosestHitSearch {
+    pub ray: Ray,
+    pub slab: SlabRay,
+    pub best: Option<Hit>,
+}
+
+impl ClosestHitSearch {
+    #[inline(always)]
+    pub fn new(ray: &Ray) -> Self {
+        Self {
+            ray: *ray,
+            slab: SlabRay::new(ray),
+            best: None,
+        }
+    }
+
+    /// Tests a leaf's primitives, keeping the closest hit (ties to the lower index).
+    #[inline(always)]
+    pub fn test_leaf<F, C>(&mut self, prims: &[u32], hit_prim: &mut F, counter: &mut C)
+    where
+        F: FnMut(u32, &Ray) -> Option<f32>,
+        C: TraversalCounter,
+    {
+        for &prim in prims {
+            counter.test_primitive();
+            if let Some(t) = hit_prim(prim, &self.ray) {
+                let hit = Hit { t, prim };
+                if self.best.is_none_or(|b| hit.is_before(&b)) {
+                    self.ray.t_max = t;
+                    self.slab.t_max = t;
+                    self.best = Some(hit);
+                }
+            }
+        }
+    }
+}
+
 /// Receives traversal events; `()` ignores them and compiles to nothing.
 pub trait TraversalCounter {
     /// A node's children were box-tested (interior) or its primitives tested (leaf).
@@ -104,33 +143,21 @@ impl Bvh2 {
         C: TraversalCounter,
     {
         let root = self.nodes.first()?;
-        let mut ray = *ray;
-        let mut slab = SlabRay::new(&ray);
-        if slab.entry_or_inf(root.min, root.max) == f32::INFINITY {
+        let mut search = ClosestHitSearch::new(ray);
+        if search.slab.entry_or_inf(root.min, root.max) == f32::INFINITY {
             return None;
         }
-        let mut best: Option<Hit> = None;
         let mut stack = TraversalStack::<(u32, f32)>::new();
         let mut node = root;
         loop {
             counter.visit_node();
             if node.is_leaf() {
-                for &prim in self.leaf_prims(node) {
-                    counter.test_primitive();
-                    if let Some(t) = hit_prim(prim, &ray) {
-                        let hit = Hit { t, prim };
-                        if best.is_none_or(|b| hit.is_before(&b)) {
-                            ray.t_max = t;
-                            slab.t_max = t;
-                            best = Some(hit);
-                        }
-                    }
-                }
+                search.test_leaf(self.leaf_prims(node), &mut hit_prim, counter);
             } else {
                 let (left, right) = (node.first, node.first + 1);
                 let (l, r) = (&self.nodes[left as usize], &self.nodes[right as usize]);
-                let t_left = slab.entry_or_inf(l.min, l.max);
-                let t_right = slab.entry_or_inf(r.min, r.max);
+                let t_left = search.slab.entry_or_inf(l.min, l.max);
+                let t_right = search.slab.entry_or_inf(r.min, r.max);
                 let (near, t_near, far, t_far) = if t_left <= t_right {
                     (left, t_left, right, t_right)
                 } else {
@@ -147,8 +174,8 @@ impl Bvh2 {
             // Pop the next subtree that can still hold a closer (or equally close) hit.
             loop {
                 match stack.pop() {
-                    None => return best,
-                    Some((index, t_entry)) if t_entry <= ray.t_max => {
+                    None => return search.best,
+                    Some((index, t_entry)) if t_entry <= search.ray.t_max => {
                         node = &self.nodes[index as usize];
                         break;
                     }

@@ -184,6 +184,8 @@ impl<const N: usize> BvhN<N> {
             }
             counter.visit_node();
             if count > 0 {
+                // The same loop as `ClosestHitSearch::test_leaf`, kept inline: routing this
+                // traversal through that type measured ~20% slower (the ray left registers).
                 let first = index as usize;
                 for &prim in &self.prim_indices[first..first + count as usize] {
                     counter.test_primitive();

@@ -23,15 +23,6 @@ impl Default for AccelKind {
     }
 }
 
-impl AccelKind {
-    /// Every choice by name, `none` first.
-    pub fn names() -> Vec<&'static str> {
-        std::iter::once("none")
-            .chain(Builder::ALL.iter().map(|b| b.name()))
-            .collect()
-    }
-}
-
 impl fmt::Display for AccelKind {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
