@@ -417,5 +417,32 @@ fn bench_paper_quick_writes_consistent_tables() {
         assert!(m["report_speedup"].as_f64().unwrap() >= 1.0);
     }
     assert!(md.contains("## Table 2: speedup over no BVH"));
+    for plot in [
+        "render_time.png",
+        "speedup.png",
+        "build_vs_sah.png",
+        "table3.png",
+    ] {
+        let image =
+            image::open(dir.join("results").join(plot)).unwrap_or_else(|e| panic!("{plot}: {e}"));
+        assert!(image.width() > 100, "{plot}");
+    }
+    // The tables and plots can be remade from the JSON alone.
+    let again = canopy(
+        &[
+            "bench",
+            "paper",
+            "--from",
+            "results/results.json",
+            "--out",
+            "again",
+        ],
+        &dir,
+    );
+    assert!(again.status.success(), "{}", stderr(&again));
+    assert_eq!(
+        std::fs::read_to_string(dir.join("again/results.md")).unwrap(),
+        md
+    );
     std::fs::remove_dir_all(dir).unwrap();
 }

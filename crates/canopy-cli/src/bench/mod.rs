@@ -2,7 +2,9 @@
 //! machine — every reference scene rendered with the report's methods and canopy's other
 //! builders at every width, repeated, timed and tabulated.
 
+mod plots;
 mod report_figures;
+mod table3;
 mod tables;
 
 use crate::build_args::BuildArgs;
@@ -11,7 +13,7 @@ use canopy_bvh::{Builder, Bvh4, Bvh8};
 use canopy_render::{render, render_counted, Accel, AccelKind, BuiltinScene, BvhWidth, Scene};
 use clap::{Args, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
 #[derive(Args)]
@@ -34,9 +36,13 @@ struct PaperArgs {
     /// Renders per measurement [default: 6, as in the report; 2 with --quick].
     #[arg(long)]
     runs: Option<u32>,
-    /// Folder for results.md, results.csv and results.json.
+    /// Folder for results.md, results.csv, results.json, the plots and table3.png.
     #[arg(short, long, default_value = "bench-paper")]
     out: PathBuf,
+    /// Remake the tables, plots and pictures of an earlier run from its results.json,
+    /// without measuring again.
+    #[arg(long, value_name = "RESULTS_JSON")]
+    from: Option<PathBuf>,
     /// Which reference scenes, comma-separated numbers 1 to 6 [default: all].
     #[arg(long, value_delimiter = ',')]
     scenes: Vec<usize>,
@@ -116,8 +122,27 @@ fn methods(all: bool) -> Vec<Method> {
     list
 }
 
+/// The settings of a run.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct RunConfig {
+    pub width: u32,
+    pub height: u32,
+    pub spp: u32,
+    pub runs: u32,
+    pub threads: usize,
+}
+
+/// Everything a run measured: what `results.json` holds.
+#[derive(Debug, Serialize, Deserialize)]
+pub struct RunRecord {
+    pub settings: String,
+    pub command: String,
+    pub config: RunConfig,
+    pub measurements: Vec<Measurement>,
+}
+
 /// One scene rendered with one method.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Measurement {
     pub scene: String,
     pub method: String,
@@ -154,6 +179,26 @@ fn mean_and_std(xs: &[f64]) -> (f64, f64) {
 
 pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
     let BenchCommand::Paper(args) = &args.what;
+    let params = args.build.params()?;
+    if let Some(from) = &args.from {
+        let text = std::fs::read_to_string(from)
+            .with_context(|| format!("cannot read {}", from.display()))?;
+        let record: RunRecord = serde_json::from_str(&text).with_context(|| {
+            format!(
+                "{}: not a results.json of `canopy bench paper`",
+                from.display()
+            )
+        })?;
+        std::fs::create_dir_all(&args.out)
+            .with_context(|| format!("cannot create {}", args.out.display()))?;
+        write_outputs(&record, &args.out, &params)?;
+        println!(
+            "remade the outputs of {} measurements in {}",
+            record.measurements.len(),
+            args.out.display()
+        );
+        return Ok(());
+    }
     let runs = args.runs.unwrap_or(if args.quick { 2 } else { 6 });
     if runs == 0 {
         bail!("--runs must be at least 1");
@@ -172,7 +217,6 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
         None => (480, 480),
     };
     let spp = args.spp.unwrap_or(if args.quick { 2 } else { 128 });
-    let params = args.build.params()?;
     let methods = methods(args.methods == "all");
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(args.threads.unwrap_or(0))
@@ -216,23 +260,53 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
         std::thread::available_parallelism().map_or(0, |n| n.get()),
         env!("CARGO_PKG_VERSION")
     );
-    let command = std::env::args().collect::<Vec<_>>().join(" ");
-    write_atomic(
-        &args.out.join("results.md"),
-        &tables::markdown(&measurements, &settings, &command),
-    )?;
-    write_atomic(&args.out.join("results.csv"), &tables::csv(&measurements))?;
-    let json = serde_json::json!({ "settings": settings, "command": command, "measurements": measurements });
+    let record = RunRecord {
+        settings,
+        command: std::env::args().collect::<Vec<_>>().join(" "),
+        config: RunConfig {
+            width,
+            height,
+            spp,
+            runs,
+            threads: pool.current_num_threads(),
+        },
+        measurements,
+    };
     write_atomic(
         &args.out.join("results.json"),
-        &serde_json::to_string_pretty(&json)?,
+        &serde_json::to_string_pretty(&record)?,
     )?;
+    pool.install(|| write_outputs(&record, &args.out, &params))?;
     println!(
         "wrote {} measurements to {}",
-        measurements.len(),
+        record.measurements.len(),
         args.out.display()
     );
     Ok(())
+}
+
+/// Tables, plots and the Table 3 pictures of a run.
+fn write_outputs(
+    record: &RunRecord,
+    out: &Path,
+    params: &canopy_bvh::BuildParams,
+) -> anyhow::Result<()> {
+    let m = &record.measurements;
+    write_atomic(
+        &out.join("results.md"),
+        &tables::markdown(m, &record.settings, &record.command),
+    )?;
+    write_atomic(&out.join("results.csv"), &tables::csv(m))?;
+    plots::write_plots(out, m)?;
+    // Pictures at most 240 pixels wide and 16 spp: they show trees, not light.
+    let size = record.config.width.min(record.config.height).min(240);
+    table3::write_table3(
+        &out.join("table3.png"),
+        &methods(false),
+        size,
+        record.config.spp.min(16),
+        params,
+    )
 }
 
 fn measure(

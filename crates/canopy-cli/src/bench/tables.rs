@@ -12,6 +12,13 @@ pub fn significant(x: f64) -> String {
     format!("{x:.decimals$}")
 }
 
+/// `mean ± std`, both to the mean's precision.
+fn mean_and_spread(mean: f64, std: f64) -> String {
+    let mean_text = significant(mean);
+    let decimals = mean_text.split_once('.').map_or(0, |(_, d)| d.len());
+    format!("{mean_text} ± {std:.decimals$}")
+}
+
 /// One CSV line per measurement, with a header.
 pub fn csv(measurements: &[Measurement]) -> String {
     let mut out = String::from(
@@ -81,11 +88,7 @@ pub fn markdown(measurements: &[Measurement], settings: &str, command: &str) -> 
     for method in &methods {
         let cells: Vec<String> = scenes
             .iter()
-            .map(|s| {
-                find(s, method).map_or("–".into(), |m| {
-                    format!("{} ± {}", significant(m.mean_s), significant(m.std_s))
-                })
-            })
+            .map(|s| find(s, method).map_or("–".into(), |m| mean_and_spread(m.mean_s, m.std_s)))
             .collect();
         let _ = writeln!(w, "| {method} | {} |", cells.join(" | "));
     }

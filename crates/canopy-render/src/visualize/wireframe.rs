@@ -6,7 +6,7 @@ use super::draw::Canvas;
 use super::font::text_width;
 use crate::camera::Camera;
 use crate::film::Film;
-use canopy_bvh::{Aabb, Bvh2};
+use canopy_bvh::{Aabb, Bvh2, BvhN};
 use glam::Vec3;
 use std::str::FromStr;
 
@@ -97,19 +97,58 @@ fn edges(b: &Aabb) -> [(Vec3, Vec3); 12] {
     pairs.map(|(i, j)| (c(i), c(j)))
 }
 
+/// Every child box of a wide tree whose level is in `levels` (the root node's children
+/// are level 1, as in a binary tree whose root is level 0), shallowest first.
+pub fn wide_boxes_at_levels<const N: usize>(
+    bvh: &BvhN<N>,
+    levels: LevelRange,
+) -> Vec<(Aabb, usize)> {
+    let mut boxes = Vec::new();
+    let Some(root) = bvh.nodes().first() else {
+        return boxes;
+    };
+    if levels.contains(0) {
+        let all = (0..root.len()).fold(Aabb::EMPTY, |b, i| b.union(root.slot_bounds(i)));
+        boxes.push((all, 0));
+    }
+    let mut stack = vec![(0usize, 1usize)];
+    while let Some((index, level)) = stack.pop() {
+        let node = &bvh.nodes()[index];
+        for i in 0..node.len() {
+            if levels.contains(level) {
+                boxes.push((node.slot_bounds(i), level));
+            }
+            if node.count[i] == 0 && level < levels.last {
+                stack.push((node.child[i] as usize, level + 1));
+            }
+        }
+    }
+    boxes.sort_by_key(|&(_, level)| level);
+    boxes
+}
+
 /// Draws the boxes of the requested levels over `film`, and a legend of the level
 /// colours; returns how many boxes were drawn.
 pub fn draw_bvh(film: &mut Film, camera: &Camera, bvh: &Bvh2, levels: LevelRange) -> usize {
-    let boxes = boxes_at_levels(bvh, levels);
+    draw_boxes(film, camera, &boxes_at_levels(bvh, levels), levels.first)
+}
+
+/// Draws boxes tagged with their tree level (from [`boxes_at_levels`] or
+/// [`wide_boxes_at_levels`]), coloured from level `first` to the deepest, with a legend.
+pub fn draw_boxes(
+    film: &mut Film,
+    camera: &Camera,
+    boxes: &[(Aabb, usize)],
+    first: usize,
+) -> usize {
     let Some(deepest) = boxes.iter().map(|&(_, l)| l).max() else {
         return 0;
     };
-    let first = levels.first;
     // Turbo's first tenth is nearly black; start above it so the root stays visible.
     let colour =
         |level: usize| turbo(0.1 + 0.9 * (level - first) as f32 / (deepest - first).max(1) as f32);
     let mut canvas = Canvas::new(film);
-    for (b, level) in &boxes {
+    for (b, level) in boxes {
         for (a, z) in edges(b) {
             if let Some((pa, pz)) = project_segment(camera, a, z) {
                 canvas.line(pa, pz, colour(*level), 0.85);
@@ -194,6 +233,23 @@ mod tests {
         );
         assert!("5..2".parse::<LevelRange>().is_err());
         assert!("x".parse::<LevelRange>().is_err());
+    }
+
+    #[test]
+    fn wide_levels_match_the_binary_tree_they_collapse() {
+        // A complete binary tree of 8 leaves collapsed 4-wide: level 1 holds the four
+        // grandchildren of the binary root, level 2 the eight leaves.
+        let (_, bvh) = tree(8);
+        let wide = canopy_bvh::Bvh4::from_bvh2(&bvh);
+        let count = |s: &str| wide_boxes_at_levels(&wide, s.parse().unwrap()).len();
+        assert_eq!(
+            (count("0"), count("1"), count("2"), count("3..")),
+            (1, 4, 8, 0)
+        );
+        assert_eq!(
+            wide_boxes_at_levels(&wide, LevelRange::ALL)[0].0,
+            bvh.bounds()
+        );
     }
 
     #[test]
