@@ -1,6 +1,7 @@
 //! The acceleration structure a render uses: none (a loop over all primitives, the
 //! report's baseline) or a BVH from any builder, binary or collapsed to 4 or 8 wide.
 
+use crate::geometry::ShearedRay;
 use crate::scene::Primitive;
 use canopy_bvh::{
     build, BuildParams, Builder, Bvh2, Bvh4, Bvh8, Hit, Ray, TraversalCounter, TraversalStats,
@@ -160,7 +161,13 @@ impl Accel {
         ray: &Ray,
         counter: &mut C,
     ) -> Option<Hit> {
-        let test = |prim: u32, ray: &Ray| primitives[prim as usize].shape.intersect(ray);
+        // The shear depends on the direction only, so it stays valid as t_max shrinks.
+        let sheared = ShearedRay::new(ray);
+        let test = |prim: u32, ray: &Ray| {
+            primitives[prim as usize]
+                .shape
+                .intersect_sheared(ray, &sheared)
+        };
         match (&self.structure, &self.bvh) {
             (Structure::Binary, Some(bvh)) => bvh.intersect_counted(ray, test, counter),
             (Structure::Four(bvh), _) => bvh.intersect_counted(ray, test, counter),
@@ -169,17 +176,17 @@ impl Accel {
                 for _ in primitives {
                     counter.test_primitive();
                 }
-                brute_force(primitives, ray)
+                brute_force(primitives, ray, &sheared)
             }
         }
     }
 }
 
-fn brute_force(primitives: &[Primitive], ray: &Ray) -> Option<Hit> {
+fn brute_force(primitives: &[Primitive], ray: &Ray, sheared: &ShearedRay) -> Option<Hit> {
     let mut best: Option<Hit> = None;
     let mut ray = *ray;
     for (prim, p) in primitives.iter().enumerate() {
-        if let Some(t) = p.shape.intersect(&ray) {
+        if let Some(t) = p.shape.intersect_sheared(&ray, sheared) {
             let hit = Hit {
                 t,
                 prim: prim as u32,

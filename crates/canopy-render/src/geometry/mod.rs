@@ -9,7 +9,7 @@ mod triangle;
 
 pub use cuboid::Cuboid;
 pub use sphere::Sphere;
-pub use triangle::Triangle;
+pub use triangle::{ShearedRay, Triangle};
 
 use canopy_bvh::{Aabb, Ray};
 use glam::Vec3;
@@ -51,9 +51,16 @@ impl Shape {
     /// Hit distance in `[ray.t_min, ray.t_max]`, if any.
     #[inline]
     pub fn intersect(&self, ray: &Ray) -> Option<f32> {
+        self.intersect_sheared(ray, &ShearedRay::new(ray))
+    }
+
+    /// [`Shape::intersect`] with the ray already prepared for triangle tests (once per
+    /// ray, during traversal).
+    #[inline]
+    pub fn intersect_sheared(&self, ray: &Ray, sheared: &ShearedRay) -> Option<f32> {
         match self {
             Shape::Sphere(s) => s.intersect(ray),
-            Shape::Triangle(t) => t.intersect(ray),
+            Shape::Triangle(t) => t.hit(ray, sheared).map(|(t, _)| t),
             Shape::Cuboid(c) => c.intersect(ray),
         }
     }

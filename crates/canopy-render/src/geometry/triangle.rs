@@ -1,94 +1,142 @@
 use super::{max_abs, Surface, POINT_ERROR_ULPS};
 use canopy_bvh::{Aabb, Ray};
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 
-/// A triangle, stored as one vertex and two edges for the intersection test.
+/// A triangle, stored as its three vertices exactly as the mesh gives them: triangles
+/// that share an edge then share its end points bit for bit, which the watertight test
+/// needs.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Triangle {
-    pub p0: Vec3,
-    pub e1: Vec3,
-    pub e2: Vec3,
+    pub v: [Vec3; 3],
     /// Index into the scene's vertex-normal triples, or [`Triangle::FLAT`].
     pub normals: u32,
+}
+
+/// A ray prepared once for watertight triangle tests (Woop, Benthin and Wald,
+/// "Watertight Ray/Triangle Intersection", JCGT 2013): the axis along which the ray runs
+/// most steeply becomes z, and a shear maps the ray onto the z axis.
+#[derive(Clone, Copy, Debug)]
+pub struct ShearedRay {
+    /// Axis indices: z is the dominant direction axis; x, y keep the winding.
+    kx: usize,
+    ky: usize,
+    kz: usize,
+    shear: Vec3,
+}
+
+impl ShearedRay {
+    pub fn new(ray: &Ray) -> Self {
+        let d = ray.dir;
+        let kz = d.abs().max_position();
+        let (mut kx, mut ky) = ((kz + 1) % 3, (kz + 2) % 3);
+        if d[kz] < 0.0 {
+            std::mem::swap(&mut kx, &mut ky);
+        }
+        Self {
+            kx,
+            ky,
+            kz,
+            shear: Vec3::new(d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]),
+        }
+    }
 }
 
 impl Triangle {
     /// `normals` value of a flat-shaded triangle.
     pub const FLAT: u32 = u32::MAX;
 
-    pub fn new(p0: Vec3, p1: Vec3, p2: Vec3) -> Self {
+    pub fn new(v0: Vec3, v1: Vec3, v2: Vec3) -> Self {
         Self {
-            p0,
-            e1: p1 - p0,
-            e2: p2 - p0,
+            v: [v0, v1, v2],
             normals: Self::FLAT,
         }
     }
 
-    pub fn vertices(&self) -> [Vec3; 3] {
-        [self.p0, self.p0 + self.e1, self.p0 + self.e2]
-    }
-
     pub fn bounds(&self) -> Aabb {
-        Aabb::from_points(self.vertices())
+        Aabb::from_points(self.v)
     }
 
     pub fn area(&self) -> f32 {
-        0.5 * self.e1.cross(self.e2).length()
+        0.5 * (self.v[1] - self.v[0])
+            .cross(self.v[2] - self.v[0])
+            .length()
     }
 
-    /// Distance and barycentrics (u, v of vertices 1 and 2) of the hit (Möller and
-    /// Trumbore, "Fast, minimum storage ray-triangle intersection", 1997).
+    /// Distance and barycentric weights of the three vertices, if `ray` hits within its
+    /// range. Watertight: a ray through an edge or vertex shared by triangles hits at least
+    /// one of them; edge functions that come out exactly zero in single precision are
+    /// recomputed in double precision, as the paper prescribes.
     #[inline]
-    fn hit(&self, ray: &Ray) -> Option<(f32, f32, f32)> {
-        let pvec = ray.dir.cross(self.e2);
-        let det = self.e1.dot(pvec);
+    pub fn hit(&self, ray: &Ray, sheared: &ShearedRay) -> Option<(f32, [f32; 3])> {
+        let ShearedRay { kx, ky, kz, shear } = *sheared;
+        let [a, b, c] = self.v.map(|v| v - ray.origin);
+        let (ax, ay) = (a[kx] - shear.x * a[kz], a[ky] - shear.y * a[kz]);
+        let (bx, by) = (b[kx] - shear.x * b[kz], b[ky] - shear.y * b[kz]);
+        let (cx, cy) = (c[kx] - shear.x * c[kz], c[ky] - shear.y * c[kz]);
+        let mut u = cx * by - cy * bx;
+        let mut v = ax * cy - ay * cx;
+        let mut w = bx * ay - by * ax;
+        if u == 0.0 || v == 0.0 || w == 0.0 {
+            let d =
+                |p: f32, q: f32, r: f32, s: f32| (p as f64 * q as f64 - r as f64 * s as f64) as f32;
+            u = d(cx, by, cy, bx);
+            v = d(ax, cy, ay, cx);
+            w = d(bx, ay, by, ax);
+        }
+        if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
+            return None;
+        }
+        let det = u + v + w;
         if det == 0.0 || !det.is_finite() {
             return None;
         }
-        let inv_det = 1.0 / det;
-        let tvec = ray.origin - self.p0;
-        let u = tvec.dot(pvec) * inv_det;
-        if !(0.0..=1.0).contains(&u) {
-            return None;
-        }
-        let qvec = tvec.cross(self.e1);
-        let v = ray.dir.dot(qvec) * inv_det;
-        if v < 0.0 || u + v > 1.0 {
-            return None;
-        }
-        let t = self.e2.dot(qvec) * inv_det;
-        (t >= ray.t_min && t <= ray.t_max).then_some((t, u, v))
+        let (az, bz, cz) = (shear.z * a[kz], shear.z * b[kz], shear.z * c[kz]);
+        let t = (u * az + v * bz + w * cz) / det;
+        (t >= ray.t_min && t <= ray.t_max).then(|| (t, [u / det, v / det, w / det]))
     }
 
+    /// Hit distance, preparing the ray on the spot (for one-off tests; traversal prepares
+    /// it once per ray and calls [`Triangle::hit`]).
     #[inline]
     pub fn intersect(&self, ray: &Ray) -> Option<f32> {
-        self.hit(ray).map(|(t, _, _)| t)
+        self.hit(ray, &ShearedRay::new(ray)).map(|(t, _)| t)
     }
 
     pub fn surface(&self, ray: &Ray, vertex_normals: &[[Vec3; 3]]) -> Surface {
-        // Recompute the barycentrics for this one hit rather than carry them through
-        // traversal; the point from barycentrics is far more precise than o + t d.
-        let (_, u, v) = self.hit(ray).unwrap_or((0.0, 1.0 / 3.0, 1.0 / 3.0));
-        let p = self.p0 + u * self.e1 + v * self.e2;
-        let geometric_normal = self.e1.cross(self.e2).normalize_or(Vec3::Y);
+        // Recompute the weights for this one hit rather than carry them through traversal;
+        // the point from weights is far more precise than o + t d.
+        let (_, weights) = self
+            .hit(ray, &ShearedRay::new(ray))
+            .unwrap_or((0.0, [1.0 / 3.0; 3]));
+        let p = (0..3)
+            .fold(DVec3::ZERO, |p, i| {
+                p + weights[i] as f64 * self.v[i].as_dvec3()
+            })
+            .as_vec3();
+        let geometric_normal = (self.v[1] - self.v[0])
+            .cross(self.v[2] - self.v[0])
+            .normalize_or(Vec3::Y);
         let shading_normal = match vertex_normals.get(self.normals as usize) {
-            Some([n0, n1, n2]) => {
-                let n = ((1.0 - u - v) * *n0 + u * *n1 + v * *n2).normalize_or(geometric_normal);
-                if n.dot(geometric_normal) < 0.0 {
-                    -n
+            Some(n) => {
+                let interpolated = (0..3)
+                    .fold(Vec3::ZERO, |s, i| s + weights[i] * n[i])
+                    .normalize_or(geometric_normal);
+                if interpolated.dot(geometric_normal) < 0.0 {
+                    -interpolated
                 } else {
-                    n
+                    interpolated
                 }
             }
             None => geometric_normal,
         };
-        let [a, b, c] = self.vertices();
         Surface {
             p,
             geometric_normal,
             shading_normal,
-            error: POINT_ERROR_ULPS * max_abs(a).max(max_abs(b)).max(max_abs(c)),
+            error: POINT_ERROR_ULPS
+                * max_abs(self.v[0])
+                    .max(max_abs(self.v[1]))
+                    .max(max_abs(self.v[2])),
         }
     }
 }
@@ -134,6 +182,19 @@ mod tests {
     }
 
     #[test]
+    fn grazing_edge_and_vertex_hits_count() {
+        // Exactly on the edge from (0,0) to (1,0), and exactly on a vertex.
+        assert_eq!(
+            tri().intersect(&ray(Vec3::new(0.5, 0.0, 1.0), -Vec3::Z)),
+            Some(1.0)
+        );
+        assert_eq!(
+            tri().intersect(&ray(Vec3::new(1.0, 0.0, 1.0), -Vec3::Z)),
+            Some(1.0)
+        );
+    }
+
+    #[test]
     fn parallel_ray_misses() {
         assert_eq!(
             tri().intersect(&ray(Vec3::new(-1.0, 0.25, 0.0), Vec3::X)),
@@ -162,6 +223,15 @@ mod tests {
             flat.intersect(&ray(Vec3::new(0.5, 0.0, 1.0), -Vec3::Z)),
             None
         );
+    }
+
+    #[test]
+    fn weights_locate_the_hit_point() {
+        let r = ray(Vec3::new(0.2, 0.3, 2.0), -Vec3::Z);
+        let (t, w) = tri().hit(&r, &ShearedRay::new(&r)).unwrap();
+        assert_eq!(t, 2.0);
+        let p = w[0] * tri().v[0] + w[1] * tri().v[1] + w[2] * tri().v[2];
+        assert!((p - Vec3::new(0.2, 0.3, 0.0)).length() < 1e-6);
     }
 
     #[test]
