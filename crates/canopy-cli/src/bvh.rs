@@ -2,6 +2,7 @@
 //! tabulate their shape, quality and build time.
 
 use crate::build_args::{builders_help, BuildArgs};
+use crate::units::human_bytes;
 use anyhow::bail;
 use canopy_bvh::{build, Aabb, BuildParams, Builder, Bvh4, Bvh8};
 use canopy_render::BvhWidth;
@@ -164,15 +165,7 @@ fn print_table(report: &Report) {
             r.max_leaf_size,
             r.max_depth,
             r.sah_cost,
-            human_bytes(r.memory_bytes)
+            human_bytes(r.memory_bytes as u64)
         );
-    }
-}
-
-fn human_bytes(bytes: usize) -> String {
-    match bytes {
-        b if b >= 1 << 20 => format!("{:.1} MiB", b as f64 / (1 << 20) as f64),
-        b if b >= 1 << 10 => format!("{:.1} KiB", b as f64 / 1024.0),
-        b => format!("{b} B"),
     }
 }

@@ -3,7 +3,9 @@
 mod bench;
 mod build_args;
 mod bvh;
+mod check;
 mod render;
+mod units;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
@@ -27,6 +29,8 @@ enum Command {
     Bvh(bvh::BvhArgs),
     /// Benchmarks: `canopy bench paper` reproduces the report's evaluation.
     Bench(bench::BenchArgs),
+    /// Validate a scene and describe what it contains, without rendering.
+    Check(check::CheckArgs),
     /// List the built-in scenes.
     Scenes,
 }
@@ -37,6 +41,7 @@ fn main() -> ExitCode {
         Command::Render(args) => render::run(&args),
         Command::Bvh(args) => bvh::run(&args),
         Command::Bench(args) => bench::run(&args),
+        Command::Check(args) => check::run(&args),
         Command::Scenes => list_scenes(),
     };
     match result {

@@ -10,9 +10,6 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::{Path, PathBuf};
 
-/// Largest image canopy agrees to render (pixels), to fail early instead of exhausting memory.
-const MAX_PIXELS: u64 = 1 << 28;
-
 #[derive(Args)]
 pub struct RenderArgs {
     /// Built-in scene name (see `canopy scenes`) or path to a scene file.
@@ -163,6 +160,12 @@ fn print_scene_summary(args: &RenderArgs, scene: &Scene, accel: &Accel) {
         counts.triangles,
         counts.cuboids
     );
+    if scene.skipped_degenerate > 0 {
+        println!(
+            "warning     {} zero-area mesh triangles were left out",
+            scene.skipped_degenerate
+        );
+    }
     match args.bvh {
         AccelKind::None => println!("bvh         none"),
         AccelKind::Bvh(_) => println!(
@@ -182,20 +185,7 @@ fn apply_overrides(scene: &mut Scene, args: &RenderArgs) -> anyhow::Result<()> {
     s.spp = args.spp.unwrap_or(s.spp);
     s.max_depth = args.depth.unwrap_or(s.max_depth);
     s.seed = args.seed.unwrap_or(s.seed);
-    if s.width == 0 || s.height == 0 {
-        bail!("image size {}x{} is empty", s.width, s.height);
-    }
-    if s.width as u64 * s.height as u64 > MAX_PIXELS {
-        bail!(
-            "image size {}x{} is too large (at most {MAX_PIXELS} pixels; this one needs {} MiB of film)",
-            s.width,
-            s.height,
-            (s.width as u64 * s.height as u64 * 12) >> 20
-        );
-    }
-    if s.spp == 0 {
-        bail!("--spp must be at least 1");
-    }
+    s.check().map_err(anyhow::Error::msg)?;
     Ok(())
 }
 

@@ -446,3 +446,51 @@ fn bench_paper_quick_writes_consistent_tables() {
     );
     std::fs::remove_dir_all(dir).unwrap();
 }
+
+#[test]
+fn check_describes_a_valid_scene_without_rendering() {
+    let dir = scratch("check");
+    let out = canopy(&["check", "paper-5"], &dir);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let text = String::from_utf8_lossy(&out.stdout);
+    for line in [
+        "primitives  1477 (485 spheres, 992 triangles, 0 cuboids)",
+        "render      480x480, 128 spp, depth 4",
+        "ok          paper-5 is valid",
+    ] {
+        assert!(text.contains(line), "`{line}` missing:\n{text}");
+    }
+    assert_eq!(outputs(&dir), Vec::<String>::new(), "check writes nothing");
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+#[test]
+fn check_reports_degenerate_triangles_and_bad_settings() {
+    let dir = scratch("check-bad");
+    std::fs::write(
+        dir.join("m.obj"),
+        "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 2\n",
+    )
+    .unwrap();
+    let scene = format!("{CAMERA}[[meshes]]\nfile = \"m.obj\"\nmaterial = {{ type = \"lambertian\", albedo = [1, 1, 1] }}\n");
+    std::fs::write(dir.join("s.toml"), &scene).unwrap();
+    let out = canopy(&["check", "s.toml"], &dir);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(
+        String::from_utf8_lossy(&out.stdout).contains("1 zero-area mesh triangles are left out")
+    );
+
+    std::fs::write(
+        dir.join("deep.toml"),
+        format!("{CAMERA}[render]\nmax_depth = 5000\n"),
+    )
+    .unwrap();
+    let out = canopy(&["check", "deep.toml"], &dir);
+    assert!(!out.status.success());
+    assert!(
+        stderr(&out).contains("deep.toml:4: render: max_depth 5000 is over the limit"),
+        "{}",
+        stderr(&out)
+    );
+    std::fs::remove_dir_all(dir).unwrap();
+}

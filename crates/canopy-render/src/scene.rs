@@ -40,6 +40,49 @@ pub struct RenderSettings {
     pub seed: u64,
 }
 
+impl RenderSettings {
+    /// Most pixels an image may have (the film takes 12 bytes per pixel).
+    pub const MAX_PIXELS: u64 = 1 << 28;
+    /// Most ray segments per path.
+    pub const MAX_DEPTH: u32 = 1024;
+
+    /// Why these settings cannot be rendered, if they cannot.
+    pub fn check(&self) -> Result<(), String> {
+        let pixels = self.width as u64 * self.height as u64;
+        if pixels == 0 {
+            return Err(format!(
+                "image size {}x{} is empty",
+                self.width, self.height
+            ));
+        }
+        if pixels > Self::MAX_PIXELS {
+            return Err(format!(
+                "image size {}x{} is too large: at most {} pixels (this one would need {} MiB of film)",
+                self.width,
+                self.height,
+                Self::MAX_PIXELS,
+                (pixels * 12) >> 20
+            ));
+        }
+        if self.spp == 0 {
+            return Err("at least 1 sample per pixel is needed".into());
+        }
+        if self.max_depth > Self::MAX_DEPTH {
+            return Err(format!(
+                "max_depth {} is over the limit of {}",
+                self.max_depth,
+                Self::MAX_DEPTH
+            ));
+        }
+        Ok(())
+    }
+
+    /// Bytes of film the render needs.
+    pub fn film_bytes(&self) -> u64 {
+        self.width as u64 * self.height as u64 * 12
+    }
+}
+
 impl Default for RenderSettings {
     fn default() -> Self {
         Self {
@@ -70,6 +113,8 @@ pub struct Scene {
     pub primitives: Vec<Primitive>,
     /// Vertex normals of smooth triangles, indexed by `Triangle::normals`.
     pub vertex_normals: Vec<[Vec3; 3]>,
+    /// Mesh triangles left out because they have no area (they can never be hit).
+    pub skipped_degenerate: usize,
 }
 
 impl Scene {

@@ -36,8 +36,7 @@ struct SceneDoc {
     name: Option<String>,
     description: Option<String>,
     camera: Spanned<CameraDoc>,
-    #[serde(default)]
-    render: RenderDoc,
+    render: Option<Spanned<RenderDoc>>,
     background: Option<Spanned<toml::Value>>,
     #[serde(default)]
     materials: BTreeMap<String, Spanned<toml::Value>>,
@@ -204,7 +203,7 @@ pub fn parse_scene(source: &str, file: &str, assets: &dyn Assets) -> Result<Scen
         named: BTreeMap::new(),
     };
     builder.camera(&doc.camera)?;
-    builder.settings(&doc.render);
+    builder.settings(doc.render.as_ref())?;
     if let Some(bg) = &doc.background {
         builder.background(bg)?;
     }
@@ -283,15 +282,25 @@ impl SceneBuilder<'_> {
         Ok(())
     }
 
-    fn settings(&mut self, doc: &RenderDoc) {
+    fn settings(&mut self, doc: Option<&Spanned<RenderDoc>>) -> Result<(), SceneError> {
         let d = RenderSettings::default();
-        self.scene.settings = RenderSettings {
-            width: doc.width.unwrap_or(d.width),
-            height: doc.height.unwrap_or(d.height),
-            spp: doc.spp.unwrap_or(d.spp),
-            max_depth: doc.max_depth.unwrap_or(d.max_depth),
-            seed: doc.seed.unwrap_or(d.seed),
+        let Some(doc) = doc else {
+            self.scene.settings = d;
+            return Ok(());
         };
+        let r = doc.get_ref();
+        let settings = RenderSettings {
+            width: r.width.unwrap_or(d.width),
+            height: r.height.unwrap_or(d.height),
+            spp: r.spp.unwrap_or(d.spp),
+            max_depth: r.max_depth.unwrap_or(d.max_depth),
+            seed: r.seed.unwrap_or(d.seed),
+        };
+        if let Err(problem) = settings.check() {
+            return self.cx.invalid(doc.span(), format!("render: {problem}"));
+        }
+        self.scene.settings = settings;
+        Ok(())
     }
 
     fn background(&mut self, value: &Spanned<toml::Value>) -> Result<(), SceneError> {
@@ -466,6 +475,11 @@ impl SceneBuilder<'_> {
         for &[a, b, c] in &data.triangles {
             let [pa, pb, pc] = [a, b, c].map(|i| data.positions[i as usize]);
             let mut triangle = Triangle::new(pa, pb, pc);
+            // A triangle without area can never be hit: leave it out, and say so.
+            if triangle.area() == 0.0 {
+                self.scene.skipped_degenerate += 1;
+                continue;
+            }
             if !data.normals.is_empty() {
                 triangle.normals = self.scene.vertex_normals.len() as u32;
                 self.scene
@@ -564,6 +578,21 @@ mod tests {
     fn missing_mesh_file_names_the_mesh() {
         let e = error("[[meshes]]\nfile = \"gone.ply\"\nmaterial = {type = \"lambertian\", albedo = [1, 1, 1]}\n");
         assert!(e.contains("test.toml:4") && e.contains("gone.ply"), "{e}");
+    }
+
+    #[test]
+    fn zero_area_triangles_are_skipped_and_counted() {
+        struct Mesh;
+        impl Assets for Mesh {
+            fn read(&self, _: &str) -> Result<Vec<u8>, String> {
+                // One good triangle, one with a repeated vertex, one with collinear ones.
+                Ok(b"v 0 0 0\nv 1 0 0\nv 0 1 0\nv 2 0 0\nf 1 2 3\nf 1 2 2\nf 1 2 4\n".to_vec())
+            }
+        }
+        let source = format!("{CAMERA}[[meshes]]\nfile = \"m.obj\"\nmaterial = {{ type = \"lambertian\", albedo = [1, 1, 1] }}\n");
+        let scene = parse_scene(&source, "t.toml", &Mesh).unwrap();
+        assert_eq!(scene.primitives.len(), 1);
+        assert_eq!(scene.skipped_degenerate, 2);
     }
 
     #[test]
