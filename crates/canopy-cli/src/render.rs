@@ -4,16 +4,24 @@
 use crate::build_args::{builders_help, BuildArgs};
 use anyhow::{bail, Context};
 use canopy_render::camera::Camera;
+use canopy_render::checkpoint::Checkpoint;
 use canopy_render::visualize::{draw_bvh, render_heatmap, LevelRange};
-use canopy_render::{output::image_format, render, write_image, Accel, AccelKind, BvhWidth, Scene};
+use canopy_render::{
+    output::image_format, render_samples, write_image, Accel, AccelKind, Accumulator, BvhWidth,
+    RenderStats, Scene,
+};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
 
 #[derive(Args)]
 pub struct RenderArgs {
-    /// Built-in scene name (see `canopy scenes`) or path to a scene file.
-    scene: String,
+    /// Built-in scene name (see `canopy scenes`), scene file, or OBJ/PLY mesh.
+    #[arg(required_unless_present = "resume")]
+    scene: Option<String>,
     /// Output image, .png (8-bit sRGB) or .exr (linear float) [default: <scene>.png].
     #[arg(short, long)]
     output: Option<PathBuf>,
@@ -50,6 +58,32 @@ pub struct RenderArgs {
     /// plus primitive tests) as a false-colour image with a scale bar.
     #[arg(long, conflicts_with = "show_bvh")]
     heatmap: bool,
+    /// Save the render's progress to FILE periodically (atomically), to resume it later.
+    #[arg(long, value_name = "FILE")]
+    checkpoint: Option<PathBuf>,
+    /// How often to save the checkpoint: seconds, or a number with s, m or h.
+    #[arg(long, default_value = "60s", value_parser = parse_duration, requires = "checkpoint")]
+    every: Duration,
+    /// Continue the render saved in a checkpoint (scene and settings come from it).
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["scene", "size", "spp", "depth", "seed", "heatmap"])]
+    resume: Option<PathBuf>,
+}
+
+fn parse_duration(s: &str) -> Result<Duration, String> {
+    let (number, unit) = match s.char_indices().find(|(_, c)| c.is_ascii_alphabetic()) {
+        Some((i, _)) => s.split_at(i),
+        None => (s, "s"),
+    };
+    let scale = match unit {
+        "s" => 1.0,
+        "m" => 60.0,
+        "h" => 3600.0,
+        _ => return Err(format!("`{s}`: use seconds, or a number with s, m or h")),
+    };
+    match number.trim().parse::<f64>() {
+        Ok(n) if n >= 0.0 && n.is_finite() => Ok(Duration::from_secs_f64(n * scale)),
+        _ => Err(format!("`{s}` is not a duration")),
+    }
 }
 
 fn parse_size(s: &str) -> Result<(u32, u32), String> {
@@ -69,12 +103,29 @@ fn parse_accel(s: &str) -> Result<AccelKind, String> {
 }
 
 pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
-    let mut scene = canopy_render::load_scene(&args.scene)?;
-    apply_overrides(&mut scene, args)?;
+    let (scene_arg, scene, accumulator) = match &args.resume {
+        Some(path) => {
+            let checkpoint = Checkpoint::load(path)?;
+            let mut scene = canopy_render::load_scene(&checkpoint.scene)?;
+            scene.settings = checkpoint.settings;
+            checkpoint.matches(&scene, path)?;
+            (checkpoint.scene, scene, checkpoint.accumulator)
+        }
+        None => {
+            let arg = args
+                .scene
+                .clone()
+                .expect("clap requires a scene without --resume");
+            let mut scene = canopy_render::load_scene(&arg)?;
+            apply_overrides(&mut scene, args)?;
+            let accumulator = Accumulator::new(scene.settings.width, scene.settings.height);
+            (arg, scene, accumulator)
+        }
+    };
     let output = args
         .output
         .clone()
-        .unwrap_or_else(|| default_output(&args.scene, &scene));
+        .unwrap_or_else(|| default_output(&scene_arg, &scene));
     // Refuse a bad output path before spending minutes on the render.
     image_format(&output)?;
 
@@ -88,7 +139,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     if args.show_bvh && accel.bvh().is_none() {
         bail!("--show-bvh needs a BVH; choose a builder with --bvh");
     }
-    print_scene_summary(args, &scene, &accel);
+    print_scene_summary(args, &scene_arg, &scene, &accel);
     if args.heatmap {
         let map = pool.install(|| render_heatmap(&scene, &accel));
         write_image(&map.film, &output)?;
@@ -100,15 +151,18 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         return Ok(());
     }
 
-    let progress = ProgressBar::new(scene.settings.height as u64).with_style(
-        ProgressStyle::with_template(
-            "{spinner} rendering [{bar:40}] {percent:>3}%  {elapsed} elapsed, ETA {eta}",
+    let checkpoint_path = args.checkpoint.clone().or_else(|| args.resume.clone());
+    let run = pool.install(|| {
+        progressive(
+            &scene,
+            &scene_arg,
+            &accel,
+            accumulator,
+            checkpoint_path.as_deref(),
+            args.every,
         )
-        .expect("valid template")
-        .progress_chars("=> "),
-    );
-    let (mut film, stats) = pool.install(|| render(&scene, &accel, &|| progress.inc(1)));
-    progress.finish_and_clear();
+    })?;
+    let mut film = run.accumulator.film();
     if let (true, Some(bvh)) = (args.show_bvh, accel.bvh()) {
         let camera = Camera::new(&scene.camera, film.width, film.height);
         let drawn = draw_bvh(&mut film, &camera, bvh, args.levels);
@@ -119,6 +173,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     }
     write_image(&film, &output)?;
 
+    let stats = run.stats;
     println!(
         "render      {:.3} s on {} threads",
         stats.elapsed.as_secs_f64(),
@@ -129,14 +184,83 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         stats.rays,
         stats.mrays_per_second()
     );
-    if stats.invalid_samples > 0 {
+    if run.accumulator.invalid_samples > 0 {
         println!(
             "warning     {} samples with NaN/inf radiance were dropped",
-            stats.invalid_samples
+            run.accumulator.invalid_samples
         );
     }
     println!("image       {}", output.display());
+    let (done, spp) = (run.accumulator.samples, scene.settings.spp);
+    if done < spp {
+        let saved = checkpoint_path.unwrap_or_else(|| default_checkpoint(&output));
+        Checkpoint::new(&scene_arg, &scene, run.accumulator).save(&saved)?;
+        println!("partial     {done} of {spp} samples per pixel: the image is noisier than asked");
+        bail!(
+            "interrupted; the render so far is saved: continue with `canopy render --resume {}`",
+            saved.display()
+        );
+    }
+    if let Some(path) = checkpoint_path {
+        // The render is complete: its checkpoint has nothing left to give.
+        let _ = std::fs::remove_file(path);
+    }
     Ok(())
+}
+
+/// What a (possibly interrupted) progressive render produced.
+struct Progressive {
+    accumulator: Accumulator,
+    /// Rays and time of this session (not of earlier, resumed ones).
+    stats: RenderStats,
+}
+
+/// Renders one sample per pixel at a time until the scene's spp are done or Ctrl-C is
+/// pressed, saving a checkpoint every `every` when asked. Passes add samples in order, so
+/// the image is the same as an uninterrupted render's.
+fn progressive(
+    scene: &Scene,
+    scene_arg: &str,
+    accel: &Accel,
+    mut accumulator: Accumulator,
+    checkpoint: Option<&Path>,
+    every: Duration,
+) -> anyhow::Result<Progressive> {
+    let interrupted = Arc::new(AtomicBool::new(false));
+    let flag = interrupted.clone();
+    // Without a handler (another one is installed) Ctrl-C just ends the process as usual.
+    let _ = ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst));
+    let (spp, rows) = (scene.settings.spp as u64, scene.settings.height as u64);
+    let progress = ProgressBar::new(spp * rows).with_style(
+        ProgressStyle::with_template(
+            "{spinner} rendering [{bar:40}] {percent:>3}%  {elapsed} elapsed, ETA {eta}",
+        )
+        .expect("valid template")
+        .progress_chars("=> "),
+    );
+    progress.set_position(accumulator.samples as u64 * rows);
+    let mut stats = RenderStats::default();
+    let mut last_save = Instant::now();
+    while accumulator.samples < scene.settings.spp && !interrupted.load(Ordering::SeqCst) {
+        let pass = render_samples(scene, accel, &mut accumulator, 1, &|| progress.inc(1));
+        stats.rays += pass.rays;
+        stats.elapsed += pass.elapsed;
+        if let Some(path) = checkpoint {
+            if last_save.elapsed() >= every && accumulator.samples < scene.settings.spp {
+                Checkpoint::new(scene_arg, scene, accumulator.clone()).save(path)?;
+                last_save = Instant::now();
+            }
+        }
+    }
+    progress.finish_and_clear();
+    Ok(Progressive { accumulator, stats })
+}
+
+/// `<output>.checkpoint`, beside the image.
+fn default_checkpoint(output: &Path) -> PathBuf {
+    let mut name = output.file_name().unwrap_or_default().to_os_string();
+    name.push(".checkpoint");
+    output.with_file_name(name)
 }
 
 fn describe_levels(levels: LevelRange) -> String {
@@ -146,12 +270,12 @@ fn describe_levels(levels: LevelRange) -> String {
     }
 }
 
-fn print_scene_summary(args: &RenderArgs, scene: &Scene, accel: &Accel) {
+fn print_scene_summary(args: &RenderArgs, scene_arg: &str, scene: &Scene, accel: &Accel) {
     let s = scene.settings;
     let counts = scene.shape_counts();
     println!(
         "scene       {} ({}x{}, {} spp, depth {}, seed {})",
-        args.scene, s.width, s.height, s.spp, s.max_depth, s.seed
+        scene_arg, s.width, s.height, s.spp, s.max_depth, s.seed
     );
     println!(
         "primitives  {} ({} spheres, {} triangles, {} cuboids)",

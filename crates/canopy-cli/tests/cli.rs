@@ -494,3 +494,137 @@ fn check_reports_degenerate_triangles_and_bad_settings() {
     );
     std::fs::remove_dir_all(dir).unwrap();
 }
+
+/// Arguments of a render long enough (~1 s) to interrupt, checkpointing after every pass.
+fn interruptible(output: &str) -> Vec<String> {
+    [
+        "render",
+        "paper-5",
+        "--size",
+        "128x128",
+        "--spp",
+        "96",
+        "--threads",
+        "2",
+        "-o",
+        output,
+        "--checkpoint",
+        "ck",
+        "--every",
+        "0",
+    ]
+    .map(String::from)
+    .to_vec()
+}
+
+#[test]
+fn a_killed_render_always_leaves_a_valid_checkpoint_that_resumes_to_the_same_image() {
+    let dir = scratch("kill");
+    let full = canopy(
+        &[
+            "render", "paper-5", "--size", "128x128", "--spp", "96", "-o", "full.png",
+        ],
+        &dir,
+    );
+    assert!(full.status.success(), "{}", stderr(&full));
+    let expected = std::fs::read(dir.join("full.png")).unwrap();
+    let mut resumed = 0;
+    for delay_ms in [60, 150, 300, 500] {
+        let _ = std::fs::remove_file(dir.join("ck"));
+        let mut child = Command::new(env!("CARGO_BIN_EXE_canopy"))
+            .args(interruptible("killed.png"))
+            .current_dir(&dir)
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap();
+        std::thread::sleep(std::time::Duration::from_millis(delay_ms));
+        child.kill().unwrap(); // SIGKILL: no chance to clean up
+        child.wait().unwrap();
+        let ck = dir.join("ck");
+        if !ck.exists() {
+            continue; // killed before the first save, or finished (and removed it)
+        }
+        let checkpoint = canopy_render::checkpoint::Checkpoint::load(&ck)
+            .unwrap_or_else(|e| panic!("killed after {delay_ms} ms: {e}"));
+        assert!(checkpoint.accumulator.samples < 96);
+        let out = canopy(&["render", "--resume", "ck", "-o", "resumed.png"], &dir);
+        assert!(out.status.success(), "{}", stderr(&out));
+        assert!(
+            std::fs::read(dir.join("resumed.png")).unwrap() == expected,
+            "killed after {delay_ms} ms: resumed image differs"
+        );
+        resumed += 1;
+    }
+    assert!(
+        resumed > 0,
+        "no kill landed mid-render; the render is too fast for this test"
+    );
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+#[test]
+fn ctrl_c_writes_the_partial_image_and_a_checkpoint_then_resumes() {
+    let dir = scratch("sigint");
+    let full = canopy(
+        &[
+            "render", "paper-5", "--size", "128x128", "--spp", "96", "-o", "full.png",
+        ],
+        &dir,
+    );
+    assert!(full.status.success());
+    let child = Command::new(env!("CARGO_BIN_EXE_canopy"))
+        .args(interruptible("partial.png"))
+        .current_dir(&dir)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(300));
+    let signal = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(signal.success());
+    let out = child.wait_with_output().unwrap();
+    if out.status.success() {
+        // The render beat the signal; nothing to check on this machine.
+        std::fs::remove_dir_all(dir).unwrap();
+        return;
+    }
+    assert!(
+        stderr(&out).contains("interrupted; the render so far is saved"),
+        "{}",
+        stderr(&out)
+    );
+    assert!(String::from_utf8_lossy(&out.stdout).contains("partial     "));
+    assert!(
+        image::open(dir.join("partial.png")).is_ok(),
+        "the partial image is written"
+    );
+    let resumed = canopy(&["render", "--resume", "ck", "-o", "resumed.png"], &dir);
+    assert!(resumed.status.success(), "{}", stderr(&resumed));
+    assert!(
+        std::fs::read(dir.join("resumed.png")).unwrap()
+            == std::fs::read(dir.join("full.png")).unwrap()
+    );
+    assert!(
+        !dir.join("ck").exists(),
+        "a finished render removes its checkpoint"
+    );
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+#[test]
+fn resuming_a_damaged_checkpoint_is_a_clear_error() {
+    let dir = scratch("damaged");
+    std::fs::write(dir.join("ck"), b"CANOPYCK not really").unwrap();
+    let out = canopy(&["render", "--resume", "ck"], &dir);
+    assert!(!out.status.success());
+    assert!(
+        stderr(&out).contains("ck: not a canopy checkpoint, or a damaged one"),
+        "{}",
+        stderr(&out)
+    );
+    std::fs::remove_dir_all(dir).unwrap();
+}

@@ -76,38 +76,111 @@ fn render_with<C: RowCounter>(
     accel: &Accel,
     on_row_done: &(dyn Fn() + Sync),
 ) -> (Film, RenderStats) {
+    let mut accumulator = Accumulator::new(scene.settings.width, scene.settings.height);
+    let stats = accumulate::<C>(
+        scene,
+        accel,
+        &mut accumulator,
+        scene.settings.spp,
+        on_row_done,
+    );
+    (accumulator.film(), stats)
+}
+
+/// A render in progress: every pixel's sum of samples (in sample order) and how many
+/// samples each pixel has. Adding the rest later gives exactly the image of an
+/// uninterrupted render.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Accumulator {
+    pub width: u32,
+    pub height: u32,
+    /// Sum of the radiance samples of each pixel, row by row from the top.
+    pub sums: Vec<Vec3>,
+    /// Samples every pixel has received.
+    pub samples: u32,
+    /// Ray segments traced and samples dropped as NaN/inf, over all passes.
+    pub rays: u64,
+    pub invalid_samples: u64,
+}
+
+impl Accumulator {
+    pub fn new(width: u32, height: u32) -> Self {
+        Self {
+            width,
+            height,
+            sums: vec![Vec3::ZERO; width as usize * height as usize],
+            samples: 0,
+            rays: 0,
+            invalid_samples: 0,
+        }
+    }
+
+    /// The mean of the samples so far.
+    pub fn film(&self) -> Film {
+        let n = self.samples.max(1) as f32;
+        Film {
+            width: self.width,
+            height: self.height,
+            pixels: self.sums.iter().map(|s| *s / n).collect(),
+        }
+    }
+}
+
+/// Adds the next `count` samples (indices `samples .. samples + count`) to every pixel
+/// of `accumulator`, which must match the scene's image size.
+pub fn render_samples(
+    scene: &Scene,
+    accel: &Accel,
+    accumulator: &mut Accumulator,
+    count: u32,
+    on_row_done: &(dyn Fn() + Sync),
+) -> RenderStats {
+    accumulate::<()>(scene, accel, accumulator, count, on_row_done)
+}
+
+fn accumulate<C: RowCounter>(
+    scene: &Scene,
+    accel: &Accel,
+    accumulator: &mut Accumulator,
+    count: u32,
+    on_row_done: &(dyn Fn() + Sync),
+) -> RenderStats {
     let settings = scene.settings;
+    assert_eq!(
+        (accumulator.width, accumulator.height),
+        (settings.width, settings.height),
+        "accumulator and scene differ in image size"
+    );
     let camera = Camera::new(&scene.camera, settings.width, settings.height);
-    let mut film = Film::new(settings.width, settings.height);
+    let first_sample = accumulator.samples;
     let rays = AtomicU64::new(0);
     let invalid = AtomicU64::new(0);
     let nodes = AtomicU64::new(0);
     let prims = AtomicU64::new(0);
     let start = Instant::now();
     let width = settings.width as usize;
-    film.pixels
+    accumulator
+        .sums
         .par_chunks_mut(width.max(1))
         .enumerate()
         .for_each(|(y, row)| {
             let mut row_rays = 0;
             let mut row_invalid = 0;
             let mut counter = C::default();
-            for (x, pixel) in row.iter_mut().enumerate() {
+            for (x, sum) in row.iter_mut().enumerate() {
                 let index = (y * width + x) as u64;
-                let mut sum = Vec3::ZERO;
-                for sample in 0..settings.spp {
+                for sample in first_sample..first_sample + count {
                     let mut rng = Rng::for_sample(settings.seed, index, sample as u64);
                     let s = (x as f32 + rng.next_f32()) / settings.width as f32;
                     let t = (y as f32 + rng.next_f32()) / settings.height as f32;
                     let ray = camera.ray(s, t, &mut rng);
                     let l = trace_path(scene, accel, ray, &mut rng, &mut row_rays, &mut counter);
                     if l.is_finite() {
-                        sum += l;
+                        *sum += l;
                     } else {
                         row_invalid += 1;
                     }
                 }
-                *pixel = sum / settings.spp.max(1) as f32;
             }
             rays.fetch_add(row_rays, Ordering::Relaxed);
             invalid.fetch_add(row_invalid, Ordering::Relaxed);
@@ -116,6 +189,7 @@ fn render_with<C: RowCounter>(
             prims.fetch_add(work.primitives_tested, Ordering::Relaxed);
             on_row_done();
         });
+    accumulator.samples += count;
     let stats = RenderStats {
         rays: rays.into_inner(),
         invalid_samples: invalid.into_inner(),
@@ -125,7 +199,9 @@ fn render_with<C: RowCounter>(
         },
         elapsed: start.elapsed(),
     };
-    (film, stats)
+    accumulator.rays += stats.rays;
+    accumulator.invalid_samples += stats.invalid_samples;
+    stats
 }
 
 /// Radiance arriving along `ray`, following one path of at most `max_depth` segments.

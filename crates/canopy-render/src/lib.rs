@@ -7,6 +7,7 @@
 pub mod accel;
 pub mod builtin;
 pub mod camera;
+pub mod checkpoint;
 pub mod error;
 pub mod film;
 pub mod geometry;
@@ -23,7 +24,7 @@ pub use accel::{Accel, AccelKind, BvhWidth};
 pub use builtin::{BuiltinScene, BUILTIN_SCENES};
 pub use error::{OutputError, SceneError};
 pub use film::Film;
-pub use integrator::{render, render_counted, RenderStats};
+pub use integrator::{render, render_counted, render_samples, Accumulator, RenderStats};
 pub use output::write_image;
 pub use scene::{Background, RenderSettings, Scene};
 

@@ -6,8 +6,8 @@ use crate::error::OutputError;
 use crate::film::Film;
 use image::{ImageBuffer, ImageFormat, Rgb};
 use std::fs::File;
-use std::io::BufWriter;
-use std::path::{Path, PathBuf};
+use std::io::{BufWriter, Cursor, Write};
+use std::path::Path;
 
 /// The image format for a path, from its extension.
 pub fn image_format(path: &Path) -> Result<ImageFormat, OutputError> {
@@ -24,63 +24,68 @@ pub fn image_format(path: &Path) -> Result<ImageFormat, OutputError> {
 /// Writes the film to `path` atomically.
 pub fn write_image(film: &Film, path: &Path) -> Result<(), OutputError> {
     let format = image_format(path)?;
-    let temp = temp_path(path);
-    let result = write_to(film, format, &temp, path).and_then(|()| {
-        std::fs::rename(&temp, path).map_err(|cause| OutputError::Write {
-            path: path.to_owned(),
-            cause,
-        })
-    });
-    if result.is_err() {
-        let _ = std::fs::remove_file(&temp);
-    }
-    result
-}
-
-/// A hidden sibling of `path`, unique to this process.
-fn temp_path(path: &Path) -> PathBuf {
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy())
-        .unwrap_or_default();
-    path.with_file_name(format!(".{name}.{}.tmp", std::process::id()))
-}
-
-fn write_to(film: &Film, format: ImageFormat, temp: &Path, path: &Path) -> Result<(), OutputError> {
-    let io_error = |cause| OutputError::Write {
+    let bytes = encode(film, format).map_err(|cause| OutputError::Encode {
         path: path.to_owned(),
         cause,
-    };
-    let encode_error = |cause| OutputError::Encode {
+    })?;
+    write_atomically(path, |w| w.write_all(&bytes)).map_err(|cause| OutputError::Write {
         path: path.to_owned(),
         cause,
-    };
-    let mut out = BufWriter::new(File::create(temp).map_err(io_error)?);
+    })
+}
+
+/// The film as the bytes of an image file.
+fn encode(film: &Film, format: ImageFormat) -> Result<Vec<u8>, image::ImageError> {
+    let mut bytes = Cursor::new(Vec::new());
     match format {
         ImageFormat::OpenExr => {
             let data: Vec<f32> = film.pixels.iter().flat_map(|p| p.to_array()).collect();
             let img: ImageBuffer<Rgb<f32>, _> =
                 ImageBuffer::from_raw(film.width, film.height, data)
                     .expect("film holds width * height pixels");
-            img.write_to(&mut out, format).map_err(encode_error)?;
+            img.write_to(&mut bytes, format)?;
         }
         _ => {
             let img: ImageBuffer<Rgb<u8>, _> =
                 ImageBuffer::from_raw(film.width, film.height, film.to_srgb8())
                     .expect("film holds width * height pixels");
-            img.write_to(&mut out, format).map_err(encode_error)?;
+            img.write_to(&mut bytes, format)?;
         }
     }
-    let file = out.into_inner().map_err(|e| io_error(e.into_error()))?;
-    file.sync_all().map_err(io_error)?;
-    drop(file);
-    Ok(())
+    Ok(bytes.into_inner())
+}
+
+/// Writes a file through a hidden temporary sibling, synced and then renamed over
+/// `path`: readers see the old file or the whole new one, never a part. On failure the
+/// temporary file is removed.
+pub fn write_atomically(
+    path: &Path,
+    write: impl FnOnce(&mut BufWriter<File>) -> std::io::Result<()>,
+) -> std::io::Result<()> {
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy())
+        .unwrap_or_default();
+    let temp = path.with_file_name(format!(".{name}.{}.tmp", std::process::id()));
+    let result = (|| {
+        let mut out = BufWriter::new(File::create(&temp)?);
+        write(&mut out)?;
+        let file = out.into_inner().map_err(|e| e.into_error())?;
+        file.sync_all()?;
+        drop(file);
+        std::fs::rename(&temp, path)
+    })();
+    if result.is_err() {
+        let _ = std::fs::remove_file(&temp);
+    }
+    result
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use glam::Vec3;
+    use std::path::PathBuf;
 
     fn film() -> Film {
         let mut f = Film::new(3, 2);
