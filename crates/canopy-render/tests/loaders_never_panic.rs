@@ -110,7 +110,7 @@ proptest! {
 fn seeds_are_valid() {
     for seed in ply_seeds() {
         let mesh = parse_mesh(&seed, MeshFormat::Ply).unwrap();
-        assert!(mesh.triangles.len() >= 1);
+        assert!(!mesh.triangles.is_empty());
     }
 }
 
