@@ -26,8 +26,39 @@ pub struct DirAssets(pub PathBuf);
 impl Assets for DirAssets {
     fn read(&self, path: &str) -> Result<Vec<u8>, String> {
         let full = self.0.join(path);
+        let size = std::fs::metadata(&full)
+            .map_err(|e| format!("cannot read {}: {e}", full.display()))?
+            .len();
+        check_fits_in_memory(size, available_memory())?;
         std::fs::read(&full).map_err(|e| format!("cannot read {}: {e}", full.display()))
     }
+}
+
+/// Bytes of memory a mesh takes per byte of its file, generously: a binary PLY spends
+/// about 20 bytes per triangle, canopy about 40 for the triangle, 40 for its primitive
+/// record and 70 for its share of a BVH.
+const MEMORY_PER_FILE_BYTE: u64 = 8;
+
+/// Refuses a mesh file whose loaded size would exceed the memory available (when known).
+fn check_fits_in_memory(file_bytes: u64, available: Option<u64>) -> Result<(), String> {
+    let needed = file_bytes.saturating_mul(MEMORY_PER_FILE_BYTE);
+    match available {
+        Some(free) if needed > free => Err(format!(
+            "the file is {} MiB and would need about {} MiB of memory once loaded, more than the {} MiB available",
+            file_bytes >> 20,
+            needed >> 20,
+            free >> 20
+        )),
+        _ => Ok(()),
+    }
+}
+
+/// `MemAvailable` from /proc/meminfo, where there is one.
+fn available_memory() -> Option<u64> {
+    let info = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = info.lines().find(|l| l.starts_with("MemAvailable:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib * 1024)
 }
 
 #[derive(Deserialize)]
@@ -593,6 +624,21 @@ mod tests {
         let scene = parse_scene(&source, "t.toml", &Mesh).unwrap();
         assert_eq!(scene.primitives.len(), 1);
         assert_eq!(scene.skipped_degenerate, 2);
+    }
+
+    #[test]
+    fn a_mesh_too_big_for_memory_is_refused_before_reading() {
+        let err = check_fits_in_memory(4 << 30, Some(8 << 30)).unwrap_err();
+        assert!(
+            err.contains("4096 MiB") && err.contains("8192 MiB available"),
+            "{err}"
+        );
+        assert!(check_fits_in_memory(1 << 20, Some(8 << 30)).is_ok());
+        assert!(
+            check_fits_in_memory(u64::MAX, None).is_ok(),
+            "unknown memory: no limit"
+        );
+        assert!(available_memory().is_none_or(|m| m > 0));
     }
 
     #[test]
