@@ -197,8 +197,9 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         Checkpoint::new(&scene_arg, &scene, run.accumulator).save(&saved)?;
         println!("partial     {done} of {spp} samples per pixel: the image is noisier than asked");
         bail!(
-            "interrupted; the render so far is saved: continue with `canopy render --resume {}`",
-            saved.display()
+            "interrupted; the render so far is saved: continue with `canopy render --resume {} -o {}`",
+            saved.display(),
+            output.display()
         );
     }
     if let Some(path) = checkpoint_path {
