@@ -16,6 +16,15 @@ pub struct TreeStats {
 }
 
 impl TreeStats {
+    /// Node count and memory of a tree's arrays; the rest is filled in by a walk.
+    pub(crate) fn sized<N>(nodes: &[N], prim_indices: &[u32]) -> Self {
+        Self {
+            nodes: nodes.len(),
+            memory_bytes: std::mem::size_of_val(nodes) + std::mem::size_of_val(prim_indices),
+            ..Self::default()
+        }
+    }
+
     pub fn mean_leaf_size(&self, primitives: usize) -> f32 {
         primitives as f32 / self.leaves.max(1) as f32
     }
@@ -24,12 +33,7 @@ impl TreeStats {
 impl Bvh2 {
     /// Shape and quality of the tree under the given SAH costs.
     pub fn stats(&self, costs: &SahCosts) -> TreeStats {
-        let mut stats = TreeStats {
-            nodes: self.nodes.len(),
-            memory_bytes: std::mem::size_of_val(self.nodes.as_slice())
-                + std::mem::size_of_val(self.prim_indices.as_slice()),
-            ..TreeStats::default()
-        };
+        let mut stats = TreeStats::sized(&self.nodes, &self.prim_indices);
         let Some(root) = self.nodes.first() else {
             return stats;
         };

@@ -334,12 +334,7 @@ impl<const N: usize> BvhN<N> {
 
     /// Shape and quality; the SAH charges one traversal step per wide node entered.
     pub fn stats(&self, costs: &SahCosts) -> TreeStats {
-        let mut stats = TreeStats {
-            nodes: self.nodes.len(),
-            memory_bytes: std::mem::size_of_val(self.nodes.as_slice())
-                + std::mem::size_of_val(self.prim_indices.as_slice()),
-            ..TreeStats::default()
-        };
+        let mut stats = TreeStats::sized(&self.nodes, &self.prim_indices);
         let Some(root) = self.nodes.first() else {
             return stats;
         };

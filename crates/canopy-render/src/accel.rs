@@ -1,7 +1,7 @@
 //! The acceleration structure a render uses: none (a loop over all primitives, the
 //! report's baseline) or a BVH from any builder, binary or collapsed to 4 or 8 wide.
 
-use crate::geometry::ShearedRay;
+use crate::geometry::{Shape, ShearedRay};
 use crate::scene::Primitive;
 use canopy_bvh::{
     build, BuildParams, Builder, Bvh2, Bvh4, Bvh8, Hit, Ray, TraversalCounter, TraversalStats,
@@ -101,6 +101,9 @@ pub struct Accel {
     /// The builder's binary tree (kept for statistics and pictures even when collapsed).
     bvh: Option<Bvh2>,
     structure: Structure,
+    /// Whether any primitive is a triangle: only then does a query prepare the ray for
+    /// triangle tests.
+    has_triangles: bool,
     /// Wall-clock time of the build, collapse included.
     pub build_time: Duration,
 }
@@ -115,6 +118,7 @@ impl Accel {
         let start = Instant::now();
         let AccelKind::Bvh(builder) = kind else {
             return Self {
+                has_triangles: has_triangles(primitives),
                 bvh: None,
                 structure: Structure::Linear,
                 build_time: start.elapsed(),
@@ -128,6 +132,7 @@ impl Accel {
             BvhWidth::Eight => Structure::Eight(Bvh8::from_bvh2(&bvh)),
         };
         Self {
+            has_triangles: has_triangles(primitives),
             bvh: Some(bvh),
             structure,
             build_time: start.elapsed(),
@@ -162,7 +167,11 @@ impl Accel {
         counter: &mut C,
     ) -> Option<Hit> {
         // The shear depends on the direction only, so it stays valid as t_max shrinks.
-        let sheared = ShearedRay::new(ray);
+        let sheared = if self.has_triangles {
+            ShearedRay::new(ray)
+        } else {
+            ShearedRay::UNUSED
+        };
         let test = |prim: u32, ray: &Ray| {
             primitives[prim as usize]
                 .shape
@@ -180,6 +189,12 @@ impl Accel {
             }
         }
     }
+}
+
+fn has_triangles(primitives: &[Primitive]) -> bool {
+    primitives
+        .iter()
+        .any(|p| matches!(p.shape, Shape::Triangle(_)))
 }
 
 fn brute_force(primitives: &[Primitive], ray: &Ray, sheared: &ShearedRay) -> Option<Hit> {

@@ -25,6 +25,14 @@ pub struct ShearedRay {
 }
 
 impl ShearedRay {
+    /// A placeholder for queries over scenes without triangles, where it is never read.
+    pub const UNUSED: ShearedRay = ShearedRay {
+        kx: 0,
+        ky: 1,
+        kz: 2,
+        shear: Vec3::ZERO,
+    };
+
     pub fn new(ray: &Ray) -> Self {
         let d = ray.dir;
         let kz = d.abs().max_position();
