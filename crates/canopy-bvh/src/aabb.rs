@@ -16,7 +16,8 @@ pub struct Aabb {
 /// Slack on the far slab distance so that rounding in the slab test never culls a box
 /// that a primitive inside it is hit in (Ize, "Robust BVH Ray Traversal", JCGT 2013:
 /// 1 + 2 gamma(3)).
-const FAR_SLACK: f32 = 1.0 + 2.0 * (3.0 * f32::EPSILON * 0.5) / (1.0 - 3.0 * f32::EPSILON * 0.5);
+pub(crate) const FAR_SLACK: f32 =
+    1.0 + 2.0 * (3.0 * f32::EPSILON * 0.5) / (1.0 - 3.0 * f32::EPSILON * 0.5);
 
 impl Aabb {
     pub const EMPTY: Aabb = Aabb {

@@ -23,15 +23,19 @@
 mod aabb;
 pub mod build;
 mod bvh2;
+mod isa;
 mod ray;
 mod stats;
 mod traverse;
+mod triangle;
 mod wide;
 
 pub use aabb::Aabb;
 pub use build::{build, BuildParams, Builder, SahCosts, UnknownBuilder};
 pub use bvh2::{Bvh2, Bvh2Node, BvhError};
-pub use ray::{Hit, Ray};
+pub use isa::{Isa, IsaError};
+pub use ray::{Hit, PrimHit, Ray};
 pub use stats::TreeStats;
 pub use traverse::{TraversalCounter, TraversalStats};
+pub use triangle::{intersect_triangle, ShearedRay, TrianglePack, NO_PRIM, PACK_LANES};
 pub use wide::{Bvh4, Bvh8, BvhN, WideNode, EMPTY_SLOT};

@@ -34,14 +34,45 @@ impl Ray {
     }
 }
 
-/// The closest hit found by a traversal: ray parameter and primitive index.
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// What a primitive test reports: the hit distance and, for triangles, the barycentric
+/// weights `u` of the second vertex and `v` of the third (zero for other primitives).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PrimHit {
+    pub t: f32,
+    pub u: f32,
+    pub v: f32,
+}
+
+impl From<f32> for PrimHit {
+    /// A hit at distance `t` on a primitive without barycentrics.
+    #[inline]
+    fn from(t: f32) -> Self {
+        Self { t, u: 0.0, v: 0.0 }
+    }
+}
+
+/// The closest hit found by a traversal: ray parameter, primitive index and the
+/// primitive's barycentrics there (see [`PrimHit`]); room for an instance id later.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Hit {
     pub t: f32,
     pub prim: u32,
+    pub u: f32,
+    pub v: f32,
 }
 
 impl Hit {
+    /// A hit of primitive `prim` as its test reported it.
+    #[inline]
+    pub fn new(prim: u32, hit: PrimHit) -> Self {
+        Self {
+            t: hit.t,
+            prim,
+            u: hit.u,
+            v: hit.v,
+        }
+    }
+
     /// Whether `self` is closer than `other`; equal distances go to the lower primitive
     /// index, so every acceleration structure (and brute force) agrees on the answer.
     #[inline]

@@ -1,7 +1,7 @@
 //! Closest-hit and any-hit traversal of a [`Bvh2`], generic over the primitive test.
 
 use crate::aabb::SlabRay;
-use crate::{Bvh2, Hit, Ray};
+use crate::{Bvh2, Hit, PrimHit, Ray};
 use std::mem::MaybeUninit;
 
 /// Traversal stack: a fixed array for the common case, spilling to the heap only for
@@ -67,21 +67,27 @@ impl ClosestHitSearch {
 
     /// Tests a leaf's primitives, keeping the closest hit (ties to the lower index).
     #[inline(always)]
-    pub fn test_leaf<F, C>(&mut self, prims: &[u32], hit_prim: &mut F, counter: &mut C)
+    pub fn test_leaf<F, P, C>(&mut self, prims: &[u32], hit_prim: &mut F, counter: &mut C)
     where
-        F: FnMut(u32, &Ray) -> Option<f32>,
+        F: FnMut(u32, &Ray) -> Option<P>,
+        P: Into<PrimHit>,
         C: TraversalCounter,
     {
         for &prim in prims {
             counter.test_primitive();
-            if let Some(t) = hit_prim(prim, &self.ray) {
-                let hit = Hit { t, prim };
-                if self.best.is_none_or(|b| hit.is_before(&b)) {
-                    self.ray.t_max = t;
-                    self.slab.t_max = t;
-                    self.best = Some(hit);
-                }
+            if let Some(hit) = hit_prim(prim, &self.ray) {
+                self.offer(Hit::new(prim, hit.into()));
             }
+        }
+    }
+
+    /// Keeps `hit` if it comes before the best so far.
+    #[inline(always)]
+    pub fn offer(&mut self, hit: Hit) {
+        if self.best.is_none_or(|b| hit.is_before(&b)) {
+            self.ray.t_max = hit.t;
+            self.slab.t_max = hit.t;
+            self.best = Some(hit);
         }
     }
 }
@@ -119,27 +125,29 @@ impl TraversalCounter for TraversalStats {
 impl Bvh2 {
     /// Closest hit along `ray` within `[t_min, t_max]`.
     ///
-    /// `hit_prim(prim, ray)` tests one primitive and returns its hit distance, if any, in
-    /// `[ray.t_min, ray.t_max]`; the `ray` it sees has `t_max` shrunk to the closest hit so
-    /// far. Equal distances resolve to the lower primitive index (see [`Hit::is_before`]),
+    /// `hit_prim(prim, ray)` tests one primitive and returns its hit distance (`f32`) or
+    /// [`PrimHit`], if any, in `[ray.t_min, ray.t_max]`; the `ray` it sees has `t_max`
+    /// shrunk to the closest hit so far. Equal distances resolve to the lower primitive index (see [`Hit::is_before`]),
     /// so the answer matches a brute-force loop exactly.
     #[inline]
-    pub fn intersect<F>(&self, ray: &Ray, hit_prim: F) -> Option<Hit>
+    pub fn intersect<F, P>(&self, ray: &Ray, hit_prim: F) -> Option<Hit>
     where
-        F: FnMut(u32, &Ray) -> Option<f32>,
+        F: FnMut(u32, &Ray) -> Option<P>,
+        P: Into<PrimHit>,
     {
         self.intersect_counted(ray, hit_prim, &mut ())
     }
 
     /// [`Bvh2::intersect`], reporting its work to `counter`.
-    pub fn intersect_counted<F, C>(
+    pub fn intersect_counted<F, P, C>(
         &self,
         ray: &Ray,
         mut hit_prim: F,
         counter: &mut C,
     ) -> Option<Hit>
     where
-        F: FnMut(u32, &Ray) -> Option<f32>,
+        F: FnMut(u32, &Ray) -> Option<P>,
+        P: Into<PrimHit>,
         C: TraversalCounter,
     {
         let root = self.nodes.first()?;

@@ -1,7 +1,7 @@
 //! Every builder must answer closest-hit and any-hit queries exactly as a loop over all
 //! primitives does. Primitives here are boxes, tested with the same slab test.
 
-use canopy_bvh::{build, Aabb, BuildParams, Builder, Bvh4, Bvh8, Hit, Ray};
+use canopy_bvh::{build, Aabb, BuildParams, Builder, Bvh4, Bvh8, Hit, Isa, Ray};
 use glam::Vec3;
 use proptest::prelude::*;
 
@@ -9,7 +9,7 @@ fn brute_force_closest(boxes: &[Aabb], ray: &Ray) -> Option<Hit> {
     let mut best: Option<Hit> = None;
     for (i, b) in boxes.iter().enumerate() {
         if let Some(t) = b.ray_entry(ray) {
-            let hit = Hit { t, prim: i as u32 };
+            let hit = Hit::new(i as u32, t.into());
             if best.is_none_or(|b| hit.is_before(&b)) {
                 best = Some(hit);
             }
@@ -25,14 +25,35 @@ fn check_against_brute_force(boxes: &[Aabb], rays: &[Ray], params: &BuildParams)
             .unwrap_or_else(|e| panic!("{builder}: {e}"));
         let stats = bvh.stats(&params.sah);
         assert!(stats.max_leaf_size <= params.max_leaf_size.max(1) as usize);
-        let bvh4 = Bvh4::from_bvh2(&bvh);
-        let bvh8 = Bvh8::from_bvh2(&bvh);
+        let mut bvh4 = Bvh4::from_bvh2(&bvh);
+        let mut bvh8 = Bvh8::from_bvh2(&bvh);
         bvh4.validate(boxes)
             .unwrap_or_else(|e| panic!("{builder} x4: {e}"));
         bvh8.validate(boxes)
             .unwrap_or_else(|e| panic!("{builder} x8: {e}"));
         let closest = |p: u32, r: &Ray| boxes[p as usize].ray_entry(r);
         let any = |p: u32, r: &Ray| boxes[p as usize].ray_entry(r).is_some();
+        // Every node kernel this CPU has (the scalar twin included) on the same rays.
+        for isa in Isa::supported() {
+            bvh4.set_isa(isa).unwrap();
+            bvh8.set_isa(isa).unwrap();
+            for ray in rays {
+                let expected = brute_force_closest(boxes, ray);
+                assert_eq!(
+                    bvh4.intersect(ray, closest),
+                    expected,
+                    "{builder} x4 {isa}: {ray:?}"
+                );
+                assert_eq!(
+                    bvh8.intersect(ray, closest),
+                    expected,
+                    "{builder} x8 {isa}: {ray:?}"
+                );
+                let hit = expected.is_some();
+                assert_eq!(bvh4.occluded(ray, any), hit, "{builder} x4 {isa}: {ray:?}");
+                assert_eq!(bvh8.occluded(ray, any), hit, "{builder} x8 {isa}: {ray:?}");
+            }
+        }
         for ray in rays {
             let expected = brute_force_closest(boxes, ray);
             assert_eq!(
@@ -176,7 +197,7 @@ fn one_primitive_gives_a_single_leaf() {
         assert!(bvh.nodes()[0].is_leaf());
         let ray = Ray::new(Vec3::new(0.5, 0.5, -1.0), Vec3::Z, 0.0, f32::INFINITY);
         let hit = Bvh8::from_bvh2(&bvh).intersect(&ray, |p, r| boxes[p as usize].ray_entry(r));
-        assert_eq!(hit, Some(Hit { t: 1.0, prim: 0 }));
+        assert_eq!(hit, Some(Hit::new(0, 1.0.into())));
     }
 }
 
@@ -241,7 +262,7 @@ fn two_identical_boxes_tie_to_the_lower_index() {
     let bvh = build(Builder::BinnedSah, &boxes, &params);
     let ray = Ray::new(Vec3::new(-1.0, 0.5, 0.5), Vec3::X, 0.0, f32::INFINITY);
     let hit = bvh.intersect(&ray, |p, r| boxes[p as usize].ray_entry(r));
-    assert_eq!(hit, Some(Hit { t: 1.0, prim: 0 }));
+    assert_eq!(hit, Some(Hit::new(0, 1.0.into())));
 }
 
 #[test]

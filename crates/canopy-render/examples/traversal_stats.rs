@@ -1,6 +1,6 @@
 //! Mean BVH work per camera ray for a built-in scene:
 //! `cargo run --release -p canopy-render --example traversal_stats -- paper-1`
-use canopy_bvh::{BuildParams, Builder, Ray, TraversalStats};
+use canopy_bvh::{BuildParams, Builder, Ray, ShearedRay, TraversalStats};
 use canopy_render::camera::Camera;
 use canopy_render::rng::Rng;
 use canopy_render::BuiltinScene;
@@ -35,12 +35,16 @@ fn main() {
             (i / w) as f32 / h as f32,
             &mut rng,
         );
-        let test = |p: u32, r: &Ray| scene.primitives[p as usize].shape.intersect(r);
+        let test = |p: u32, r: &Ray| {
+            scene.primitives[p as usize]
+                .shape
+                .intersect_sheared(r, &ShearedRay::new(r))
+        };
         if let Some(hit) = bvh.intersect_counted(&ray, test, &mut stats) {
             // One diffuse-like bounce from the hit point.
             let s = scene.primitives[hit.prim as usize].shape.surface(
                 &ray,
-                hit.t,
+                &hit,
                 &scene.vertex_normals,
             );
             let dir = (s.geometric_normal

@@ -128,8 +128,16 @@ impl Accel {
         let bvh = build(builder, &boxes, params);
         let structure = match width {
             BvhWidth::Two => Structure::Binary,
-            BvhWidth::Four => Structure::Four(Bvh4::from_bvh2(&bvh)),
-            BvhWidth::Eight => Structure::Eight(Bvh8::from_bvh2(&bvh)),
+            BvhWidth::Four => {
+                let mut wide = Bvh4::from_bvh2(&bvh);
+                wide.pack_triangles(|p| primitives[p as usize].shape.triangle_vertices());
+                Structure::Four(wide)
+            }
+            BvhWidth::Eight => {
+                let mut wide = Bvh8::from_bvh2(&bvh);
+                wide.pack_triangles(|p| primitives[p as usize].shape.triangle_vertices());
+                Structure::Eight(wide)
+            }
         };
         Self {
             has_triangles: has_triangles(primitives),
@@ -177,10 +185,13 @@ impl Accel {
                 .shape
                 .intersect_sheared(ray, &sheared)
         };
+        // Wide trees test their triangles in packs; the closure sees the other shapes.
+        let test_other =
+            |prim: u32, ray: &Ray| primitives[prim as usize].shape.intersect_non_triangle(ray);
         match (&self.structure, &self.bvh) {
             (Structure::Binary, Some(bvh)) => bvh.intersect_counted(ray, test, counter),
-            (Structure::Four(bvh), _) => bvh.intersect_counted(ray, test, counter),
-            (Structure::Eight(bvh), _) => bvh.intersect_counted(ray, test, counter),
+            (Structure::Four(bvh), _) => bvh.intersect_counted(ray, test_other, counter),
+            (Structure::Eight(bvh), _) => bvh.intersect_counted(ray, test_other, counter),
             _ => {
                 for _ in primitives {
                     counter.test_primitive();
@@ -201,13 +212,10 @@ fn brute_force(primitives: &[Primitive], ray: &Ray, sheared: &ShearedRay) -> Opt
     let mut best: Option<Hit> = None;
     let mut ray = *ray;
     for (prim, p) in primitives.iter().enumerate() {
-        if let Some(t) = p.shape.intersect_sheared(&ray, sheared) {
-            let hit = Hit {
-                t,
-                prim: prim as u32,
-            };
+        if let Some(h) = p.shape.intersect_sheared(&ray, sheared) {
+            let hit = Hit::new(prim as u32, h);
             if best.is_none_or(|b| hit.is_before(&b)) {
-                ray.t_max = t;
+                ray.t_max = hit.t;
                 best = Some(hit);
             }
         }

@@ -223,7 +223,7 @@ fn trace_path<C: TraversalCounter>(
         };
         let primitive = &scene.primitives[hit.prim as usize];
         let material = &scene.materials[primitive.material as usize];
-        let surface = primitive.shape.surface(&ray, hit.t, &scene.vertex_normals);
+        let surface = primitive.shape.surface(&ray, &hit, &scene.vertex_normals);
         radiance += throughput * material.emitted();
         let Some(scatter) = material.scatter(ray.dir, &surface, rng) else {
             break;

@@ -7,11 +7,12 @@ mod cuboid;
 mod sphere;
 mod triangle;
 
+pub use canopy_bvh::ShearedRay;
 pub use cuboid::Cuboid;
 pub use sphere::Sphere;
-pub use triangle::{ShearedRay, Triangle};
+pub use triangle::Triangle;
 
-use canopy_bvh::{Aabb, Ray};
+use canopy_bvh::{Aabb, Hit, PrimHit, Ray};
 use glam::Vec3;
 
 /// The local geometry at a hit point.
@@ -52,28 +53,57 @@ impl Shape {
     #[inline]
     pub fn intersect(&self, ray: &Ray) -> Option<f32> {
         self.intersect_sheared(ray, &ShearedRay::new(ray))
+            .map(|h| h.t)
     }
 
     /// [`Shape::intersect`] with the ray already prepared for triangle tests (once per
     /// ray, during traversal).
     #[inline]
-    pub fn intersect_sheared(&self, ray: &Ray, sheared: &ShearedRay) -> Option<f32> {
+    pub fn intersect_sheared(&self, ray: &Ray, sheared: &ShearedRay) -> Option<PrimHit> {
         match self {
-            Shape::Sphere(s) => s.intersect(ray),
-            Shape::Triangle(t) => t.hit(ray, sheared).map(|(t, _)| t),
-            Shape::Cuboid(c) => c.intersect(ray),
+            Shape::Sphere(s) => s.intersect(ray).map(PrimHit::from),
+            Shape::Triangle(t) => t.hit(ray, sheared),
+            Shape::Cuboid(c) => c.intersect(ray).map(PrimHit::from),
         }
     }
 
-    /// The surface where `ray` hits this shape at distance `t` (from [`Shape::intersect`]).
-    /// `vertex_normals` holds the per-vertex normals of smooth triangles.
-    pub fn surface(&self, ray: &Ray, t: f32, vertex_normals: &[[Vec3; 3]]) -> Surface {
+    /// [`Shape::intersect_sheared`] for queries whose triangles are tested elsewhere (in a
+    /// wide tree's triangle packs): spheres and cuboids inline, a triangle (never expected
+    /// here) prepares its own ray.
+    #[inline(always)]
+    pub fn intersect_non_triangle(&self, ray: &Ray) -> Option<PrimHit> {
         match self {
-            Shape::Sphere(s) => s.surface(ray, t),
-            Shape::Triangle(tri) => tri.surface(ray, vertex_normals),
-            Shape::Cuboid(c) => c.surface(ray, t),
+            Shape::Sphere(s) => s.intersect(ray).map(PrimHit::from),
+            Shape::Cuboid(c) => c.intersect(ray).map(PrimHit::from),
+            Shape::Triangle(t) => cold_triangle_hit(t, ray),
         }
     }
+
+    /// The surface where `ray` hits this shape (`hit` from a query of `ray`; triangles use
+    /// its barycentrics, other shapes its distance). `vertex_normals` holds the per-vertex
+    /// normals of smooth triangles.
+    pub fn surface(&self, ray: &Ray, hit: &Hit, vertex_normals: &[[Vec3; 3]]) -> Surface {
+        match self {
+            Shape::Sphere(s) => s.surface(ray, hit.t),
+            Shape::Triangle(tri) => tri.surface(hit.u, hit.v, vertex_normals),
+            Shape::Cuboid(c) => c.surface(ray, hit.t),
+        }
+    }
+
+    /// The vertices of a triangle; `None` for other shapes.
+    #[inline]
+    pub fn triangle_vertices(&self) -> Option<[Vec3; 3]> {
+        match self {
+            Shape::Triangle(t) => Some(t.v),
+            _ => None,
+        }
+    }
+}
+
+#[cold]
+#[inline(never)]
+fn cold_triangle_hit(t: &Triangle, ray: &Ray) -> Option<PrimHit> {
+    t.hit(ray, &ShearedRay::new(ray))
 }
 
 /// Largest absolute coordinate.

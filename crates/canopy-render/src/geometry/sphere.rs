@@ -22,7 +22,7 @@ impl Sphere {
     /// discriminant from the distance of the centre to the ray's line, and the second
     /// root from the first (no catastrophic cancellation), so a small sphere far away or
     /// a huge sphere nearby (the ground ball of radius 1000) both stay precise.
-    #[inline]
+    #[inline(always)]
     pub fn intersect(&self, ray: &Ray) -> Option<f32> {
         let f = ray.origin - self.center;
         let d = ray.dir;

@@ -1,5 +1,5 @@
 use super::{max_abs, Surface, POINT_ERROR_ULPS};
-use canopy_bvh::{Aabb, Ray};
+use canopy_bvh::{intersect_triangle, Aabb, PrimHit, Ray, ShearedRay};
 use glam::{DVec3, Vec3};
 
 /// A triangle, stored as its three vertices exactly as the mesh gives them: triangles
@@ -10,43 +10,6 @@ pub struct Triangle {
     pub v: [Vec3; 3],
     /// Index into the scene's vertex-normal triples, or [`Triangle::FLAT`].
     pub normals: u32,
-}
-
-/// A ray prepared once for watertight triangle tests (Woop, Benthin and Wald,
-/// "Watertight Ray/Triangle Intersection", JCGT 2013): the axis along which the ray runs
-/// most steeply becomes z, and a shear maps the ray onto the z axis.
-#[derive(Clone, Copy, Debug)]
-pub struct ShearedRay {
-    /// Axis indices: z is the dominant direction axis; x, y keep the winding.
-    kx: usize,
-    ky: usize,
-    kz: usize,
-    shear: Vec3,
-}
-
-impl ShearedRay {
-    /// A placeholder for queries over scenes without triangles, where it is never read.
-    pub const UNUSED: ShearedRay = ShearedRay {
-        kx: 0,
-        ky: 1,
-        kz: 2,
-        shear: Vec3::ZERO,
-    };
-
-    pub fn new(ray: &Ray) -> Self {
-        let d = ray.dir;
-        let kz = d.abs().max_position();
-        let (mut kx, mut ky) = ((kz + 1) % 3, (kz + 2) % 3);
-        if d[kz] < 0.0 {
-            std::mem::swap(&mut kx, &mut ky);
-        }
-        Self {
-            kx,
-            ky,
-            kz,
-            shear: Vec3::new(d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]),
-        }
-    }
 }
 
 impl Triangle {
@@ -70,52 +33,24 @@ impl Triangle {
             .length()
     }
 
-    /// Distance and barycentric weights of the three vertices, if `ray` hits within its
-    /// range. Watertight: a ray through an edge or vertex shared by triangles hits at least
-    /// one of them; edge functions that come out exactly zero in single precision are
-    /// recomputed in double precision, as the paper prescribes.
+    /// The hit of `ray` within its range: distance and the barycentric weights of
+    /// vertices 1 and 2. Watertight (canopy-bvh's test, the one its triangle packs run).
     #[inline]
-    pub fn hit(&self, ray: &Ray, sheared: &ShearedRay) -> Option<(f32, [f32; 3])> {
-        let ShearedRay { kx, ky, kz, shear } = *sheared;
-        let [a, b, c] = self.v.map(|v| v - ray.origin);
-        let (ax, ay) = (a[kx] - shear.x * a[kz], a[ky] - shear.y * a[kz]);
-        let (bx, by) = (b[kx] - shear.x * b[kz], b[ky] - shear.y * b[kz]);
-        let (cx, cy) = (c[kx] - shear.x * c[kz], c[ky] - shear.y * c[kz]);
-        let mut u = cx * by - cy * bx;
-        let mut v = ax * cy - ay * cx;
-        let mut w = bx * ay - by * ax;
-        if u == 0.0 || v == 0.0 || w == 0.0 {
-            let d =
-                |p: f32, q: f32, r: f32, s: f32| (p as f64 * q as f64 - r as f64 * s as f64) as f32;
-            u = d(cx, by, cy, bx);
-            v = d(ax, cy, ay, cx);
-            w = d(bx, ay, by, ax);
-        }
-        if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
-            return None;
-        }
-        let det = u + v + w;
-        if det == 0.0 || !det.is_finite() {
-            return None;
-        }
-        let (az, bz, cz) = (shear.z * a[kz], shear.z * b[kz], shear.z * c[kz]);
-        let t = (u * az + v * bz + w * cz) / det;
-        (t >= ray.t_min && t <= ray.t_max).then(|| (t, [u / det, v / det, w / det]))
+    pub fn hit(&self, ray: &Ray, sheared: &ShearedRay) -> Option<PrimHit> {
+        intersect_triangle(&self.v, ray, sheared)
     }
 
     /// Hit distance, preparing the ray on the spot (for one-off tests; traversal prepares
-    /// it once per ray and calls [`Triangle::hit`]).
+    /// it once per ray).
     #[inline]
     pub fn intersect(&self, ray: &Ray) -> Option<f32> {
-        self.hit(ray, &ShearedRay::new(ray)).map(|(t, _)| t)
+        self.hit(ray, &ShearedRay::new(ray)).map(|h| h.t)
     }
 
-    pub fn surface(&self, ray: &Ray, vertex_normals: &[[Vec3; 3]]) -> Surface {
-        // Recompute the weights for this one hit rather than carry them through traversal;
-        // the point from weights is far more precise than o + t d.
-        let (_, weights) = self
-            .hit(ray, &ShearedRay::new(ray))
-            .unwrap_or((0.0, [1.0 / 3.0; 3]));
+    /// The surface at the hit with barycentrics `(u, v)` (weights of vertices 1 and 2).
+    pub fn surface(&self, u: f32, v: f32, vertex_normals: &[[Vec3; 3]]) -> Surface {
+        // The point from the weights is far more precise than o + t d.
+        let weights = [1.0 - u - v, u, v];
         let p = (0..3)
             .fold(DVec3::ZERO, |p, i| {
                 p + weights[i] as f64 * self.v[i].as_dvec3()
@@ -236,8 +171,9 @@ mod tests {
     #[test]
     fn weights_locate_the_hit_point() {
         let r = ray(Vec3::new(0.2, 0.3, 2.0), -Vec3::Z);
-        let (t, w) = tri().hit(&r, &ShearedRay::new(&r)).unwrap();
-        assert_eq!(t, 2.0);
+        let h = tri().hit(&r, &ShearedRay::new(&r)).unwrap();
+        assert_eq!(h.t, 2.0);
+        let w = [1.0 - h.u - h.v, h.u, h.v];
         let p = w[0] * tri().v[0] + w[1] * tri().v[1] + w[2] * tri().v[2];
         assert!((p - Vec3::new(0.2, 0.3, 0.0)).length() < 1e-6);
     }
@@ -247,7 +183,7 @@ mod tests {
         let mut t = tri();
         t.normals = 0;
         let normals = [[Vec3::Z, Vec3::new(1.0, 0.0, 1.0).normalize(), Vec3::Z]];
-        let s = t.surface(&ray(Vec3::new(0.5, 0.0, 1.0), -Vec3::Z), &normals);
+        let s = t.surface(0.5, 0.0, &normals);
         assert_eq!(s.geometric_normal, Vec3::Z);
         assert!(s.shading_normal.x > 0.1 && s.shading_normal.z > 0.5);
     }

@@ -1,0 +1,492 @@
+//! Wide BVHs (4 or 8 children per node), collapsed from a [`Bvh2`] (Dammertz et al.,
+//! "Shallow bounding volume hierarchies for fast SIMD ray tracing of incoherent rays",
+//! 2008; Wald et al., "Getting rid of packets", 2008).
+//!
+//! Collapse is greedy by surface area: a wide node starts from a binary node's two
+//! children and repeatedly opens the interior child with the largest surface area (the
+//! one most rays would enter) until it has `N` children. Boxes are stored by plane, one
+//! lane per slot, so that one SIMD box test covers a node ([`kernels`]). Leaves may hold
+//! their triangles in packs of four ([`BvhN::pack_triangles`]) tested together.
+
+mod kernels;
+mod traverse;
+
+use crate::traverse::TraversalCounter;
+use crate::triangle::{PackRay, TrianglePack, NO_PRIM, PACK_LANES};
+use crate::{Aabb, Bvh2, BvhError, Hit, Isa, IsaError, PrimHit, Ray, SahCosts, TreeStats};
+use bytemuck::{Pod, Zeroable};
+use glam::Vec3;
+use std::marker::PhantomData;
+use traverse::{closest, ClosureLeaves, PackedLeaves, Query};
+
+pub(crate) use traverse::Dispatch;
+
+/// `count` of a slot that holds nothing; its box is [`Aabb::EMPTY`].
+pub const EMPTY_SLOT: u32 = u32::MAX;
+
+/// A node of an `N`-wide BVH. Slot `i` is empty (`count == EMPTY_SLOT`), an interior
+/// child (`count == 0`, node index `child`), or a leaf of `count` primitives starting at
+/// position `child` of the primitive index array. Used slots come first.
+///
+/// Byte layout (`32 * N` bytes, 64-aligned): `bounds[plane][slot]` with planes min x,
+/// min y, min z, max x, max y, max z (`24 * N` bytes), then `child` and `count`
+/// (`4 * N` bytes each). Each plane is one SIMD register of `N` lanes.
+#[repr(C, align(64))]
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct WideNode<const N: usize> {
+    pub bounds: [[f32; N]; 6],
+    pub child: [u32; N],
+    pub count: [u32; N],
+}
+
+macro_rules! pod_node {
+    ($($n:literal),*) => {$(
+        const _: () = assert!(std::mem::size_of::<WideNode<$n>>() == 32 * $n);
+        const _: () = assert!(std::mem::align_of::<WideNode<$n>>() == 64);
+        // SAFETY: only `f32`/`u32` arrays, no padding (asserted above), any bits valid.
+        unsafe impl Zeroable for WideNode<$n> {}
+        // SAFETY: as above.
+        unsafe impl Pod for WideNode<$n> {}
+    )*};
+}
+pod_node!(4, 8);
+
+impl<const N: usize> WideNode<N> {
+    fn empty() -> Self {
+        let e = Aabb::EMPTY;
+        Self {
+            bounds: [e.min.x, e.min.y, e.min.z, e.max.x, e.max.y, e.max.z].map(|p| [p; N]),
+            child: [0; N],
+            count: [EMPTY_SLOT; N],
+        }
+    }
+
+    /// Box of slot `i`.
+    #[inline(always)]
+    pub fn slot_bounds(&self, i: usize) -> Aabb {
+        let b = &self.bounds;
+        Aabb::new(
+            Vec3::new(b[0][i], b[1][i], b[2][i]),
+            Vec3::new(b[3][i], b[4][i], b[5][i]),
+        )
+    }
+
+    fn set_slot(&mut self, i: usize, b: Aabb, child: u32, count: u32) {
+        let planes = [b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z];
+        for (plane, value) in self.bounds.iter_mut().zip(planes) {
+            plane[i] = value;
+        }
+        self.child[i] = child;
+        self.count[i] = count;
+    }
+
+    /// Number of used slots.
+    #[inline(always)]
+    pub fn len(&self) -> usize {
+        self.count.iter().take_while(|&&c| c != EMPTY_SLOT).count()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.count[0] == EMPTY_SLOT
+    }
+}
+
+/// An `N`-wide BVH: nodes (root first), the primitive index array leaves point into, and
+/// optionally the same primitives as triangle packs; with the instruction set its
+/// traversal kernels use.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BvhN<const N: usize> {
+    nodes: Vec<WideNode<N>>,
+    prim_indices: Vec<u32>,
+    /// Empty, or `packs[k]` holds positions `4k..4k + 4` of `prim_indices`.
+    packs: Vec<TrianglePack>,
+    isa: Isa,
+}
+
+pub type Bvh4 = BvhN<4>;
+pub type Bvh8 = BvhN<8>;
+
+impl<const N: usize> Default for BvhN<N> {
+    fn default() -> Self {
+        Self {
+            nodes: Vec::new(),
+            prim_indices: Vec::new(),
+            packs: Vec::new(),
+            isa: Isa::best(),
+        }
+    }
+}
+
+impl<const N: usize> BvhN<N> {
+    /// Whether leaves hold triangle packs.
+    pub fn has_triangle_packs(&self) -> bool {
+        !self.packs.is_empty()
+    }
+
+    /// The instruction set the traversal kernels use.
+    pub fn isa(&self) -> Isa {
+        self.isa
+    }
+
+    /// Uses the kernels of `isa` (every twin gives the same answers; for tests and
+    /// benchmarks). Fails if this CPU lacks it.
+    pub fn set_isa(&mut self, isa: Isa) -> Result<(), IsaError> {
+        if !isa.is_supported() {
+            return Err(IsaError::Unsupported(isa));
+        }
+        self.isa = isa;
+        Ok(())
+    }
+
+    pub fn nodes(&self) -> &[WideNode<N>] {
+        &self.nodes
+    }
+
+    /// Leaf-ordered primitive indices (with [`NO_PRIM`] padding between leaves when
+    /// triangles are packed).
+    pub fn prim_indices(&self) -> &[u32] {
+        &self.prim_indices
+    }
+}
+
+impl<const N: usize> BvhN<N> {
+    /// Collapses a binary tree; the primitive order is kept. Traversal uses the best
+    /// instruction set of this CPU.
+    pub fn from_bvh2(bvh: &Bvh2) -> Self {
+        let src = bvh.nodes();
+        let mut wide = Self {
+            prim_indices: bvh.prim_indices().to_vec(),
+            ..Self::default()
+        };
+        let Some(root) = src.first() else {
+            return wide;
+        };
+        if root.is_leaf() {
+            let mut node = WideNode::empty();
+            node.set_slot(0, root.bounds(), root.first, root.count);
+            wide.nodes.push(node);
+            return wide;
+        }
+        wide.nodes.push(WideNode::empty());
+        // (binary interior node, wide node to fill)
+        let mut work = vec![(0usize, 0usize)];
+        while let Some((binary, slot_node)) = work.pop() {
+            let first = src[binary].first as usize;
+            let mut children = vec![first, first + 1];
+            while children.len() < N {
+                // Open the interior child with the largest surface area.
+                let widest = children
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, &c)| !src[c].is_leaf())
+                    .max_by(|a, b| {
+                        src[*a.1]
+                            .bounds()
+                            .surface_area()
+                            .total_cmp(&src[*b.1].bounds().surface_area())
+                    });
+                let Some((i, &c)) = widest else { break };
+                let grandchild = src[c].first as usize;
+                children[i] = grandchild;
+                children.push(grandchild + 1);
+            }
+            let mut node = WideNode::empty();
+            for (i, &c) in children.iter().enumerate() {
+                let child = &src[c];
+                if child.is_leaf() {
+                    node.set_slot(i, child.bounds(), child.first, child.count);
+                } else {
+                    let index = wide.nodes.len();
+                    wide.nodes.push(WideNode::empty());
+                    node.set_slot(i, child.bounds(), index as u32, 0);
+                    work.push((c, index));
+                }
+            }
+            wide.nodes[slot_node] = node;
+        }
+        wide
+    }
+
+    /// Stores the leaves' triangles in packs of four, tested together by SIMD kernels.
+    /// `triangle(prim)` gives a primitive's vertices if it is a triangle; other
+    /// primitives stay with the caller's closure. Each leaf then starts on a pack
+    /// boundary with its triangles first (`prim_indices` gets [`NO_PRIM`] padding
+    /// between leaves, never inside one).
+    /// A tree without triangles is left as it is.
+    pub fn pack_triangles(&mut self, triangle: impl Fn(u32) -> Option<[Vec3; 3]>) {
+        if !self.prim_indices.iter().any(|&p| triangle(p).is_some()) {
+            return;
+        }
+        let mut order = Vec::with_capacity(self.prim_indices.len() * 2);
+        for n in 0..self.nodes.len() {
+            for i in 0..N {
+                let (first, count) = (self.nodes[n].child[i], self.nodes[n].count[i]);
+                if count == 0 || count == EMPTY_SLOT {
+                    continue;
+                }
+                order.resize(order.len().next_multiple_of(PACK_LANES), NO_PRIM);
+                self.nodes[n].child[i] = order.len() as u32;
+                let leaf = &self.prim_indices[first as usize..(first + count) as usize];
+                let (tris, others): (Vec<u32>, Vec<u32>) =
+                    leaf.iter().partition(|&&p| triangle(p).is_some());
+                order.extend(tris.into_iter().chain(others));
+            }
+        }
+        order.resize(order.len().next_multiple_of(PACK_LANES), NO_PRIM);
+        self.packs = order
+            .chunks_exact(PACK_LANES)
+            .map(|lanes| {
+                let mut pack = TrianglePack::EMPTY;
+                for (lane, &prim) in lanes.iter().enumerate() {
+                    if prim == NO_PRIM {
+                        continue;
+                    }
+                    match triangle(prim) {
+                        Some(v) => pack.set_triangle(lane, prim, v),
+                        None => pack.set_other(lane, prim),
+                    }
+                }
+                pack
+            })
+            .collect();
+        self.prim_indices = order;
+    }
+
+    /// Checks every primitive is in exactly one leaf, every slot box is the tight box of
+    /// its contents, and every node is reached exactly once.
+    pub fn validate(&self, boxes: &[Aabb]) -> Result<(), BvhError> {
+        if self.nodes.is_empty() {
+            return match boxes.len() {
+                0 => Ok(()),
+                _ => Err(BvhError::PrimitiveCount { prim: 0, times: 0 }),
+            };
+        }
+        let mut seen = vec![0usize; boxes.len()];
+        let mut reached = vec![false; self.nodes.len()];
+        reached[0] = true;
+        let mut stack = vec![0usize];
+        while let Some(n) = stack.pop() {
+            let node = &self.nodes[n];
+            for i in 0..node.len() {
+                let (child, count) = (node.child[i] as usize, node.count[i]);
+                let contents = if count > 0 {
+                    let end = child + count as usize;
+                    let prims =
+                        self.prim_indices
+                            .get(child..end)
+                            .ok_or(BvhError::LeafOutOfRange {
+                                node: n,
+                                first: child,
+                                end,
+                                len: self.prim_indices.len(),
+                            })?;
+                    let mut b = Aabb::EMPTY;
+                    for &p in prims {
+                        *seen
+                            .get_mut(p as usize)
+                            .ok_or(BvhError::PrimitiveOutOfRange {
+                                prim: p,
+                                len: boxes.len(),
+                            })? += 1;
+                        b = b.union(boxes[p as usize]);
+                    }
+                    b
+                } else {
+                    if child >= self.nodes.len() || child == 0 {
+                        return Err(BvhError::ChildOutOfRange {
+                            node: n,
+                            child,
+                            len: self.nodes.len(),
+                        });
+                    }
+                    if std::mem::replace(&mut reached[child], true) {
+                        return Err(BvhError::NodeShared { node: child });
+                    }
+                    stack.push(child);
+                    let c = &self.nodes[child];
+                    (0..c.len()).fold(Aabb::EMPTY, |b, j| b.union(c.slot_bounds(j)))
+                };
+                if contents != node.slot_bounds(i) {
+                    return Err(BvhError::NotTight { node: n });
+                }
+            }
+        }
+        let unreached = reached.iter().filter(|r| !**r).count();
+        if unreached > 0 {
+            return Err(BvhError::UnreachableNodes {
+                unreached,
+                len: self.nodes.len(),
+            });
+        }
+        if let Some((prim, &times)) = seen.iter().enumerate().find(|(_, &t)| t != 1) {
+            return Err(BvhError::PrimitiveCount {
+                prim: prim as u32,
+                times,
+            });
+        }
+        Ok(())
+    }
+
+    /// Shape and quality; the SAH charges one traversal step per wide node entered.
+    pub fn stats(&self, costs: &SahCosts) -> TreeStats {
+        let mut stats = TreeStats::sized(&self.nodes, &self.prim_indices);
+        stats.memory_bytes += std::mem::size_of_val(self.packs.as_slice());
+        let Some(root) = self.nodes.first() else {
+            return stats;
+        };
+        let root_box = (0..root.len()).fold(Aabb::EMPTY, |b, i| b.union(root.slot_bounds(i)));
+        let root_area = root_box.surface_area();
+        let relative = |b: Aabb| {
+            if root_area > 0.0 {
+                (b.surface_area() / root_area) as f64
+            } else {
+                1.0
+            }
+        };
+        let mut cost = costs.traversal as f64;
+        let mut stack = vec![(0usize, 1usize)];
+        while let Some((n, depth)) = stack.pop() {
+            stats.max_depth = stats.max_depth.max(depth);
+            let node = &self.nodes[n];
+            for i in 0..node.len() {
+                let area = relative(node.slot_bounds(i));
+                if node.count[i] > 0 {
+                    stats.leaves += 1;
+                    stats.max_leaf_size = stats.max_leaf_size.max(node.count[i] as usize);
+                    cost += area * node.count[i] as f64 * costs.intersection as f64;
+                } else {
+                    cost += area * costs.traversal as f64;
+                    stack.push((node.child[i] as usize, depth + 1));
+                }
+            }
+        }
+        stats.sah_cost = cost as f32;
+        stats
+    }
+}
+
+impl<const N: usize> BvhN<N>
+where
+    WideNode<N>: Dispatch<N>,
+{
+    /// Closest hit; same contract as [`Bvh2::intersect`]. Triangles in packs are tested by
+    /// canopy itself (see [`BvhN::pack_triangles`]); the closure tests the rest.
+    #[inline]
+    pub fn intersect<F, P>(&self, ray: &Ray, hit_prim: F) -> Option<Hit>
+    where
+        F: FnMut(u32, &Ray) -> Option<P>,
+        P: Into<PrimHit>,
+    {
+        self.intersect_counted(ray, hit_prim, &mut ())
+    }
+
+    /// [`BvhN::intersect`], reporting its work to `counter`.
+    #[inline]
+    pub fn intersect_counted<F, P, C>(&self, ray: &Ray, hit_prim: F, counter: &mut C) -> Option<Hit>
+    where
+        F: FnMut(u32, &Ray) -> Option<P>,
+        P: Into<PrimHit>,
+        C: TraversalCounter,
+    {
+        if self.nodes.is_empty() {
+            return None;
+        }
+        let query = ClosestQuery {
+            bvh: self,
+            ray,
+            test: hit_prim,
+            counter,
+        };
+        WideNode::<N>::dispatch(self.isa, query)
+    }
+
+    /// Whether anything blocks `ray`; same contract as [`Bvh2::occluded`].
+    #[inline]
+    pub fn occluded<F>(&self, ray: &Ray, hit_prim: F) -> bool
+    where
+        F: FnMut(u32, &Ray) -> bool,
+    {
+        if self.nodes.is_empty() {
+            return false;
+        }
+        let query = AnyQuery {
+            bvh: self,
+            ray,
+            test: hit_prim,
+        };
+        WideNode::<N>::dispatch(self.isa, query)
+    }
+}
+
+struct ClosestQuery<'a, const N: usize, F, C> {
+    bvh: &'a BvhN<N>,
+    ray: &'a Ray,
+    test: F,
+    counter: &'a mut C,
+}
+
+impl<const N: usize, F, P, C> Query<N> for ClosestQuery<'_, N, F, C>
+where
+    F: FnMut(u32, &Ray) -> Option<P>,
+    P: Into<PrimHit>,
+    C: TraversalCounter,
+{
+    type Out = Option<Hit>;
+
+    #[inline(always)]
+    unsafe fn run<K: kernels::NodeKernel<N>, T: crate::triangle::PackKernel>(self) -> Option<Hit> {
+        let Self {
+            bvh,
+            ray,
+            test,
+            counter,
+        } = self;
+        // SAFETY (both calls): the caller guarantees the instruction sets.
+        if bvh.packs.is_empty() {
+            let mut leaves = ClosureLeaves {
+                prims: &bvh.prim_indices,
+                test,
+            };
+            unsafe { closest::<N, K, _, _>(&bvh.nodes, ray, &mut leaves, counter) }
+        } else {
+            let mut leaves = PackedLeaves::<T, F> {
+                packs: &bvh.packs,
+                ray: PackRay::new(ray),
+                test,
+                kernel: PhantomData,
+            };
+            unsafe { closest::<N, K, _, _>(&bvh.nodes, ray, &mut leaves, counter) }
+        }
+    }
+}
+
+struct AnyQuery<'a, const N: usize, F> {
+    bvh: &'a BvhN<N>,
+    ray: &'a Ray,
+    test: F,
+}
+
+impl<const N: usize, F: FnMut(u32, &Ray) -> bool> Query<N> for AnyQuery<'_, N, F> {
+    type Out = bool;
+
+    #[inline(always)]
+    unsafe fn run<K: kernels::NodeKernel<N>, T: crate::triangle::PackKernel>(self) -> bool {
+        let Self { bvh, ray, test } = self;
+        // SAFETY (both calls): the caller guarantees the instruction sets.
+        if bvh.packs.is_empty() {
+            let mut leaves = ClosureLeaves {
+                prims: &bvh.prim_indices,
+                test,
+            };
+            unsafe { traverse::any::<N, K, _>(&bvh.nodes, ray, &mut leaves) }
+        } else {
+            let mut leaves = PackedLeaves::<T, F> {
+                packs: &bvh.packs,
+                ray: PackRay::new(ray),
+                test,
+                kernel: PhantomData,
+            };
+            unsafe { traverse::any::<N, K, _>(&bvh.nodes, ray, &mut leaves) }
+        }
+    }
+}

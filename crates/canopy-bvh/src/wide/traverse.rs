@@ -1,0 +1,347 @@
+//! Closest-hit and any-hit traversal of a wide BVH, written once over the node kernel
+//! (the box test of all slots) and the leaf test (a closure per primitive, or triangle
+//! packs plus the closure for other primitives). [`dispatch`] picks the kernels for an
+//! instruction set and runs the query inside a function compiled for it.
+
+use super::kernels::{NodeKernel, OctRay, ScalarNode};
+use super::WideNode;
+use crate::traverse::{TraversalCounter, TraversalStack};
+use crate::triangle::{PackKernel, PackRay, ScalarPack, TrianglePack, PACK_LANES};
+use crate::{Hit, Isa, PrimHit, Ray};
+use std::marker::PhantomData;
+
+/// The closest-hit search state: the ray, its `t_max` shrunk to the best hit so far.
+pub(crate) struct Closest {
+    pub ray: Ray,
+    pub best: Option<Hit>,
+}
+
+impl Closest {
+    /// Keeps `hit` if it comes before the best so far (ties to the lower index).
+    #[inline(always)]
+    fn offer(&mut self, hit: Hit) {
+        if self.best.is_none_or(|b| hit.is_before(&b)) {
+            self.ray.t_max = hit.t;
+            self.best = Some(hit);
+        }
+    }
+}
+
+/// Tests the primitives of a leaf: `count` entries from position `first` of the tree's
+/// leaf-ordered primitive array.
+pub(crate) trait ClosestLeaves {
+    fn closest<C: TraversalCounter>(
+        &mut self,
+        first: u32,
+        count: u32,
+        search: &mut Closest,
+        counter: &mut C,
+    );
+}
+
+pub(crate) trait AnyLeaves {
+    fn any(&mut self, first: u32, count: u32, ray: &Ray) -> bool;
+}
+
+/// Leaves whose primitives are all tested by the caller's closure.
+pub(crate) struct ClosureLeaves<'a, F> {
+    pub prims: &'a [u32],
+    pub test: F,
+}
+
+impl<F, P> ClosestLeaves for ClosureLeaves<'_, F>
+where
+    F: FnMut(u32, &Ray) -> Option<P>,
+    P: Into<PrimHit>,
+{
+    #[inline(always)]
+    fn closest<C: TraversalCounter>(&mut self, first: u32, count: u32, s: &mut Closest, c: &mut C) {
+        let first = first as usize;
+        for &prim in &self.prims[first..first + count as usize] {
+            c.test_primitive();
+            if let Some(hit) = (self.test)(prim, &s.ray) {
+                s.offer(Hit::new(prim, hit.into()));
+            }
+        }
+    }
+}
+
+impl<F: FnMut(u32, &Ray) -> bool> AnyLeaves for ClosureLeaves<'_, F> {
+    #[inline(always)]
+    fn any(&mut self, first: u32, count: u32, ray: &Ray) -> bool {
+        let first = first as usize;
+        self.prims[first..first + count as usize]
+            .iter()
+            .any(|&prim| (self.test)(prim, ray))
+    }
+}
+
+/// Leaves stored as triangle packs: triangles by the pack kernel `T`, other primitives
+/// by the caller's closure.
+pub(crate) struct PackedLeaves<'a, T, F> {
+    pub packs: &'a [TrianglePack],
+    pub ray: PackRay,
+    pub test: F,
+    pub kernel: PhantomData<T>,
+}
+
+/// The packs holding `count` leaf entries from position `first` (leaves start on a pack).
+#[inline(always)]
+fn leaf_packs(packs: &[TrianglePack], first: u32, count: u32) -> &[TrianglePack] {
+    let start = first as usize / PACK_LANES;
+    &packs[start..start + (count as usize).div_ceil(PACK_LANES)]
+}
+
+#[inline(always)]
+fn lanes(mut mask: u32) -> impl Iterator<Item = usize> {
+    std::iter::from_fn(move || {
+        (mask != 0).then(|| {
+            let lane = mask.trailing_zeros() as usize;
+            mask &= mask - 1;
+            lane
+        })
+    })
+}
+
+impl<T, F, P> ClosestLeaves for PackedLeaves<'_, T, F>
+where
+    T: PackKernel,
+    F: FnMut(u32, &Ray) -> Option<P>,
+    P: Into<PrimHit>,
+{
+    #[inline(always)]
+    fn closest<C: TraversalCounter>(&mut self, first: u32, count: u32, s: &mut Closest, c: &mut C) {
+        for pack in leaf_packs(self.packs, first, count) {
+            if pack.triangles != 0 {
+                for _ in 0..pack.triangles.count_ones() {
+                    c.test_primitive();
+                }
+                // SAFETY: `dispatch` runs this only where `T`'s instruction set exists.
+                let hits = unsafe { T::test(pack, &self.ray, s.ray.t_min, s.ray.t_max) };
+                for lane in lanes(hits.mask) {
+                    let hit = PrimHit {
+                        t: hits.t[lane],
+                        u: hits.u[lane],
+                        v: hits.v[lane],
+                    };
+                    s.offer(Hit::new(pack.prim[lane], hit));
+                }
+            }
+            for lane in lanes(pack.others) {
+                c.test_primitive();
+                let prim = pack.prim[lane];
+                if let Some(hit) = (self.test)(prim, &s.ray) {
+                    s.offer(Hit::new(prim, hit.into()));
+                }
+            }
+        }
+    }
+}
+
+impl<T: PackKernel, F: FnMut(u32, &Ray) -> bool> AnyLeaves for PackedLeaves<'_, T, F> {
+    #[inline(always)]
+    fn any(&mut self, first: u32, count: u32, ray: &Ray) -> bool {
+        for pack in leaf_packs(self.packs, first, count) {
+            // SAFETY: as above.
+            if pack.triangles != 0
+                && unsafe { T::test(pack, &self.ray, ray.t_min, ray.t_max) }.mask != 0
+            {
+                return true;
+            }
+            if lanes(pack.others).any(|lane| (self.test)(pack.prim[lane], ray)) {
+                return true;
+            }
+        }
+        false
+    }
+}
+
+/// A stack entry: a slot's `child` and `count` (see [`WideNode`]) and its entry distance.
+type Entry = (u32, u32, f32);
+
+/// Closest hit, nearest child first. `nodes` is non-empty.
+///
+/// # Safety
+/// `K`'s instruction set must be available.
+#[inline(always)]
+pub(crate) unsafe fn closest<const N: usize, K, L, C>(
+    nodes: &[WideNode<N>],
+    ray: &Ray,
+    leaves: &mut L,
+    counter: &mut C,
+) -> Option<Hit>
+where
+    K: NodeKernel<N>,
+    L: ClosestLeaves,
+    C: TraversalCounter,
+{
+    let oct = OctRay::new(ray);
+    // SAFETY: the caller guarantees the instruction set.
+    let kray = unsafe { K::prepare(&oct) };
+    let mut search = Closest {
+        ray: *ray,
+        best: None,
+    };
+    let mut stack = TraversalStack::<Entry>::new();
+    let (mut child, mut count) = (0u32, 0u32);
+    loop {
+        counter.visit_node();
+        if count > 0 {
+            leaves.closest(child, count, &mut search, counter);
+        } else {
+            let node = &nodes[child as usize];
+            // SAFETY: as above.
+            let (mask, t) = unsafe { K::hit_mask(node, &kray, search.ray.t_max) };
+            if mask != 0 {
+                // Gather the entered slots, sort them far to near (only those: usually
+                // one to three), push all but the nearest and descend into it.
+                let mut hits = [(0u32, 0u32, 0f32); N];
+                let mut n = 0;
+                for i in lanes(mask) {
+                    let entry = (node.child[i], node.count[i], t[i]);
+                    let mut j = n;
+                    while j > 0 && hits[j - 1].2 < entry.2 {
+                        hits[j] = hits[j - 1];
+                        j -= 1;
+                    }
+                    hits[j] = entry;
+                    n += 1;
+                }
+                for &entry in &hits[..n - 1] {
+                    stack.push(entry);
+                }
+                (child, count) = (hits[n - 1].0, hits[n - 1].1);
+                continue;
+            }
+        }
+        // Pop the next subtree that can still hold a closer (or equally close) hit.
+        loop {
+            match stack.pop() {
+                None => return search.best,
+                Some((c, n, t_entry)) if t_entry <= search.ray.t_max => {
+                    (child, count) = (c, n);
+                    break;
+                }
+                Some(_) => {}
+            }
+        }
+    }
+}
+
+/// Whether anything blocks `ray`; stops at the first hit. `nodes` is non-empty.
+///
+/// # Safety
+/// `K`'s instruction set must be available.
+#[inline(always)]
+pub(crate) unsafe fn any<const N: usize, K, L>(
+    nodes: &[WideNode<N>],
+    ray: &Ray,
+    leaves: &mut L,
+) -> bool
+where
+    K: NodeKernel<N>,
+    L: AnyLeaves,
+{
+    let oct = OctRay::new(ray);
+    // SAFETY: the caller guarantees the instruction set.
+    let kray = unsafe { K::prepare(&oct) };
+    let mut stack = TraversalStack::<(u32, u32)>::new();
+    stack.push((0, 0));
+    while let Some((child, count)) = stack.pop() {
+        if count > 0 {
+            if leaves.any(child, count, ray) {
+                return true;
+            }
+            continue;
+        }
+        let node = &nodes[child as usize];
+        // SAFETY: as above.
+        let (mask, _) = unsafe { K::hit_mask(node, &kray, ray.t_max) };
+        for i in lanes(mask) {
+            stack.push((node.child[i], node.count[i]));
+        }
+    }
+    false
+}
+
+/// A traversal to run with the kernels of one instruction set.
+pub trait Query<const N: usize> {
+    type Out;
+
+    /// # Safety
+    /// The instruction sets of `K` and `T` must be available.
+    unsafe fn run<K: NodeKernel<N>, T: PackKernel>(self) -> Self::Out;
+}
+
+/// Widths that have SIMD kernels (4 and 8; public only as a bound, not to implement): picks the node and pack kernels for `isa` and runs the
+/// query in a function compiled for that instruction set.
+pub trait Dispatch<const N: usize> {
+    /// `isa` must be supported by this CPU (checked where the tree's kernel is set).
+    fn dispatch<Q: Query<N>>(isa: Isa, query: Q) -> Q::Out;
+}
+
+#[cfg(target_arch = "x86_64")]
+mod x86 {
+    use super::*;
+    use crate::triangle::Sse2Pack;
+    use crate::wide::kernels::{Avx2Node, Avx512Node, Sse2Node};
+
+    #[target_feature(enable = "avx2")]
+    unsafe fn with_avx2<const N: usize, K: NodeKernel<N>, Q: Query<N>>(q: Q) -> Q::Out {
+        // SAFETY: this function is only called when AVX2 is available.
+        unsafe { q.run::<K, Sse2Pack>() }
+    }
+
+    #[target_feature(enable = "avx512f,avx512vl,avx2")]
+    unsafe fn with_avx512<const N: usize, K: NodeKernel<N>, Q: Query<N>>(q: Q) -> Q::Out {
+        // SAFETY: this function is only called when AVX-512 F/VL are available.
+        unsafe { q.run::<K, Sse2Pack>() }
+    }
+
+    impl Dispatch<4> for WideNode<4> {
+        #[inline]
+        fn dispatch<Q: Query<4>>(isa: Isa, q: Q) -> Q::Out {
+            // SAFETY: `isa` is supported (the tree's kernel is checked when set); SSE2
+            // is baseline x86-64.
+            unsafe {
+                match isa {
+                    Isa::Scalar => q.run::<ScalarNode, ScalarPack>(),
+                    Isa::Sse2 => q.run::<Sse2Node, Sse2Pack>(),
+                    Isa::Avx2 => with_avx2::<4, Sse2Node, Q>(q),
+                    Isa::Avx512 => with_avx512::<4, Sse2Node, Q>(q),
+                }
+            }
+        }
+    }
+
+    impl Dispatch<8> for WideNode<8> {
+        #[inline]
+        fn dispatch<Q: Query<8>>(isa: Isa, q: Q) -> Q::Out {
+            // SAFETY: as above.
+            unsafe {
+                match isa {
+                    Isa::Scalar => q.run::<ScalarNode, ScalarPack>(),
+                    Isa::Sse2 => q.run::<Sse2Node, Sse2Pack>(),
+                    Isa::Avx2 => with_avx2::<8, Avx2Node, Q>(q),
+                    Isa::Avx512 => with_avx512::<8, Avx512Node, Q>(q),
+                }
+            }
+        }
+    }
+}
+
+#[cfg(not(target_arch = "x86_64"))]
+macro_rules! scalar_dispatch {
+    ($($n:literal),*) => {$(
+        impl Dispatch<$n> for WideNode<$n> {
+            #[inline]
+            fn dispatch<Q: Query<$n>>(_isa: Isa, q: Q) -> Q::Out {
+                // SAFETY: the scalar kernels need nothing.
+                unsafe { q.run::<ScalarNode, ScalarPack>() }
+            }
+        }
+    )*};
+}
+
+#[cfg(not(target_arch = "x86_64"))]
+scalar_dispatch!(4, 8);
