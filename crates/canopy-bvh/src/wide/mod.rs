@@ -16,6 +16,7 @@ use crate::triangle::{PackRay, TrianglePack, NO_PRIM, PACK_LANES};
 use crate::{Aabb, Bvh2, BvhError, Hit, Isa, IsaError, PrimHit, Ray, SahCosts, TreeStats};
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
+use rayon::prelude::*;
 use std::marker::PhantomData;
 use traverse::{closest, ClosureLeaves, PackedLeaves, Query};
 
@@ -415,6 +416,55 @@ where
             test: hit_prim,
         };
         WideNode::<N>::dispatch(self.isa, query)
+    }
+}
+
+/// Rays per parallel task of the batch calls: large enough to amortise scheduling, small
+/// enough to balance two to a few dozen threads.
+const BATCH_CHUNK: usize = 512;
+
+impl<const N: usize> BvhN<N>
+where
+    WideNode<N>: Dispatch<N>,
+{
+    /// Closest hits of many rays, in parallel over chunks (rayon's current pool):
+    /// `hits[i]` answers `rays[i]`. `hit_prim` tests non-triangle primitives as in
+    /// [`BvhN::intersect`], from several threads at once.
+    ///
+    /// # Panics
+    /// If `rays` and `hits` differ in length.
+    pub fn intersect_batch<F, P>(&self, rays: &[Ray], hits: &mut [Option<Hit>], hit_prim: F)
+    where
+        F: Fn(u32, &Ray) -> Option<P> + Sync,
+        P: Into<PrimHit>,
+    {
+        assert_eq!(rays.len(), hits.len(), "one hit slot per ray");
+        hits.par_chunks_mut(BATCH_CHUNK)
+            .zip(rays.par_chunks(BATCH_CHUNK))
+            .for_each(|(hits, rays)| {
+                for (hit, ray) in hits.iter_mut().zip(rays) {
+                    *hit = self.intersect(ray, &hit_prim);
+                }
+            });
+    }
+
+    /// Occlusion of many rays, in parallel over chunks: `occluded[i]` answers `rays[i]`.
+    ///
+    /// # Panics
+    /// If `rays` and `occluded` differ in length.
+    pub fn occluded_batch<F>(&self, rays: &[Ray], occluded: &mut [bool], hit_prim: F)
+    where
+        F: Fn(u32, &Ray) -> bool + Sync,
+    {
+        assert_eq!(rays.len(), occluded.len(), "one answer per ray");
+        occluded
+            .par_chunks_mut(BATCH_CHUNK)
+            .zip(rays.par_chunks(BATCH_CHUNK))
+            .for_each(|(out, rays)| {
+                for (o, ray) in out.iter_mut().zip(rays) {
+                    *o = self.occluded(ray, &hit_prim);
+                }
+            });
     }
 }
 

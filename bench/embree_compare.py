@@ -1,0 +1,217 @@
+#!/usr/bin/env python3
+"""canopy against Embree 4 (through embreex) on the same meshes and rays, in one run.
+
+Run it with `bench/embree_compare.sh` (which makes its own venv with embreex and numpy).
+For each mesh: 1024x1024 primary rays of a pinhole camera framing it, and 1M incoherent
+rays (origins at primary hits, offset along the normal; directions uniform on the sphere);
+closest hit and occlusion; 1 and 2 threads. Hits are checked to agree, then a table of
+Mrays/s and one line `ratio <mesh> <rays> <query> <threads>: X.XX` per cell is printed.
+
+embreex calls rtcIntersect1/rtcOccluded1 in a loop over numpy arrays and builds numpy
+outputs; that loop costs tens of ns per ray on its own. We measure it on a scene whose one
+triangle no ray comes near and report Embree both as called and with that per-ray cost
+taken off ("kernel"): the `ratio` lines compare against the kernel figure, the harder one.
+"""
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+
+import numpy as np
+from embreex import rtcore_scene as rtcs
+from embreex.mesh_construction import TriangleMesh
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+SHARED = os.path.join(ROOT, "..", "shared", "assets", "meshes")
+
+
+def read_ply(path):
+    """Vertices (V,3) float32 and faces (F,3) int of a binary little-endian triangle PLY."""
+    with open(path, "rb") as f:
+        data = f.read()
+    end = data.index(b"end_header\n") + len(b"end_header\n")
+    header = data[:end].decode("ascii").splitlines()
+    if "format binary_little_endian 1.0" not in header:
+        sys.exit(f"{path}: only binary little-endian PLY is supported here")
+    n_vert = n_face = 0
+    vprops = []
+    element = None
+    for line in header:
+        parts = line.split()
+        if parts[:1] == ["element"]:
+            element = parts[1]
+            if element == "vertex":
+                n_vert = int(parts[2])
+            elif element == "face":
+                n_face = int(parts[2])
+        elif parts[:1] == ["property"] and element == "vertex":
+            vprops.append((parts[2], parts[1]))
+    if any(t != "float" for _, t in vprops):
+        sys.exit(f"{path}: vertex properties must be float")
+    verts = np.frombuffer(data, np.float32, n_vert * len(vprops), end).reshape(n_vert, -1)[:, :3]
+    faces = np.frombuffer(data, np.dtype([("n", "u1"), ("i", "<u4", 3)]), n_face, end + 4 * n_vert * len(vprops))
+    if np.any(faces["n"] != 3):
+        sys.exit(f"{path}: only triangles are supported here")
+    return np.ascontiguousarray(verts, np.float32), faces["i"].astype(np.int64)
+
+
+def primary_rays(verts, size):
+    lo, hi = verts.min(0), verts.max(0)
+    centre, radius = (lo + hi) / 2, np.linalg.norm(hi - lo) / 2
+    vfov = np.radians(40.0)
+    eye = centre + radius / np.tan(vfov / 2) * 1.1 * np.array([0, 0.3, 1.0]) / np.linalg.norm([0, 0.3, 1.0])
+    w = (eye - centre) / np.linalg.norm(eye - centre)
+    u = np.cross([0, 1, 0], w)
+    u /= np.linalg.norm(u)
+    v = np.cross(w, u)
+    h = np.tan(vfov / 2)
+    s = (np.arange(size) + 0.5) / size * 2 - 1
+    px, py = np.meshgrid(s * h, -s * h)
+    d = px[..., None] * u + py[..., None] * v - w
+    d = (d / np.linalg.norm(d, axis=-1, keepdims=True)).reshape(-1, 3)
+    o = np.broadcast_to(eye, d.shape)
+    return np.ascontiguousarray(o, np.float32), np.ascontiguousarray(d, np.float32)
+
+
+def incoherent_rays(o, d, hit, n, rng):
+    idx = np.flatnonzero(hit["primID"] >= 0)
+    pick = idx[rng.integers(0, len(idx), n)]
+    p = o[pick] + hit["tfar"][pick, None] * d[pick]
+    ng = hit["Ng"][pick]
+    ng = ng / np.linalg.norm(ng, axis=1, keepdims=True)
+    ng = np.where((np.sum(ng * d[pick], axis=1) < 0)[:, None], ng, -ng)  # towards the camera
+    scale = np.abs(p).max(axis=1, keepdims=True)
+    origin = p + ng * (1e-4 * scale)
+    dirs = rng.normal(size=(n, 3))
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    return np.ascontiguousarray(origin, np.float32), np.ascontiguousarray(dirs, np.float32)
+
+
+def embree_run(scene, o, d, query, threads):
+    """Seconds for one pass over all rays, split across `threads` Python threads (embreex
+    releases the GIL inside its loop)."""
+    parts = np.array_split(np.arange(len(o)), threads)
+    results = [None] * threads
+
+    def work(k):
+        sl = slice(parts[k][0], parts[k][-1] + 1)
+        if query == "closest":
+            results[k] = scene.run(o[sl], d[sl], output=1)
+        else:
+            results[k] = scene.run(o[sl], d[sl], query="OCCLUDED")
+
+    start = time.perf_counter()
+    pool = [threading.Thread(target=work, args=(k,)) for k in range(threads)]
+    for t in pool:
+        t.start()
+    for t in pool:
+        t.join()
+    elapsed = time.perf_counter() - start
+    if query == "closest":
+        merged = {k: np.concatenate([r[k] for r in results]) for k in ("tfar", "primID", "u", "v", "Ng")}
+    else:
+        # embreex answers occlusion with the blocking geometry's id, -1 when unblocked.
+        merged = np.concatenate(results) >= 0
+    return elapsed, merged
+
+
+def best_of(runs, f):
+    best, out = float("inf"), None
+    for _ in range(runs):
+        t, out = f()
+        best = min(best, t)
+    return best, out
+
+
+def canopy_run(trace, mesh, o, d, query, threads, runs, tmp):
+    rays = np.zeros((len(o), 8), np.float32)
+    rays[:, :3], rays[:, 3:6], rays[:, 6], rays[:, 7] = o, d, 0.0, np.inf
+    rpath, hpath = os.path.join(tmp, "rays.f32"), os.path.join(tmp, "hits.bin")
+    rays.tofile(rpath)
+    out = subprocess.run([trace, mesh, rpath, query, str(threads), str(runs), hpath],
+                         check=True, capture_output=True, text=True).stdout
+    info = json.loads(out.strip().splitlines()[-1])
+    raw = np.fromfile(hpath, np.uint8)
+    n = len(o)
+    if query == "closest":
+        t = raw[: 4 * n].view(np.float32)
+        prim = raw[4 * n: 8 * n].view(np.int32)
+        return info, {"tfar": t, "primID": prim}
+    return info, raw.astype(bool)
+
+
+def compare(query, emb, can):
+    """Rays whose answers disagree: hit/miss must match exactly; distances within 1e-4
+    relative (a different primitive at the same distance is a tie on a shared edge)."""
+    if query == "occluded":
+        return int(np.sum(emb != can))
+    e_hit, c_hit = emb["primID"] >= 0, can["primID"] >= 0
+    bad = e_hit != c_hit
+    both = e_hit & c_hit
+    et, ct = emb["tfar"][both], can["tfar"][both]
+    bad[both] |= np.abs(et - ct) > 1e-4 * np.maximum(np.abs(et), 1e-6)
+    return int(np.sum(bad))
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--meshes", nargs="*", default=[os.path.join(SHARED, "bunny.ply"), os.path.join(SHARED, "dragon_res2.ply")])
+    ap.add_argument("--size", type=int, default=1024, help="primary rays: size x size")
+    ap.add_argument("--incoherent", type=int, default=1_000_000)
+    ap.add_argument("--runs", type=int, default=5)
+    ap.add_argument("--trace", required=True, help="path of the trace_rays example binary")
+    args = ap.parse_args()
+    rng = np.random.default_rng(7)
+
+    # embreex's own per-ray cost: a scene with one triangle far from every ray.
+    far = rtcs.EmbreeScene()
+    TriangleMesh(far, np.array([[[1e6, 1e6, 1e6], [1e6 + 1, 1e6, 1e6], [1e6, 1e6 + 1, 1e6]]], np.float32))
+
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for mesh in args.meshes:
+            verts, faces = read_ply(mesh)
+            name = os.path.splitext(os.path.basename(mesh))[0] + f"-{len(faces) // 1000}k"
+            scene = rtcs.EmbreeScene()
+            TriangleMesh(scene, verts[faces])
+            po, pd = primary_rays(verts, args.size)
+            _, prim_hits = embree_run(scene, po, pd, "closest", 1)
+            io, idir = incoherent_rays(po, pd, prim_hits, args.incoherent, rng)
+            for kind, (o, d) in (("primary", (po, pd)), ("incoherent", (io, idir))):
+                for query in ("closest", "occluded"):
+                    for threads in (1, 2):
+                        e_s, e_out = best_of(args.runs, lambda: embree_run(scene, o, d, query, threads))
+                        x_s, _ = best_of(args.runs, lambda: embree_run(far, o, d, query, threads))
+                        info, c_out = canopy_run(args.trace, mesh, o, d, query, threads, args.runs, tmp)
+                        n = len(o)
+                        row = {
+                            "mesh": name, "rays": kind, "query": query, "threads": threads, "n": n,
+                            "embree": n / e_s / 1e6,
+                            "embree_kernel": n / max(e_s - x_s, 1e-9) / 1e6,
+                            "canopy": info["best_mrays"],
+                            "mismatches": compare(query, e_out, c_out),
+                            "isa": info["isa"],
+                        }
+                        rows.append(row)
+                        print(json.dumps(row), file=sys.stderr, flush=True)
+
+    print(f"\ncanopy (binned-sah, 8-wide, {rows[0]['isa']}) against Embree 4 via embreex, Mrays/s, best of {args.runs}\n")
+    print("| mesh | rays | query | threads | canopy | Embree as called | Embree kernel | ratio | ratio (as called) | disagreeing rays |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    for r in rows:
+        print(f"| {r['mesh']} | {r['rays']} | {r['query']} | {r['threads']} | {r['canopy']:.2f} | {r['embree']:.2f} | "
+              f"{r['embree_kernel']:.2f} | {r['canopy'] / r['embree_kernel']:.2f} | {r['canopy'] / r['embree']:.2f} | {r['mismatches']} |")
+    print()
+    for r in rows:
+        print(f"ratio {r['mesh']} {r['rays']} {r['query']} {r['threads']}: {r['canopy'] / r['embree_kernel']:.2f}")
+    if any(r["mismatches"] > 0.0001 * r["n"] for r in rows):
+        sys.exit("hits disagree on more than 0.01% of rays")
+
+
+if __name__ == "__main__":
+    main()
