@@ -22,6 +22,9 @@ pub struct Bvh2Node {
     pub count: u32,
 }
 
+const _: () = assert!(std::mem::size_of::<Bvh2Node>() == 32);
+const _: () = assert!(std::mem::align_of::<Bvh2Node>() == 4);
+
 impl Bvh2Node {
     #[inline]
     pub fn leaf(bounds: Aabb, first: u32, count: u32) -> Self {

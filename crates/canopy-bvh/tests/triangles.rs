@@ -259,3 +259,46 @@ fn large_builds_validate_and_match_brute_force() {
         );
     }
 }
+
+/// The batch calls answer each ray exactly as the single-ray calls do, whatever the
+/// chunking and thread count.
+#[test]
+fn batch_calls_equal_single_ray_calls() {
+    let prims: Vec<Prim> = (0..3000)
+        .map(|i| {
+            let a = Vec3::new((i % 17) as f32, (i / 17 % 13) as f32, (i / 221) as f32);
+            if i % 5 == 0 {
+                Prim::Box(Aabb::new(a, a + 0.3))
+            } else {
+                Prim::Triangle([a, a + Vec3::X * 0.9, a + Vec3::new(0.2, 0.8, 0.4)])
+            }
+        })
+        .collect();
+    let boxes: Vec<Aabb> = prims.iter().map(Prim::bounds).collect();
+    let mut wide = Bvh8::from_bvh2(&build(Builder::BinnedSah, &boxes, &BuildParams::default()));
+    wide.pack_triangles(|p| match &prims[p as usize] {
+        Prim::Triangle(v) => Some(*v),
+        Prim::Box(_) => None,
+    });
+    let rays: Vec<Ray> = (0..5000)
+        .map(|i| {
+            let o = Vec3::new(-5.0, (i % 70) as f32 * 0.2, (i / 70) as f32 * 0.2);
+            let d = Vec3::new(1.0, ((i * 7) % 11) as f32 * 0.05 - 0.25, 0.1);
+            Ray::new(o, d.normalize(), 0.0, f32::INFINITY)
+        })
+        .collect();
+    let mut hits = vec![None; rays.len()];
+    let mut blocked = vec![false; rays.len()];
+    wide.intersect_batch(&rays, &mut hits, |p, r| prims[p as usize].hit(r));
+    wide.occluded_batch(&rays, &mut blocked, |p, r| {
+        prims[p as usize].hit(r).is_some()
+    });
+    assert!(
+        hits.iter().filter(|h| h.is_some()).count() > 1000,
+        "the rays should mostly hit"
+    );
+    for (i, ray) in rays.iter().enumerate() {
+        assert_eq!(bits(hits[i]), bits(wide.closest(&prims, ray)), "ray {i}");
+        assert_eq!(blocked[i], hits[i].is_some(), "ray {i}");
+    }
+}
