@@ -4,7 +4,7 @@
 use crate::build_args::{builders_help, BuildArgs};
 use crate::units::human_bytes;
 use anyhow::bail;
-use canopy_bvh::{build, Aabb, BuildParams, Builder, Bvh4, Bvh8};
+use canopy_bvh::{build, Aabb, BuildParams, Builder, Tree};
 use canopy_render::BvhWidth;
 use clap::Args;
 use serde::Serialize;
@@ -100,15 +100,7 @@ fn measure(
     runs: u32,
 ) -> Row {
     // Timed: the build and the collapse to the requested width.
-    let build_once = || {
-        let bvh = build(builder, boxes, params);
-        let wide = match width {
-            BvhWidth::Two => Wide::Two,
-            BvhWidth::Four => Wide::Four(Bvh4::from_bvh2(&bvh)),
-            BvhWidth::Eight => Wide::Eight(Bvh8::from_bvh2(&bvh)),
-        };
-        (bvh, wide)
-    };
+    let build_once = || Tree::new(build(builder, boxes, params), width);
     let mut times = Vec::new();
     let mut last = None;
     for _ in 0..runs {
@@ -118,12 +110,7 @@ fn measure(
         last = Some(built);
     }
     times.sort_by(f64::total_cmp);
-    let (bvh, wide) = last.expect("at least one run");
-    let stats = match wide {
-        Wide::Two => bvh.stats(&params.sah),
-        Wide::Four(w) => w.stats(&params.sah),
-        Wide::Eight(w) => w.stats(&params.sah),
-    };
+    let stats = last.expect("at least one run").stats(&params.sah);
     Row {
         builder: builder.name(),
         width: width.children(),
@@ -136,12 +123,6 @@ fn measure(
         sah_cost: stats.sah_cost,
         memory_bytes: stats.memory_bytes,
     }
-}
-
-enum Wide {
-    Two,
-    Four(Bvh4),
-    Eight(Bvh8),
 }
 
 fn print_table(report: &Report) {

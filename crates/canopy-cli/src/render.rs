@@ -137,7 +137,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     let params = args.build.params()?;
     let accel = pool.install(|| Accel::build(args.bvh, args.width, &scene.primitives, &params));
 
-    if args.show_bvh && accel.bvh().is_none() {
+    if args.show_bvh && accel.tree().is_none() {
         bail!("--show-bvh needs a BVH; choose a builder with --bvh");
     }
     print_scene_summary(args, &scene_arg, &scene, &accel);
@@ -164,9 +164,9 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         )
     })?;
     let mut film = run.accumulator.film();
-    if let (true, Some(bvh)) = (args.show_bvh, accel.bvh()) {
+    if let (true, Some(tree)) = (args.show_bvh, accel.tree()) {
         let camera = Camera::new(&scene.camera, film.width, film.height);
-        let drawn = draw_bvh(&mut film, &camera, bvh, args.levels);
+        let drawn = draw_bvh(&mut film, &camera, tree, args.levels);
         println!(
             "overlay     {drawn} boxes of tree levels {}",
             describe_levels(args.levels)

@@ -4,7 +4,7 @@
 use crate::geometry::{Shape, ShearedRay};
 use crate::scene::Primitive;
 use canopy_bvh::{
-    build, BuildParams, Builder, Bvh2, Bvh4, Bvh8, Hit, Ray, TraversalCounter, TraversalStats,
+    build, BuildParams, Builder, BvhWidth, Hit, Ray, TraversalCounter, TraversalStats, Tree,
 };
 use std::fmt;
 use std::str::FromStr;
@@ -47,61 +47,11 @@ impl FromStr for AccelKind {
     }
 }
 
-/// Children per BVH node: the binary tree as built, or collapsed to 4 or 8 wide (SIMD box
-/// tests, triangles packed in the leaves). 8-wide is the default: the fastest to trace.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub enum BvhWidth {
-    Two,
-    Four,
-    #[default]
-    Eight,
-}
-
-impl BvhWidth {
-    pub const ALL: [BvhWidth; 3] = [BvhWidth::Two, BvhWidth::Four, BvhWidth::Eight];
-
-    pub fn children(self) -> u32 {
-        match self {
-            BvhWidth::Two => 2,
-            BvhWidth::Four => 4,
-            BvhWidth::Eight => 8,
-        }
-    }
-}
-
-impl fmt::Display for BvhWidth {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{}", self.children())
-    }
-}
-
-impl FromStr for BvhWidth {
-    type Err = String;
-
-    fn from_str(s: &str) -> Result<Self, Self::Err> {
-        match s {
-            "2" => Ok(BvhWidth::Two),
-            "4" => Ok(BvhWidth::Four),
-            "8" => Ok(BvhWidth::Eight),
-            _ => Err(format!("BVH width must be 2, 4 or 8, not `{s}`")),
-        }
-    }
-}
-
-#[derive(Clone, Debug)]
-enum Structure {
-    Linear,
-    Binary,
-    Four(Bvh4),
-    Eight(Bvh8),
-}
-
 /// A built acceleration structure over a scene's primitives.
 #[derive(Clone, Debug)]
 pub struct Accel {
-    /// The builder's binary tree (kept for statistics and pictures even when collapsed).
-    bvh: Option<Bvh2>,
-    structure: Structure,
+    /// The tree in the layout asked for; `None` for brute force.
+    tree: Option<Tree>,
     /// Whether any primitive is a triangle: only then does a query prepare the ray for
     /// triangle tests.
     has_triangles: bool,
@@ -120,37 +70,24 @@ impl Accel {
         let AccelKind::Bvh(builder) = kind else {
             return Self {
                 has_triangles: has_triangles(primitives),
-                bvh: None,
-                structure: Structure::Linear,
+                tree: None,
                 build_time: start.elapsed(),
             };
         };
         let boxes: Vec<_> = primitives.iter().map(|p| p.shape.bounds()).collect();
         let bvh = build(builder, &boxes, params);
-        let structure = match width {
-            BvhWidth::Two => Structure::Binary,
-            BvhWidth::Four => {
-                let mut wide = Bvh4::from_bvh2(&bvh);
-                wide.pack_triangles(|p| primitives[p as usize].shape.triangle_vertices());
-                Structure::Four(wide)
-            }
-            BvhWidth::Eight => {
-                let mut wide = Bvh8::from_bvh2(&bvh);
-                wide.pack_triangles(|p| primitives[p as usize].shape.triangle_vertices());
-                Structure::Eight(wide)
-            }
-        };
+        let mut tree = Tree::new(bvh, width);
+        tree.pack_triangles(|p| primitives[p as usize].shape.triangle_vertices());
         Self {
             has_triangles: has_triangles(primitives),
-            bvh: Some(bvh),
-            structure,
+            tree: Some(tree),
             build_time: start.elapsed(),
         }
     }
 
-    /// The binary tree, unless this is the brute-force structure.
-    pub fn bvh(&self) -> Option<&Bvh2> {
-        self.bvh.as_ref()
+    /// The tree, unless this is the brute-force structure.
+    pub fn tree(&self) -> Option<&Tree> {
+        self.tree.as_ref()
     }
 
     /// The work a closest-hit query does for `ray`: node visits and primitive tests.
@@ -186,14 +123,16 @@ impl Accel {
                 .shape
                 .intersect_sheared(ray, &sheared)
         };
-        // Wide trees test their triangles in packs; the closure sees the other shapes.
+        // Trees with triangle packs test triangles themselves; the closure sees the rest.
         let test_other =
             |prim: u32, ray: &Ray| primitives[prim as usize].shape.intersect_non_triangle(ray);
-        match (&self.structure, &self.bvh) {
-            (Structure::Binary, Some(bvh)) => bvh.intersect_counted(ray, test, counter),
-            (Structure::Four(bvh), _) => bvh.intersect_counted(ray, test_other, counter),
-            (Structure::Eight(bvh), _) => bvh.intersect_counted(ray, test_other, counter),
-            _ => {
+        match &self.tree {
+            // No triangle reaches the closure: there are none, or the tree tests them.
+            Some(tree) if tree.has_triangle_packs() || !self.has_triangles => {
+                tree.intersect_counted(ray, test_other, counter)
+            }
+            Some(tree) => tree.intersect_counted(ray, test, counter),
+            None => {
                 for _ in primitives {
                     counter.test_primitive();
                 }

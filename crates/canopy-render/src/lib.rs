@@ -20,8 +20,9 @@ pub mod scene;
 pub mod scene_file;
 pub mod visualize;
 
-pub use accel::{Accel, AccelKind, BvhWidth};
+pub use accel::{Accel, AccelKind};
 pub use builtin::{BuiltinScene, BUILTIN_SCENES};
+pub use canopy_bvh::BvhWidth;
 pub use error::{OutputError, SceneError};
 pub use film::Film;
 pub use integrator::{render, render_counted, render_samples, Accumulator, RenderStats};

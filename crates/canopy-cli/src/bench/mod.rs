@@ -9,7 +9,7 @@ mod tables;
 
 use crate::build_args::BuildArgs;
 use anyhow::{bail, Context};
-use canopy_bvh::{Builder, Bvh4, Bvh8};
+use canopy_bvh::Builder;
 use canopy_render::{render, render_counted, Accel, AccelKind, BuiltinScene, BvhWidth, Scene};
 use clap::{Args, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -318,12 +318,9 @@ fn measure(
     progress: &ProgressBar,
 ) -> Measurement {
     let accel = Accel::build(method.kind, method.width, &scene.primitives, params);
-    let sah_cost = match (accel.bvh(), method.width) {
-        (None, _) => 0.0,
-        (Some(bvh), BvhWidth::Two) => bvh.stats(&params.sah).sah_cost,
-        (Some(bvh), BvhWidth::Four) => Bvh4::from_bvh2(bvh).stats(&params.sah).sah_cost,
-        (Some(bvh), BvhWidth::Eight) => Bvh8::from_bvh2(bvh).stats(&params.sah).sah_cost,
-    };
+    let sah_cost = accel
+        .tree()
+        .map_or(0.0, |tree| tree.stats(&params.sah).sah_cost);
     let mut seconds = Vec::new();
     let mut rays = 0;
     for run in 1..=runs {

@@ -3,9 +3,9 @@
 
 use super::plots::write_png;
 use super::Method;
-use canopy_bvh::{BuildParams, Bvh4, Bvh8};
+use canopy_bvh::BuildParams;
 use canopy_render::camera::Camera;
-use canopy_render::visualize::{boxes_at_levels, draw_boxes, wide_boxes_at_levels, LevelRange};
+use canopy_render::visualize::{boxes_at_levels, draw_boxes, LevelRange};
 use canopy_render::{render, Accel, BuiltinScene, BvhWidth, Film};
 use plotters::prelude::*;
 use std::path::Path;
@@ -37,13 +37,9 @@ fn picture(
     scene.settings.spp = spp;
     let accel = Accel::build(method.kind, method.width, &scene.primitives, params);
     let (mut film, _) = render(&scene, &accel, &|| {});
-    if let Some(bvh) = accel.bvh() {
+    if let Some(tree) = accel.tree() {
         let levels = levels(method.width);
-        let boxes = match method.width {
-            BvhWidth::Two => boxes_at_levels(bvh, levels),
-            BvhWidth::Four => wide_boxes_at_levels(&Bvh4::from_bvh2(bvh), levels),
-            BvhWidth::Eight => wide_boxes_at_levels(&Bvh8::from_bvh2(bvh), levels),
-        };
+        let boxes = boxes_at_levels(tree, levels);
         let camera = Camera::new(&scene.camera, size, size);
         draw_boxes(&mut film, &camera, &boxes, levels.first);
     }

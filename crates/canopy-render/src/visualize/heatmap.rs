@@ -88,9 +88,10 @@ fn draw_scale_bar(canvas: &mut Canvas, max: u32) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::accel::{AccelKind, BvhWidth};
+    use crate::accel::AccelKind;
     use crate::BuiltinScene;
     use canopy_bvh::BuildParams;
+    use canopy_bvh::BvhWidth;
 
     #[test]
     fn brute_force_costs_every_primitive_for_every_pixel() {

@@ -9,4 +9,4 @@ mod wireframe;
 
 pub use colormap::turbo;
 pub use heatmap::{render_heatmap, Heatmap};
-pub use wireframe::{boxes_at_levels, draw_boxes, draw_bvh, wide_boxes_at_levels, LevelRange};
+pub use wireframe::{boxes_at_levels, draw_boxes, draw_bvh, LevelRange};

@@ -6,7 +6,7 @@ use super::draw::Canvas;
 use super::font::text_width;
 use crate::camera::Camera;
 use crate::film::Film;
-use canopy_bvh::{Aabb, Bvh2, BvhN};
+use canopy_bvh::{Aabb, Tree};
 use glam::Vec3;
 use std::str::FromStr;
 
@@ -50,25 +50,10 @@ impl FromStr for LevelRange {
     }
 }
 
-/// Every node box of the tree whose level is in `levels`, with its level, shallowest first.
-pub fn boxes_at_levels(bvh: &Bvh2, levels: LevelRange) -> Vec<(Aabb, usize)> {
-    let mut boxes = Vec::new();
-    if bvh.nodes().is_empty() {
-        return boxes;
-    }
-    let mut stack = vec![(0usize, 0usize)];
-    while let Some((index, level)) = stack.pop() {
-        let node = &bvh.nodes()[index];
-        if levels.contains(level) {
-            boxes.push((node.bounds(), level));
-        }
-        if !node.is_leaf() && level < levels.last {
-            stack.push((node.first as usize + 1, level + 1));
-            stack.push((node.first as usize, level + 1));
-        }
-    }
-    boxes.sort_by_key(|&(_, level)| level);
-    boxes
+/// Every node box of the tree whose level is in `levels`, with its level, shallowest first
+/// (for a wide tree, a node's children are one level below it).
+pub fn boxes_at_levels(tree: &Tree, levels: LevelRange) -> Vec<(Aabb, usize)> {
+    tree.boxes_at_levels(levels.first, levels.last)
 }
 
 /// The twelve edges of a box, as pairs of corners.
@@ -97,44 +82,13 @@ fn edges(b: &Aabb) -> [(Vec3, Vec3); 12] {
     pairs.map(|(i, j)| (c(i), c(j)))
 }
 
-/// Every child box of a wide tree whose level is in `levels` (the root node's children
-/// are level 1, as in a binary tree whose root is level 0), shallowest first.
-pub fn wide_boxes_at_levels<const N: usize>(
-    bvh: &BvhN<N>,
-    levels: LevelRange,
-) -> Vec<(Aabb, usize)> {
-    let mut boxes = Vec::new();
-    let Some(root) = bvh.nodes().first() else {
-        return boxes;
-    };
-    if levels.contains(0) {
-        let all = (0..root.len()).fold(Aabb::EMPTY, |b, i| b.union(root.slot_bounds(i)));
-        boxes.push((all, 0));
-    }
-    let mut stack = vec![(0usize, 1usize)];
-    while let Some((index, level)) = stack.pop() {
-        let node = &bvh.nodes()[index];
-        for i in 0..node.len() {
-            if levels.contains(level) {
-                boxes.push((node.slot_bounds(i), level));
-            }
-            if node.count[i] == 0 && level < levels.last {
-                stack.push((node.child[i] as usize, level + 1));
-            }
-        }
-    }
-    boxes.sort_by_key(|&(_, level)| level);
-    boxes
-}
-
 /// Draws the boxes of the requested levels over `film`, and a legend of the level
 /// colours; returns how many boxes were drawn.
-pub fn draw_bvh(film: &mut Film, camera: &Camera, bvh: &Bvh2, levels: LevelRange) -> usize {
-    draw_boxes(film, camera, &boxes_at_levels(bvh, levels), levels.first)
+pub fn draw_bvh(film: &mut Film, camera: &Camera, tree: &Tree, levels: LevelRange) -> usize {
+    draw_boxes(film, camera, &boxes_at_levels(tree, levels), levels.first)
 }
 
-/// Draws boxes tagged with their tree level (from [`boxes_at_levels`] or
-/// [`wide_boxes_at_levels`]), coloured from level `first` to the deepest, with a legend.
+/// Draws boxes tagged with their tree level (from [`boxes_at_levels`]), coloured from level `first` to the deepest, with a legend.
 pub fn draw_boxes(
     film: &mut Film,
     camera: &Camera,
@@ -208,7 +162,7 @@ mod tests {
     use crate::camera::CameraSpec;
     use canopy_bvh::{build, BuildParams, Builder};
 
-    fn tree(n: usize) -> (Vec<Aabb>, Bvh2) {
+    fn tree(n: usize) -> (Vec<Aabb>, canopy_bvh::Bvh2) {
         let boxes: Vec<Aabb> = (0..n)
             .map(|i| Aabb::new(Vec3::splat(i as f32), Vec3::splat(i as f32 + 0.5)))
             .collect();
@@ -240,28 +194,29 @@ mod tests {
         // A complete binary tree of 8 leaves collapsed 4-wide: level 1 holds the four
         // grandchildren of the binary root, level 2 the eight leaves.
         let (_, bvh) = tree(8);
-        let wide = canopy_bvh::Bvh4::from_bvh2(&bvh);
-        let count = |s: &str| wide_boxes_at_levels(&wide, s.parse().unwrap()).len();
+        let wide = Tree::new(bvh.clone(), canopy_bvh::BvhWidth::Four);
+        let count = |s: &str| boxes_at_levels(&wide, s.parse().unwrap()).len();
         assert_eq!(
             (count("0"), count("1"), count("2"), count("3..")),
             (1, 4, 8, 0)
         );
-        assert_eq!(
-            wide_boxes_at_levels(&wide, LevelRange::ALL)[0].0,
-            bvh.bounds()
-        );
+        assert_eq!(boxes_at_levels(&wide, LevelRange::ALL)[0].0, bvh.bounds());
     }
 
     #[test]
     fn one_node_tree_gives_one_box() {
         let (boxes, bvh) = tree(1);
-        assert_eq!(boxes_at_levels(&bvh, LevelRange::ALL), vec![(boxes[0], 0)]);
+        assert_eq!(
+            boxes_at_levels(&Tree::Binary(bvh), LevelRange::ALL),
+            vec![(boxes[0], 0)]
+        );
     }
 
     #[test]
     fn levels_select_exactly_their_nodes() {
         // 8 primitives in leaves of one: a complete tree of 15 nodes on levels 0..=3.
         let (_, bvh) = tree(8);
+        let bvh = Tree::Binary(bvh);
         let count = |s: &str| boxes_at_levels(&bvh, s.parse().unwrap()).len();
         assert_eq!(count("0"), 1);
         assert_eq!(count("1"), 2);
@@ -281,7 +236,10 @@ mod tests {
         };
         let camera = Camera::new(&spec, 64, 64);
         let mut film = Film::new(64, 64);
-        assert_eq!(draw_bvh(&mut film, &camera, &bvh, LevelRange::ALL), 1);
+        assert_eq!(
+            draw_bvh(&mut film, &camera, &Tree::Binary(bvh), LevelRange::ALL),
+            1
+        );
         // Head-on, the box is a square around the centre: the edge through its far corner
         // is lit, its inside and the image's far corner are not.
         let far_corner = camera.project(Vec3::new(0.5, 0.0, 0.5)).unwrap();

@@ -1,0 +1,206 @@
+//! The layouts a tree can be traversed in, and [`Tree`]: a tree in any of them. This is the
+//! one place that matches on the layout; everything else (the renderer, `canopy bvh`, the
+//! benchmarks, pictures of trees) goes through [`Tree`], so a new layout touches only here.
+
+use crate::traverse::TraversalCounter;
+use crate::{Aabb, Bvh2, Bvh4, Bvh8, BvhError, BvhN, Hit, Isa, IsaError, PrimHit, Ray};
+use crate::{SahCosts, TreeStats};
+use glam::Vec3;
+use std::fmt;
+use std::str::FromStr;
+
+/// Children per node: the binary tree as built, or collapsed to 4 or 8 wide (SIMD box
+/// tests, triangles packed in the leaves). 8-wide is the default: the fastest to trace.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum BvhWidth {
+    Two,
+    Four,
+    #[default]
+    Eight,
+}
+
+impl BvhWidth {
+    pub const ALL: [BvhWidth; 3] = [BvhWidth::Two, BvhWidth::Four, BvhWidth::Eight];
+
+    pub fn children(self) -> u32 {
+        match self {
+            BvhWidth::Two => 2,
+            BvhWidth::Four => 4,
+            BvhWidth::Eight => 8,
+        }
+    }
+}
+
+impl fmt::Display for BvhWidth {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}", self.children())
+    }
+}
+
+impl FromStr for BvhWidth {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        BvhWidth::ALL
+            .into_iter()
+            .find(|w| w.children().to_string() == s)
+            .ok_or_else(|| format!("BVH width must be 2, 4 or 8, not `{s}`"))
+    }
+}
+
+/// A tree in one of the layouts.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Tree {
+    Binary(Bvh2),
+    Four(Bvh4),
+    Eight(Bvh8),
+}
+
+impl Tree {
+    /// The binary tree as it is, or collapsed to the width asked for.
+    pub fn new(bvh: Bvh2, width: BvhWidth) -> Self {
+        match width {
+            BvhWidth::Two => Tree::Binary(bvh),
+            BvhWidth::Four => Tree::Four(Bvh4::from_bvh2(&bvh)),
+            BvhWidth::Eight => Tree::Eight(Bvh8::from_bvh2(&bvh)),
+        }
+    }
+
+    pub fn width(&self) -> BvhWidth {
+        match self {
+            Tree::Binary(_) => BvhWidth::Two,
+            Tree::Four(_) => BvhWidth::Four,
+            Tree::Eight(_) => BvhWidth::Eight,
+        }
+    }
+
+    /// Packs the leaves' triangles for the SIMD triangle kernel (wide layouts; the binary
+    /// tree tests every primitive through the closure). See [`BvhN::pack_triangles`].
+    pub fn pack_triangles(&mut self, triangle: impl Fn(u32) -> Option<[Vec3; 3]>) {
+        match self {
+            Tree::Binary(_) => {}
+            Tree::Four(t) => t.pack_triangles(triangle),
+            Tree::Eight(t) => t.pack_triangles(triangle),
+        }
+    }
+
+    /// Whether the tree tests triangles itself, from packs in its leaves.
+    pub fn has_triangle_packs(&self) -> bool {
+        match self {
+            Tree::Binary(_) => false,
+            Tree::Four(t) => t.has_triangle_packs(),
+            Tree::Eight(t) => t.has_triangle_packs(),
+        }
+    }
+
+    /// Uses the kernels of `isa` (wide layouts; the binary traversal is scalar).
+    pub fn set_isa(&mut self, isa: Isa) -> Result<(), IsaError> {
+        match self {
+            Tree::Binary(_) => Ok(()),
+            Tree::Four(t) => t.set_isa(isa),
+            Tree::Eight(t) => t.set_isa(isa),
+        }
+    }
+
+    pub fn stats(&self, costs: &SahCosts) -> TreeStats {
+        match self {
+            Tree::Binary(t) => t.stats(costs),
+            Tree::Four(t) => t.stats(costs),
+            Tree::Eight(t) => t.stats(costs),
+        }
+    }
+
+    pub fn validate(&self, boxes: &[Aabb]) -> Result<(), BvhError> {
+        match self {
+            Tree::Binary(t) => t.validate(boxes),
+            Tree::Four(t) => t.validate(boxes),
+            Tree::Eight(t) => t.validate(boxes),
+        }
+    }
+
+    /// Every node box whose level is in `first..=last` (the root is level 0; a wide node's
+    /// children are one level below it), shallowest first; for pictures of the tree.
+    pub fn boxes_at_levels(&self, first: usize, last: usize) -> Vec<(Aabb, usize)> {
+        let mut boxes = match self {
+            Tree::Binary(t) => binary_boxes(t, first, last),
+            Tree::Four(t) => wide_boxes(t, first, last),
+            Tree::Eight(t) => wide_boxes(t, first, last),
+        };
+        boxes.sort_by_key(|&(_, level)| level);
+        boxes
+    }
+
+    /// Closest hit; same contract as [`Bvh2::intersect`].
+    #[inline]
+    pub fn intersect_counted<F, P, C>(&self, ray: &Ray, hit_prim: F, counter: &mut C) -> Option<Hit>
+    where
+        F: FnMut(u32, &Ray) -> Option<P>,
+        P: Into<PrimHit>,
+        C: TraversalCounter,
+    {
+        match self {
+            Tree::Binary(t) => t.intersect_counted(ray, hit_prim, counter),
+            Tree::Four(t) => t.intersect_counted(ray, hit_prim, counter),
+            Tree::Eight(t) => t.intersect_counted(ray, hit_prim, counter),
+        }
+    }
+
+    /// Whether anything blocks `ray`; same contract as [`Bvh2::occluded`].
+    #[inline]
+    pub fn occluded<F>(&self, ray: &Ray, hit_prim: F) -> bool
+    where
+        F: FnMut(u32, &Ray) -> bool,
+    {
+        match self {
+            Tree::Binary(t) => t.occluded(ray, hit_prim),
+            Tree::Four(t) => t.occluded(ray, hit_prim),
+            Tree::Eight(t) => t.occluded(ray, hit_prim),
+        }
+    }
+}
+
+fn binary_boxes(bvh: &Bvh2, first: usize, last: usize) -> Vec<(Aabb, usize)> {
+    let mut boxes = Vec::new();
+    if bvh.nodes().is_empty() {
+        return boxes;
+    }
+    let mut stack = vec![(0usize, 0usize)];
+    while let Some((index, level)) = stack.pop() {
+        let node = &bvh.nodes()[index];
+        if level >= first {
+            boxes.push((node.bounds(), level));
+        }
+        if !node.is_leaf() && level < last {
+            stack.push((node.first as usize + 1, level + 1));
+            stack.push((node.first as usize, level + 1));
+        }
+    }
+    boxes
+}
+
+fn wide_boxes<const N: usize>(bvh: &BvhN<N>, first: usize, last: usize) -> Vec<(Aabb, usize)> {
+    let mut boxes = Vec::new();
+    let Some(root) = bvh.nodes().first() else {
+        return boxes;
+    };
+    if first == 0 {
+        let all = (0..root.len()).fold(Aabb::EMPTY, |b, i| b.union(root.slot_bounds(i)));
+        boxes.push((all, 0));
+    }
+    let mut stack = vec![(0usize, 1usize)];
+    while let Some((index, level)) = stack.pop() {
+        if level > last {
+            continue;
+        }
+        let node = &bvh.nodes()[index];
+        for i in 0..node.len() {
+            if level >= first {
+                boxes.push((node.slot_bounds(i), level));
+            }
+            if node.count[i] == 0 && level < last {
+                stack.push((node.child[i] as usize, level + 1));
+            }
+        }
+    }
+    boxes
+}
