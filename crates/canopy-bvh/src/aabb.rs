@@ -130,7 +130,7 @@ pub(crate) struct SlabRay {
 /// instructions (`f32::min` must also order NaNs, which costs several more). When an
 /// argument is NaN they return the second one.
 #[inline(always)]
-fn fast_min(a: f32, b: f32) -> f32 {
+pub(crate) fn fast_min(a: f32, b: f32) -> f32 {
     if a < b {
         a
     } else {
@@ -139,7 +139,7 @@ fn fast_min(a: f32, b: f32) -> f32 {
 }
 
 #[inline(always)]
-fn fast_max(a: f32, b: f32) -> f32 {
+pub(crate) fn fast_max(a: f32, b: f32) -> f32 {
     if a > b {
         a
     } else {

@@ -11,7 +11,7 @@
 //! needed.
 
 use super::WideNode;
-use crate::aabb::FAR_SLACK;
+use crate::aabb::{fast_max, fast_min, FAR_SLACK};
 use crate::Ray;
 
 /// A ray prepared for slab tests against wide nodes.
@@ -37,24 +37,6 @@ impl OctRay {
             far: near.map(|p| (p + 3) % 6),
             t_min: ray.t_min,
         }
-    }
-}
-
-#[inline(always)]
-fn fast_min(a: f32, b: f32) -> f32 {
-    if a < b {
-        a
-    } else {
-        b
-    }
-}
-
-#[inline(always)]
-fn fast_max(a: f32, b: f32) -> f32 {
-    if a > b {
-        a
-    } else {
-        b
     }
 }
 
