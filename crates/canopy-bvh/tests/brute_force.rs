@@ -54,6 +54,7 @@ fn check_against_brute_force(boxes: &[Aabb], rays: &[Ray], params: &BuildParams)
                 assert_eq!(bvh8.occluded(ray, any), hit, "{builder} x8 {isa}: {ray:?}");
             }
         }
+        // The binary tree (the wide ones are checked per kernel above).
         for ray in rays {
             let expected = brute_force_closest(boxes, ray);
             assert_eq!(
@@ -61,31 +62,11 @@ fn check_against_brute_force(boxes: &[Aabb], rays: &[Ray], params: &BuildParams)
                 expected,
                 "{builder} x2: closest hit for {ray:?}"
             );
-            assert_eq!(
-                bvh4.intersect(ray, closest),
-                expected,
-                "{builder} x4: closest hit for {ray:?}"
-            );
-            assert_eq!(
-                bvh8.intersect(ray, closest),
-                expected,
-                "{builder} x8: closest hit for {ray:?}"
-            );
             let hit = expected.is_some();
             assert_eq!(
                 bvh.occluded(ray, any),
                 hit,
                 "{builder} x2: any hit for {ray:?}"
-            );
-            assert_eq!(
-                bvh4.occluded(ray, any),
-                hit,
-                "{builder} x4: any hit for {ray:?}"
-            );
-            assert_eq!(
-                bvh8.occluded(ray, any),
-                hit,
-                "{builder} x8: any hit for {ray:?}"
             );
         }
     }
