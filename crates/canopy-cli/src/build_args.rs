@@ -1,31 +1,29 @@
 //! Options shared by every command that builds a BVH.
 
+use crate::limits;
 use canopy_bvh::{BuildParams, Builder, SahCosts};
 use clap::Args;
 
 #[derive(Args, Clone, Debug)]
 pub struct BuildArgs {
-    /// Most primitives in a BVH leaf.
-    #[arg(long, default_value_t = BuildParams::default().max_leaf_size)]
+    /// Most primitives in a BVH leaf (1 to 256).
+    #[arg(long, default_value_t = BuildParams::default().max_leaf_size, value_parser = limits::leaf_size())]
     pub max_leaf_size: u32,
-    /// SAH cost of visiting a node, relative to testing a primitive.
-    #[arg(long, default_value_t = SahCosts::default().traversal)]
+    /// SAH cost of visiting a node, relative to testing a primitive (0 < cost <= 1e6).
+    #[arg(long, default_value_t = SahCosts::default().traversal, value_parser = limits::sah_cost)]
     pub sah_traversal: f32,
-    /// SAH cost of testing a primitive.
-    #[arg(long, default_value_t = SahCosts::default().intersection)]
+    /// SAH cost of testing a primitive (0 < cost <= 1e6).
+    #[arg(long, default_value_t = SahCosts::default().intersection, value_parser = limits::sah_cost)]
     pub sah_intersection: f32,
-    /// Neighbours searched on each side by `ploc`.
-    #[arg(long, default_value_t = BuildParams::default().ploc_radius)]
+    /// Neighbours searched on each side by `ploc` (1 to 1024).
+    #[arg(long, default_value_t = BuildParams::default().ploc_radius, value_parser = limits::ploc_radius())]
     pub ploc_radius: u32,
 }
 
 impl BuildArgs {
-    pub fn params(&self) -> anyhow::Result<BuildParams> {
-        let costs_ok = |c: f32| c.is_finite() && c > 0.0;
-        if !costs_ok(self.sah_traversal) || !costs_ok(self.sah_intersection) {
-            anyhow::bail!("SAH costs must be positive numbers");
-        }
-        Ok(BuildParams {
+    /// The build parameters; every value was range-checked by the parser.
+    pub fn params(&self) -> BuildParams {
+        BuildParams {
             max_leaf_size: self.max_leaf_size,
             sah: SahCosts {
                 traversal: self.sah_traversal,
@@ -33,7 +31,7 @@ impl BuildArgs {
             },
             ploc_radius: self.ploc_radius,
             ..BuildParams::default()
-        })
+        }
     }
 }
 

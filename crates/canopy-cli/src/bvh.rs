@@ -2,8 +2,8 @@
 //! tabulate their shape, quality and build time.
 
 use crate::build_args::{builders_help, BuildArgs};
+use crate::limits;
 use crate::units::human_bytes;
-use anyhow::bail;
 use canopy_bvh::{build, Aabb, BuildParams, Builder, Tree};
 use canopy_render::BvhWidth;
 use clap::Args;
@@ -20,8 +20,8 @@ pub struct BvhArgs {
     /// Widths to collapse to, comma-separated (2, 4, 8).
     #[arg(long, value_delimiter = ',', default_value = "2")]
     width: Vec<BvhWidth>,
-    /// Builds per measurement; the median time is reported.
-    #[arg(long, default_value_t = 5)]
+    /// Builds per measurement, 1 to 1000; the median time is reported.
+    #[arg(long, default_value_t = 5, value_parser = limits::runs())]
     runs: u32,
     /// Print JSON instead of a table.
     #[arg(long)]
@@ -66,10 +66,7 @@ fn parse_builders(list: &str) -> anyhow::Result<Vec<Builder>> {
 
 pub fn run(args: &BvhArgs) -> anyhow::Result<()> {
     let builders = parse_builders(&args.bvh)?;
-    if args.runs == 0 {
-        bail!("--runs must be at least 1");
-    }
-    let params = args.build.params()?;
+    let params = args.build.params();
     let scene = canopy_render::load_scene(&args.input)?;
     let boxes = scene.primitive_bounds();
     let mut rows = Vec::new();

@@ -5,8 +5,9 @@ use canopy_bvh::Aabb;
 use canopy_bvh::Bvh2Node;
 use canopy_render::material::Material;
 use canopy_render::scene::Primitive;
-use canopy_render::{Background, Scene};
+use canopy_render::Scene;
 use clap::Args;
+use serde::Serialize;
 
 /// A primitive, and its share of a BVH: about two nodes and one index each.
 const BYTES_PER_PRIMITIVE: u64 =
@@ -16,74 +17,113 @@ const BYTES_PER_PRIMITIVE: u64 =
 pub struct CheckArgs {
     /// Built-in scene name, scene file, or a bare OBJ/PLY mesh.
     scene: String,
+    /// Print the description as one JSON object (warnings also go to stderr).
+    #[arg(long)]
+    json: bool,
+}
+
+/// What `canopy check` reports.
+#[derive(Serialize)]
+struct Description {
+    scene: String,
+    name: String,
+    description: String,
+    width: u32,
+    height: u32,
+    spp: u32,
+    max_depth: u32,
+    seed: u64,
+    primitives: usize,
+    spheres: usize,
+    triangles: usize,
+    cuboids: usize,
+    materials: usize,
+    emissive_materials: usize,
+    bounds_min: [f32; 3],
+    bounds_max: [f32; 3],
+    film_bytes: u64,
+    geometry_bytes: u64,
+    warnings: Vec<String>,
 }
 
 pub fn run(args: &CheckArgs) -> anyhow::Result<()> {
     let scene = canopy_render::load_scene(&args.scene)?;
     scene.settings.check().map_err(anyhow::Error::msg)?;
-    for line in describe(&scene) {
-        println!("{line}");
+    let description = describe(&args.scene, &scene);
+    for warning in &description.warnings {
+        eprintln!("warning: {warning}");
     }
-    println!("ok          {} is valid", args.scene);
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&description)?);
+    } else {
+        for line in lines(&scene, &description) {
+            println!("{line}");
+        }
+        println!("ok          {} is valid", args.scene);
+    }
     Ok(())
 }
 
-/// The report `canopy check` prints, one line each.
-fn describe(scene: &Scene) -> Vec<String> {
+fn describe(arg: &str, scene: &Scene) -> Description {
     let s = scene.settings;
-    let c = &scene.camera;
     let counts = scene.shape_counts();
     let bounds = scene
         .primitive_bounds()
         .into_iter()
         .fold(Aabb::EMPTY, Aabb::union);
-    let emitters = scene
-        .materials
-        .iter()
-        .filter(|m| matches!(m, Material::Emissive { .. }))
-        .count();
-    let mut lines = vec![
-        format!("scene       {} {}", scene.name, scene.description),
+    Description {
+        scene: arg.to_owned(),
+        name: scene.name.clone(),
+        description: scene.description.clone(),
+        width: s.width,
+        height: s.height,
+        spp: s.spp,
+        max_depth: s.max_depth,
+        seed: s.seed,
+        primitives: scene.primitives.len(),
+        spheres: counts.spheres,
+        triangles: counts.triangles,
+        cuboids: counts.cuboids,
+        materials: scene.materials.len(),
+        emissive_materials: scene
+            .materials
+            .iter()
+            .filter(|m| matches!(m, Material::Emissive { .. }))
+            .count(),
+        bounds_min: bounds.min.to_array(),
+        bounds_max: bounds.max.to_array(),
+        film_bytes: s.film_bytes(),
+        geometry_bytes: scene.primitives.len() as u64 * BYTES_PER_PRIMITIVE,
+        warnings: scene.warnings(),
+    }
+}
+
+/// The report `canopy check` prints, one line each.
+fn lines(scene: &Scene, d: &Description) -> Vec<String> {
+    let c = &scene.camera;
+    vec![
+        format!("scene       {} {}", d.name, d.description),
         format!(
             "camera      from {} to {}, up {}, vfov {}°, aperture {}",
             c.look_from, c.look_at, c.up, c.vfov, c.aperture
         ),
         format!(
             "render      {}x{}, {} spp, depth {}, seed {}",
-            s.width, s.height, s.spp, s.max_depth, s.seed
+            d.width, d.height, d.spp, d.max_depth, d.seed
         ),
         format!(
             "primitives  {} ({} spheres, {} triangles, {} cuboids)",
-            scene.primitives.len(),
-            counts.spheres,
-            counts.triangles,
-            counts.cuboids
+            d.primitives, d.spheres, d.triangles, d.cuboids
         ),
         format!(
-            "materials   {} ({emitters} emissive)",
-            scene.materials.len()
+            "materials   {} ({} emissive)",
+            d.materials, d.emissive_materials
         ),
-        format!("bounds      {} to {}", bounds.min, bounds.max),
+        format!("bounds      {:?} to {:?}", d.bounds_min, d.bounds_max),
         format!(
             "memory      ~{} of film, ~{} of primitives and BVH",
-            human_bytes(s.film_bytes()),
-            human_bytes(scene.primitives.len() as u64 * BYTES_PER_PRIMITIVE)
+            human_bytes(d.film_bytes),
+            human_bytes(d.geometry_bytes)
         ),
-    ];
-    if scene.skipped_degenerate > 0 {
-        lines.push(format!(
-            "warning     {} zero-area mesh triangles are left out",
-            scene.skipped_degenerate
-        ));
-    }
-    if scene.primitives.is_empty() {
-        lines.push("warning     the scene has no primitives".into());
-    }
-    if emitters == 0 && scene.background == Background::Constant(glam::Vec3::ZERO) {
-        lines.push(
-            "warning     no light: no emissive material and a black background give a black image"
-                .into(),
-        );
-    }
-    lines
+    ]
 }

@@ -4,7 +4,9 @@ mod bench;
 mod build_args;
 mod bvh;
 mod check;
+mod limits;
 mod render;
+mod safety;
 mod units;
 
 use clap::{Parser, Subcommand};
@@ -35,6 +37,24 @@ enum Command {
     Scenes,
 }
 
+/// Exit status of a run that failed (a usage error exits with 2, from the parser).
+const EXIT_ERROR: u8 = 1;
+/// Exit status of a render stopped by a signal, its partial image and checkpoint saved
+/// (128 + SIGINT, as shells report it).
+pub const EXIT_INTERRUPTED: i32 = 130;
+
+/// A render that stopped early on a signal; its work is saved.
+#[derive(Debug)]
+pub struct Interrupted(pub String);
+
+impl std::fmt::Display for Interrupted {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for Interrupted {}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
@@ -46,9 +66,13 @@ fn main() -> ExitCode {
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
+        Err(e) if e.is::<Interrupted>() => {
+            eprintln!("{e:#}");
+            ExitCode::from(EXIT_INTERRUPTED as u8)
+        }
         Err(e) => {
             eprintln!("error: {e:#}");
-            ExitCode::FAILURE
+            ExitCode::from(EXIT_ERROR)
         }
     }
 }

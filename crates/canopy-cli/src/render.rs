@@ -2,6 +2,12 @@
 //! write the image, print a summary.
 
 use crate::build_args::{builders_help, BuildArgs};
+use crate::limits;
+use crate::safety::{
+    check_checkpoint_slot, check_memory, check_writable_dir, file_stem_from_name, refuse_inputs,
+    same_file,
+};
+use crate::Interrupted;
 use anyhow::{bail, Context};
 use canopy_render::camera::Camera;
 use canopy_render::checkpoint::Checkpoint;
@@ -12,6 +18,7 @@ use canopy_render::{
 };
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
+use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -25,21 +32,22 @@ pub struct RenderArgs {
     /// Output image, .png (8-bit sRGB) or .exr (linear float) [default: <scene>.png].
     #[arg(short, long)]
     output: Option<PathBuf>,
-    /// Samples per pixel [default: from the scene].
-    #[arg(long)]
+    /// Samples per pixel, 1 to 16777216 [default: from the scene].
+    #[arg(long, value_parser = limits::spp())]
     spp: Option<u32>,
-    /// Maximum ray segments per path, the camera ray included [default: from the scene].
-    #[arg(long)]
+    /// Maximum ray segments per path, the camera ray included, 1 to 1024 [default: from
+    /// the scene].
+    #[arg(long, value_parser = limits::depth())]
     depth: Option<u32>,
-    /// Image size as WIDTHxHEIGHT [default: from the scene].
-    #[arg(long, value_parser = parse_size)]
+    /// Image size as WIDTHxHEIGHT, each 1 to 65536 [default: from the scene].
+    #[arg(long, value_parser = limits::size)]
     size: Option<(u32, u32)>,
     /// Seed of the random sampling.
     #[arg(long)]
     seed: Option<u64>,
-    /// Worker threads [default: all cores].
-    #[arg(long)]
-    threads: Option<usize>,
+    /// Worker threads, 1 to 1024 [default: all cores].
+    #[arg(long, value_parser = limits::threads())]
+    threads: Option<u32>,
     /// Acceleration structure: `none` or a BVH builder (see --help).
     #[arg(long, default_value = "binned-sah", value_parser = parse_accel, long_help = builders_help("Acceleration structure: `none` (loop over all primitives) or a BVH builder:"))]
     bvh: AccelKind,
@@ -68,6 +76,9 @@ pub struct RenderArgs {
     /// Continue the render saved in a checkpoint (scene and settings come from it).
     #[arg(long, value_name = "FILE", conflicts_with_all = ["scene", "size", "spp", "depth", "seed", "heatmap"])]
     resume: Option<PathBuf>,
+    /// Print the summary as one JSON object (warnings also go to stderr).
+    #[arg(long)]
+    json: bool,
 }
 
 fn parse_duration(s: &str) -> Result<Duration, String> {
@@ -87,127 +98,287 @@ fn parse_duration(s: &str) -> Result<Duration, String> {
     }
 }
 
-fn parse_size(s: &str) -> Result<(u32, u32), String> {
-    let (w, h) = s
-        .split_once(['x', 'X'])
-        .ok_or_else(|| format!("`{s}` is not WIDTHxHEIGHT"))?;
-    let dim = |d: &str| d.trim().parse::<u32>().ok().filter(|&v| v > 0);
-    match (dim(w), dim(h)) {
-        (Some(w), Some(h)) => Ok((w, h)),
-        _ => Err(format!("`{s}`: width and height must be positive integers")),
-    }
-}
-
 fn parse_accel(s: &str) -> Result<AccelKind, String> {
     s.parse()
         .map_err(|e: canopy_bvh::UnknownBuilder| e.to_string())
 }
 
-pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
-    let (scene_arg, scene, accumulator) = match &args.resume {
-        Some(path) => {
-            let checkpoint = Checkpoint::load(path)?;
-            let mut scene = canopy_render::load_scene(&checkpoint.scene)?;
-            scene.settings = checkpoint.settings;
-            checkpoint.matches(&scene, path)?;
-            (checkpoint.scene, scene, checkpoint.accumulator)
-        }
-        None => {
-            let arg = args
-                .scene
-                .clone()
-                .expect("clap requires a scene without --resume");
-            let mut scene = canopy_render::load_scene(&arg)?;
-            apply_overrides(&mut scene, args)?;
-            let accumulator = Accumulator::new(scene.settings.width, scene.settings.height);
-            (arg, scene, accumulator)
+/// What the render command reports: printed as text lines, or as one JSON object with
+/// `--json`. Warnings also go to stderr as they happen.
+#[derive(Default, Serialize)]
+struct Summary {
+    scene: String,
+    width: u32,
+    height: u32,
+    spp: u32,
+    max_depth: u32,
+    seed: u64,
+    primitives: usize,
+    spheres: usize,
+    triangles: usize,
+    cuboids: usize,
+    /// `none`, or the builder's name.
+    bvh: String,
+    bvh_width: u32,
+    build_ms: f64,
+    threads: usize,
+    /// Samples per pixel in the image (fewer than `spp` when interrupted).
+    samples: u32,
+    render_seconds: f64,
+    rays: u64,
+    mrays_per_second: f64,
+    image: String,
+    /// Where the render's state was saved, when it was interrupted.
+    checkpoint: Option<String>,
+    interrupted: bool,
+    heatmap_mean_cost: Option<f64>,
+    heatmap_max_cost: Option<u32>,
+    warnings: Vec<String>,
+}
+
+impl Summary {
+    fn warn(&mut self, message: String) {
+        eprintln!("warning: {message}");
+        self.warnings.push(message);
+    }
+}
+
+/// Prints a summary line unless the summary is to be printed as JSON.
+macro_rules! say {
+    ($json:expr, $($arg:tt)*) => {
+        if !$json {
+            println!($($arg)*);
         }
     };
-    let output = args
-        .output
-        .clone()
-        .unwrap_or_else(|| default_output(&scene_arg, &scene));
-    // Refuse a bad output path before spending minutes on the render.
-    image_format(&output)?;
+}
 
+/// The scene to render and where its samples start from.
+struct Job {
+    /// How a checkpoint names the scene: a built-in name or an absolute path.
+    source: String,
+    scene: Scene,
+    accumulator: Accumulator,
+    /// The checkpoint this render continues, if any.
+    resumed_from: Option<PathBuf>,
+}
+
+fn load_job(args: &RenderArgs) -> anyhow::Result<Job> {
+    if let Some(path) = &args.resume {
+        let checkpoint = Checkpoint::load(path)?;
+        let mut scene = canopy_render::load_scene(&checkpoint.scene)?;
+        scene.settings = checkpoint.settings;
+        checkpoint.matches(&scene, path)?;
+        return Ok(Job {
+            source: checkpoint.scene,
+            scene,
+            accumulator: checkpoint.accumulator,
+            resumed_from: Some(path.clone()),
+        });
+    }
+    let arg = args
+        .scene
+        .as_deref()
+        .expect("clap requires a scene without --resume");
+    let mut scene = canopy_render::load_scene(arg)?;
+    apply_overrides(&mut scene, args)?;
+    let accumulator = Accumulator::new(scene.settings.width, scene.settings.height);
+    Ok(Job {
+        source: canopy_render::scene_source(arg)?,
+        scene,
+        accumulator,
+        resumed_from: None,
+    })
+}
+
+/// Where the image and the checkpoint go, checked before any work: neither may be an
+/// input of the scene or each other, a checkpoint slot must be free or hold a canopy
+/// checkpoint, and both directories must be writable.
+struct Destinations {
+    image: PathBuf,
+    /// Saved periodically when asked (`--checkpoint`, or the resumed file).
+    periodic: Option<PathBuf>,
+    /// Where an interrupted render saves its state.
+    on_interrupt: PathBuf,
+}
+
+fn plan_destinations(args: &RenderArgs, job: &Job) -> anyhow::Result<Destinations> {
+    let image = match &args.output {
+        Some(path) => path.clone(),
+        None => default_output(args.scene.as_deref().unwrap_or("render"), &job.scene),
+    };
+    image_format(&image)?;
+    let inputs = &job.scene.inputs;
+    refuse_inputs(&image, inputs, "image")?;
+    check_writable_dir(&image, "image")?;
+    if args.heatmap {
+        return Ok(Destinations {
+            on_interrupt: default_checkpoint(&image),
+            image,
+            periodic: None,
+        });
+    }
+    let periodic = args.checkpoint.clone().or_else(|| job.resumed_from.clone());
+    let on_interrupt = periodic
+        .clone()
+        .unwrap_or_else(|| default_checkpoint(&image));
+    refuse_inputs(&on_interrupt, inputs, "checkpoint")?;
+    if same_file(&on_interrupt, &image) {
+        bail!(
+            "{}: the image and the checkpoint cannot be the same file",
+            image.display()
+        );
+    }
+    check_checkpoint_slot(&on_interrupt)?;
+    check_writable_dir(&on_interrupt, "checkpoint")?;
+    Ok(Destinations {
+        image,
+        periodic,
+        on_interrupt,
+    })
+}
+
+pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
+    let job = load_job(args)?;
+    let dest = plan_destinations(args, &job)?;
+    let settings = job.scene.settings;
+    let pixels = settings.width as u64 * settings.height as u64;
+    check_memory(
+        pixels * limits::BYTES_PER_PIXEL,
+        &format!("a {}x{} image", settings.width, settings.height),
+    )?;
     let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(args.threads.unwrap_or(0))
+        .num_threads(args.threads.unwrap_or(0) as usize)
         .build()
         .context("cannot start the worker threads")?;
-    let params = args.build.params()?;
+    let params = args.build.params();
+    let scene = &job.scene;
     let accel = pool.install(|| Accel::build(args.bvh, args.width, &scene.primitives, &params));
-
     if args.show_bvh && accel.tree().is_none() {
         bail!("--show-bvh needs a BVH; choose a builder with --bvh");
     }
-    print_scene_summary(args, &scene_arg, &scene, &accel);
+
+    let mut summary = scene_summary(args, &job, &accel, pool.current_num_threads());
+    print_scene_summary(&summary, args.json);
+    for warning in scene.warnings() {
+        summary.warn(warning);
+    }
+    summary.image = dest.image.display().to_string();
     if args.heatmap {
-        let map = pool.install(|| render_heatmap(&scene, &accel));
-        write_image(&map.film, &output)?;
-        println!(
+        let map = pool.install(|| render_heatmap(scene, &accel));
+        write_image(&map.film, &dest.image)?;
+        summary.heatmap_mean_cost = Some(map.mean_cost);
+        summary.heatmap_max_cost = Some(map.max_cost);
+        say!(
+            args.json,
             "heatmap     primary-ray cost: mean {:.1}, max {} (node visits + primitive tests)",
-            map.mean_cost, map.max_cost
+            map.mean_cost,
+            map.max_cost
         );
-        println!("image       {}", output.display());
-        return Ok(());
+        return finish(&summary, args.json);
     }
 
-    let checkpoint_path = args.checkpoint.clone().or_else(|| args.resume.clone());
     let run = pool.install(|| {
         progressive(
-            &scene,
-            &scene_arg,
+            scene,
+            &job.source,
             &accel,
-            accumulator,
-            checkpoint_path.as_deref(),
+            job.accumulator,
+            dest.periodic.as_deref(),
             args.every,
+            &mut summary,
         )
     })?;
     let mut film = run.accumulator.film();
     if let (true, Some(tree)) = (args.show_bvh, accel.tree()) {
         let camera = Camera::new(&scene.camera, film.width, film.height);
         let drawn = draw_bvh(&mut film, &camera, tree, args.levels);
-        println!(
+        say!(
+            args.json,
             "overlay     {drawn} boxes of tree levels {}",
             describe_levels(args.levels)
         );
     }
-    write_image(&film, &output)?;
+    write_image(&film, &dest.image)?;
 
     let stats = run.stats;
-    println!(
+    summary.samples = run.accumulator.samples;
+    summary.render_seconds = stats.elapsed.as_secs_f64();
+    summary.rays = stats.rays;
+    summary.mrays_per_second = stats.mrays_per_second();
+    say!(
+        args.json,
         "render      {:.3} s on {} threads",
-        stats.elapsed.as_secs_f64(),
-        pool.current_num_threads()
+        summary.render_seconds,
+        summary.threads
     );
-    println!(
+    say!(
+        args.json,
         "rays        {} ({:.2} Mrays/s)",
         stats.rays,
-        stats.mrays_per_second()
+        summary.mrays_per_second
     );
     if run.accumulator.invalid_samples > 0 {
-        println!(
-            "warning     {} samples with NaN/inf radiance were dropped",
+        summary.warn(format!(
+            "{} samples with NaN/inf radiance were dropped",
             run.accumulator.invalid_samples
-        );
+        ));
     }
-    println!("image       {}", output.display());
-    let (done, spp) = (run.accumulator.samples, scene.settings.spp);
+    let (done, spp) = (run.accumulator.samples, settings.spp);
     if done < spp {
-        let saved = checkpoint_path.unwrap_or_else(|| default_checkpoint(&output));
-        Checkpoint::new(&scene_arg, &scene, run.accumulator).save(&saved)?;
-        println!("partial     {done} of {spp} samples per pixel: the image is noisier than asked");
-        bail!(
+        let saved = &dest.on_interrupt;
+        Checkpoint::new(&job.source, scene, run.accumulator).save(saved)?;
+        summary.interrupted = true;
+        summary.checkpoint = Some(saved.display().to_string());
+        say!(
+            args.json,
+            "partial     {done} of {spp} samples per pixel: the image is noisier than asked"
+        );
+        finish(&summary, args.json)?;
+        return Err(Interrupted(format!(
             "interrupted; the render so far is saved: continue with `canopy render --resume {} -o {}`",
             saved.display(),
-            output.display()
-        );
+            dest.image.display()
+        ))
+        .into());
     }
-    if let Some(path) = checkpoint_path {
-        // The render is complete: its checkpoint has nothing left to give.
-        let _ = std::fs::remove_file(path);
+    if let Some(path) = &dest.periodic {
+        // The render is complete: its checkpoint has nothing left to give. Only a file
+        // that is recognisably a checkpoint is removed.
+        let _ = Checkpoint::remove_if_checkpoint(path);
+    }
+    finish(&summary, args.json)
+}
+
+/// Prints the image line, or the whole summary as JSON.
+fn finish(summary: &Summary, json: bool) -> anyhow::Result<()> {
+    if json {
+        println!("{}", serde_json::to_string_pretty(summary)?);
+    } else {
+        println!("image       {}", summary.image);
     }
     Ok(())
+}
+
+fn scene_summary(args: &RenderArgs, job: &Job, accel: &Accel, threads: usize) -> Summary {
+    let s = job.scene.settings;
+    let counts = job.scene.shape_counts();
+    Summary {
+        scene: job.source.clone(),
+        width: s.width,
+        height: s.height,
+        spp: s.spp,
+        max_depth: s.max_depth,
+        seed: s.seed,
+        primitives: job.scene.primitives.len(),
+        spheres: counts.spheres,
+        triangles: counts.triangles,
+        cuboids: counts.cuboids,
+        bvh: args.bvh.to_string(),
+        bvh_width: args.width.children(),
+        build_ms: accel.build_time.as_secs_f64() * 1e3,
+        threads,
+        ..Summary::default()
+    }
 }
 
 /// What a (possibly interrupted) progressive render produced.
@@ -222,16 +393,23 @@ struct Progressive {
 /// the image is the same as an uninterrupted render's.
 fn progressive(
     scene: &Scene,
-    scene_arg: &str,
+    scene_source: &str,
     accel: &Accel,
     mut accumulator: Accumulator,
     checkpoint: Option<&Path>,
     every: Duration,
+    summary: &mut Summary,
 ) -> anyhow::Result<Progressive> {
     let interrupted = Arc::new(AtomicBool::new(false));
     let flag = interrupted.clone();
-    // Without a handler (another one is installed) Ctrl-C just ends the process as usual.
-    let _ = ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst));
+    // Ctrl-C, SIGTERM and SIGHUP end the render after the pass in flight, which is then
+    // saved; a second signal ends the process at once. Without a handler (another one is
+    // installed) a signal just ends the process as usual.
+    let _ = ctrlc::set_handler(move || {
+        if flag.swap(true, Ordering::SeqCst) {
+            std::process::exit(crate::EXIT_INTERRUPTED);
+        }
+    });
     let (spp, rows) = (scene.settings.spp as u64, scene.settings.height as u64);
     let progress = ProgressBar::new(spp * rows).with_style(
         ProgressStyle::with_template(
@@ -243,13 +421,25 @@ fn progressive(
     progress.set_position(accumulator.samples as u64 * rows);
     let mut stats = RenderStats::default();
     let mut last_save = Instant::now();
+    let mut save_failing = false;
     while accumulator.samples < scene.settings.spp && !interrupted.load(Ordering::SeqCst) {
         let pass = render_samples(scene, accel, &mut accumulator, 1, &|| progress.inc(1));
         stats.rays += pass.rays;
         stats.elapsed += pass.elapsed;
         if let Some(path) = checkpoint {
             if last_save.elapsed() >= every && accumulator.samples < scene.settings.spp {
-                Checkpoint::new(scene_arg, scene, accumulator.clone()).save(path)?;
+                // A failed save (a full disk) must not end hours of rendering: warn once
+                // per run of failures, and try again at the next save.
+                match Checkpoint::new(scene_source, scene, accumulator.clone()).save(path) {
+                    Ok(()) => save_failing = false,
+                    Err(e) if !save_failing => {
+                        save_failing = true;
+                        progress.suspend(|| {
+                            summary.warn(format!("{e}; rendering goes on, saving again later"))
+                        });
+                    }
+                    Err(_) => {}
+                }
                 last_save = Instant::now();
             }
         }
@@ -272,34 +462,35 @@ fn describe_levels(levels: LevelRange) -> String {
     }
 }
 
-fn print_scene_summary(args: &RenderArgs, scene_arg: &str, scene: &Scene, accel: &Accel) {
-    let s = scene.settings;
-    let counts = scene.shape_counts();
-    println!(
+fn print_scene_summary(s: &Summary, json: bool) {
+    say!(
+        json,
         "scene       {} ({}x{}, {} spp, depth {}, seed {})",
-        scene_arg, s.width, s.height, s.spp, s.max_depth, s.seed
+        s.scene,
+        s.width,
+        s.height,
+        s.spp,
+        s.max_depth,
+        s.seed
     );
-    println!(
+    say!(
+        json,
         "primitives  {} ({} spheres, {} triangles, {} cuboids)",
-        scene.primitives.len(),
-        counts.spheres,
-        counts.triangles,
-        counts.cuboids
+        s.primitives,
+        s.spheres,
+        s.triangles,
+        s.cuboids
     );
-    if scene.skipped_degenerate > 0 {
-        println!(
-            "warning     {} zero-area mesh triangles were left out",
-            scene.skipped_degenerate
-        );
-    }
-    match args.bvh {
-        AccelKind::None => println!("bvh         none"),
-        AccelKind::Bvh(_) => println!(
+    if s.bvh == "none" {
+        say!(json, "bvh         none");
+    } else {
+        say!(
+            json,
             "bvh         {} (width {}) built in {:.2} ms",
-            args.bvh,
-            args.width,
-            accel.build_time.as_secs_f64() * 1e3
-        ),
+            s.bvh,
+            s.bvh_width,
+            s.build_ms
+        );
     }
 }
 
@@ -315,15 +506,16 @@ fn apply_overrides(scene: &mut Scene, args: &RenderArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// `<scene name>.png` in the current directory.
+/// `<scene name>.png` in the current directory, the name made into a plain file name
+/// (a scene from a stranger cannot direct the image elsewhere).
 fn default_output(arg: &str, scene: &Scene) -> PathBuf {
-    let stem = if scene.name.is_empty() {
+    let name = if scene.name.is_empty() {
         Path::new(arg)
             .file_stem()
             .map(|s| s.to_string_lossy().into_owned())
-            .unwrap_or_else(|| "render".into())
+            .unwrap_or_default()
     } else {
         scene.name.clone()
     };
-    PathBuf::from(format!("{stem}.png"))
+    PathBuf::from(format!("{}.png", file_stem_from_name(&name)))
 }

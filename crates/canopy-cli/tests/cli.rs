@@ -1,37 +1,10 @@
 //! Runs the `canopy` binary as a user would: a tiny render, and bad inputs that must give
 //! one clear message, a non-zero exit and no output file.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod common;
 
-fn canopy(args: &[&str], dir: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_canopy"))
-        .args(args)
-        .current_dir(dir)
-        .output()
-        .expect("canopy runs")
-}
-
-/// A fresh scratch directory per test.
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("canopy-cli-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
-fn stderr(out: &Output) -> String {
-    String::from_utf8_lossy(&out.stderr).into_owned()
-}
-
-/// Files in `dir` other than the inputs a test wrote.
-fn outputs(dir: &Path) -> Vec<String> {
-    std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .filter(|n| !n.ends_with(".toml") && !n.ends_with(".ply") && !n.ends_with(".obj"))
-        .collect()
-}
+use common::{canopy, outputs, scratch, stderr};
+use std::process::Command;
 
 const CAMERA: &str = "[camera]\nlook_from = [0, 0, 5]\nlook_at = [0, 0, 0]\n";
 
@@ -195,7 +168,7 @@ fn unknown_scene_and_bad_options_fail_cleanly() {
         ),
         (
             &["render", "paper-1", "--size", "0x10"],
-            "positive integers",
+            "width and height must be whole numbers in 1..=65536",
         ),
     ];
     for (args, expected) in cases {
@@ -477,7 +450,9 @@ fn check_reports_degenerate_triangles_and_bad_settings() {
     let out = canopy(&["check", "s.toml"], &dir);
     assert!(out.status.success(), "{}", stderr(&out));
     assert!(
-        String::from_utf8_lossy(&out.stdout).contains("1 zero-area mesh triangles are left out")
+        stderr(&out).contains("warning: 1 zero-area mesh triangles were left out"),
+        "{}",
+        stderr(&out)
     );
 
     std::fs::write(
@@ -488,7 +463,7 @@ fn check_reports_degenerate_triangles_and_bad_settings() {
     let out = canopy(&["check", "deep.toml"], &dir);
     assert!(!out.status.success());
     assert!(
-        stderr(&out).contains("deep.toml:4: render: max_depth 5000 is over the limit"),
+        stderr(&out).contains("deep.toml:4: render: max_depth 5000 is outside 1..=1024"),
         "{}",
         stderr(&out)
     );
@@ -565,7 +540,23 @@ fn a_killed_render_always_leaves_a_valid_checkpoint_that_resumes_to_the_same_ima
 
 #[test]
 fn ctrl_c_writes_the_partial_image_and_a_checkpoint_then_resumes() {
-    let dir = scratch("sigint");
+    interrupt_and_resume("INT");
+}
+
+#[test]
+fn sigterm_saves_the_work_as_ctrl_c_does() {
+    interrupt_and_resume("TERM");
+}
+
+#[test]
+fn sighup_saves_the_work_as_ctrl_c_does() {
+    interrupt_and_resume("HUP");
+}
+
+/// Sends `signal` to a render in progress: the partial image and a checkpoint must be
+/// written, the exit status must be 130, and resuming must give the full image.
+fn interrupt_and_resume(signal: &str) {
+    let dir = scratch(&format!("sig{signal}"));
     let full = canopy(
         &[
             "render", "paper-5", "--size", "128x128", "--spp", "96", "-o", "full.png",
@@ -581,17 +572,23 @@ fn ctrl_c_writes_the_partial_image_and_a_checkpoint_then_resumes() {
         .spawn()
         .unwrap();
     std::thread::sleep(std::time::Duration::from_millis(300));
-    let signal = Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
+    let sent = Command::new("kill")
+        .args([format!("-{signal}"), child.id().to_string()])
         .status()
         .unwrap();
-    assert!(signal.success());
+    assert!(sent.success());
     let out = child.wait_with_output().unwrap();
     if out.status.success() {
         // The render beat the signal; nothing to check on this machine.
         std::fs::remove_dir_all(dir).unwrap();
         return;
     }
+    assert_eq!(
+        out.status.code(),
+        Some(130),
+        "SIG{signal}: {}",
+        stderr(&out)
+    );
     assert!(
         stderr(&out).contains("interrupted; the render so far is saved"),
         "{}",

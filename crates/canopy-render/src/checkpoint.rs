@@ -1,7 +1,7 @@
 //! Checkpoints of a render in progress, so that a long render survives an interruption.
 //!
-//! A checkpoint holds what is needed to continue: the scene (as the command line named
-//! it), the render settings, a fingerprint of the loaded scene (to refuse resuming into a
+//! A checkpoint holds what is needed to continue: the scene (a built-in name, or the
+//! absolute path of the scene file, so a render resumes from any directory), the render settings, a fingerprint of the loaded scene (to refuse resuming into a
 //! different one), and the accumulated samples. Layout, all little-endian:
 //!
 //! ```text
@@ -14,6 +14,8 @@
 //! writes go through a temporary file and a rename, so a checkpoint on disk is always
 //! whole.
 
+use crate::files::{read_prefix, read_regular_file};
+use crate::geometry::Shape;
 use crate::integrator::Accumulator;
 use crate::output::write_atomically;
 use crate::scene::{RenderSettings, Scene};
@@ -23,7 +25,11 @@ use std::path::Path;
 use thiserror::Error;
 
 const MAGIC: &[u8; 8] = b"CANOPYCK";
-const VERSION: u32 = 1;
+/// Version 2: the scene path is absolute and the fingerprint covers all geometry.
+const VERSION: u32 = 2;
+
+/// Largest checkpoint read: the header and the largest film allowed.
+const MAX_CHECKPOINT_BYTES: u64 = 1024 * 1024 + RenderSettings::MAX_PIXELS * 12;
 
 #[derive(Debug, Error)]
 pub enum CheckpointError {
@@ -33,7 +39,7 @@ pub enum CheckpointError {
     Write { file: String, cause: std::io::Error },
     #[error("{file}: not a canopy checkpoint, or a damaged one ({what})")]
     Corrupt { file: String, what: String },
-    #[error("{file}: the checkpoint was made for a different scene or settings")]
+    #[error("{file}: the checkpoint was made for a different scene or settings (has the scene or a mesh changed since?)")]
     Mismatch { file: String },
 }
 
@@ -58,8 +64,9 @@ fn fnv1a(bytes: &[u8], mut hash: u64) -> u64 {
 
 const FNV_OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
 
-/// A hash of what determines the image: settings, camera, background, materials and
-/// every primitive's bounds.
+/// A hash of everything that determines the image: settings, camera, background,
+/// materials, and every primitive's exact geometry, material and vertex normals (so a
+/// mesh whose `smooth` setting changed no longer matches).
 pub fn fingerprint(scene: &Scene) -> u64 {
     let text = format!(
         "{:?}{:?}{:?}{:?}{}",
@@ -70,8 +77,30 @@ pub fn fingerprint(scene: &Scene) -> u64 {
         scene.primitives.len()
     );
     let mut hash = fnv1a(text.as_bytes(), FNV_OFFSET);
-    for b in scene.primitive_bounds() {
-        hash = fnv1a(bytemuck::bytes_of(&b), hash);
+    let mut words: Vec<f32> = Vec::with_capacity(16);
+    for p in &scene.primitives {
+        words.clear();
+        words.push(f32::from_bits(p.material));
+        match &p.shape {
+            Shape::Sphere(s) => {
+                words.extend(s.center.to_array());
+                words.push(s.radius);
+            }
+            Shape::Triangle(t) => {
+                words.extend(t.v.iter().flat_map(|v| v.to_array()));
+                words.push(f32::from_bits(t.normals));
+            }
+            Shape::Cuboid(c) => {
+                words.extend(c.local.min.to_array());
+                words.extend(c.local.max.to_array());
+                words.extend(c.rotation.to_cols_array());
+                words.extend(c.translation.to_array());
+            }
+        }
+        hash = fnv1a(bytemuck::cast_slice(&words), hash);
+    }
+    for normals in &scene.vertex_normals {
+        hash = fnv1a(bytemuck::cast_slice(normals), hash);
     }
     hash
 }
@@ -123,9 +152,14 @@ impl Checkpoint {
 
     pub fn load(path: &Path) -> Result<Self, CheckpointError> {
         let file = path.display().to_string();
-        let bytes = std::fs::read(path).map_err(|cause| CheckpointError::Read {
-            file: file.clone(),
-            cause,
+        let bytes = read_regular_file(path, MAX_CHECKPOINT_BYTES).map_err(|cause| {
+            CheckpointError::Read {
+                file: file.clone(),
+                cause: match cause {
+                    crate::files::ReadError::Io(e) => e,
+                    other => std::io::Error::other(other.to_string()),
+                },
+            }
         })?;
         Self::from_bytes(&bytes).map_err(|what| CheckpointError::Corrupt { file, what })
     }
@@ -182,6 +216,22 @@ impl Checkpoint {
                 invalid_samples,
             },
         })
+    }
+
+    /// Whether `path` holds a canopy checkpoint (of any version): a regular file that
+    /// starts with the checkpoint's magic number. Only such files are ever overwritten
+    /// or removed as checkpoints.
+    pub fn is_checkpoint_file(path: &Path) -> bool {
+        read_prefix(path, MAGIC.len()).is_some_and(|head| head == MAGIC)
+    }
+
+    /// Removes the checkpoint at `path` if it is one; anything else is left alone.
+    pub fn remove_if_checkpoint(path: &Path) -> std::io::Result<bool> {
+        if Self::is_checkpoint_file(path) {
+            std::fs::remove_file(path)?;
+            return Ok(true);
+        }
+        Ok(false)
     }
 
     /// Checks that this checkpoint belongs to `scene` (loaded with this checkpoint's
@@ -283,5 +333,40 @@ mod tests {
             checkpoint.matches(&other, Path::new("x")),
             Err(CheckpointError::Mismatch { .. })
         ));
+    }
+
+    #[test]
+    fn any_change_to_geometry_or_shading_does_not_match() {
+        let (scene, checkpoint) = sample();
+        let mut moved = scene.clone();
+        match &mut moved.primitives[3].shape {
+            Shape::Triangle(t) => t.v[1].x += 1e-3,
+            Shape::Sphere(s) => s.radius += 1e-3,
+            Shape::Cuboid(c) => c.translation.x += 1e-3,
+        }
+        assert!(checkpoint.matches(&moved, Path::new("x")).is_err());
+        let mut smoothed = scene.clone();
+        smoothed.vertex_normals.push([Vec3::Y; 3]);
+        assert!(checkpoint.matches(&smoothed, Path::new("x")).is_err());
+        let mut recoloured = scene;
+        recoloured.primitives[0].material ^= 1;
+        assert!(checkpoint.matches(&recoloured, Path::new("x")).is_err());
+    }
+
+    #[test]
+    fn only_checkpoints_are_recognised_and_removed() {
+        let dir = std::env::temp_dir().join(format!("canopy-ck-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let (ck, notes) = (dir.join("ck"), dir.join("notes.txt"));
+        sample().1.save(&ck).unwrap();
+        std::fs::write(&notes, "my notes").unwrap();
+        assert!(Checkpoint::is_checkpoint_file(&ck));
+        assert!(!Checkpoint::is_checkpoint_file(&notes));
+        assert!(!Checkpoint::is_checkpoint_file(&dir.join("absent")));
+        assert!(!Checkpoint::remove_if_checkpoint(&notes).unwrap());
+        assert!(notes.exists());
+        assert!(Checkpoint::remove_if_checkpoint(&ck).unwrap());
+        assert!(!ck.exists());
+        std::fs::remove_dir_all(dir).unwrap();
     }
 }

@@ -9,6 +9,7 @@ pub mod builtin;
 pub mod camera;
 pub mod checkpoint;
 pub mod error;
+pub mod files;
 pub mod film;
 pub mod geometry;
 pub mod integrator;
@@ -32,15 +33,28 @@ pub use scene::{Background, RenderSettings, Scene};
 use scene_file::{parse_scene, DirAssets};
 use std::path::Path;
 
+/// Largest scene file read (a scene with a million inline spheres fits).
+pub const MAX_SCENE_FILE_BYTES: u64 = 256 << 20;
+
 /// Loads a scene file; its meshes are found relative to its directory.
 pub fn load_scene_file(path: &Path) -> Result<Scene, SceneError> {
     let display = path.display().to_string();
-    let source = std::fs::read_to_string(path).map_err(|cause| SceneError::Read {
+    let read_error = |cause: files::ReadError| SceneError::Read {
         file: display.clone(),
-        cause,
+        cause: match cause {
+            files::ReadError::Io(e) => e,
+            other => std::io::Error::other(other.to_string()),
+        },
+    };
+    let bytes = files::read_regular_file(path, MAX_SCENE_FILE_BYTES).map_err(read_error)?;
+    let source = String::from_utf8(bytes).map_err(|_| SceneError::Read {
+        file: display.clone(),
+        cause: std::io::Error::other("not a text (UTF-8) file"),
     })?;
     let dir = path.parent().unwrap_or(Path::new(".")).to_owned();
-    parse_scene(&source, &display, &DirAssets(dir))
+    let mut scene = parse_scene(&source, &display, &DirAssets(dir))?;
+    scene.inputs.insert(0, path.to_owned());
+    Ok(scene)
 }
 
 /// A built-in scene by name, else a scene file by path, else a bare OBJ or PLY mesh
@@ -73,6 +87,7 @@ pub fn scene_from_mesh(path: &Path) -> Result<Scene, SceneError> {
         name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default(),
     );
     let mut scene = parse_scene(&source, &path.display().to_string(), &DirAssets(dir))?;
+    debug_assert_eq!(scene.inputs.len(), 1, "the mesh is recorded as an input");
     // Frame the mesh: look at its centre from the front, a little above.
     let bounds = scene
         .primitive_bounds()
@@ -85,4 +100,22 @@ pub fn scene_from_mesh(path: &Path) -> Result<Scene, SceneError> {
     let distance = radius / (0.5 * scene.camera.vfov.to_radians()).tan() * 1.1;
     scene.camera.look_from = centre + distance * glam::Vec3::new(0.0, 0.3, 1.0).normalize();
     Ok(scene)
+}
+
+/// How a checkpoint names a scene so that it can be found again from any directory: a
+/// built-in scene by its name, a file by its absolute path.
+pub fn scene_source(name_or_path: &str) -> Result<String, SceneError> {
+    if BuiltinScene::find(name_or_path).is_some() {
+        return Ok(name_or_path.to_owned());
+    }
+    let read_error = |cause| SceneError::Read {
+        file: name_or_path.to_owned(),
+        cause,
+    };
+    let absolute = std::fs::canonicalize(name_or_path).map_err(read_error)?;
+    absolute.to_str().map(str::to_owned).ok_or_else(|| {
+        read_error(std::io::Error::other(
+            "the path is not valid UTF-8, which a checkpoint cannot store",
+        ))
+    })
 }

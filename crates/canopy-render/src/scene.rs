@@ -5,6 +5,7 @@ use crate::geometry::Shape;
 use crate::material::Material;
 use canopy_bvh::Aabb;
 use glam::Vec3;
+use std::path::PathBuf;
 
 /// What a ray that leaves the scene sees.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -45,6 +46,8 @@ impl RenderSettings {
     pub const MAX_PIXELS: u64 = 1 << 28;
     /// Most ray segments per path.
     pub const MAX_DEPTH: u32 = 1024;
+    /// Most samples per pixel (16M: days of rendering at any size).
+    pub const MAX_SPP: u32 = 1 << 24;
 
     /// Why these settings cannot be rendered, if they cannot.
     pub fn check(&self) -> Result<(), String> {
@@ -64,12 +67,12 @@ impl RenderSettings {
                 (pixels * 12) >> 20
             ));
         }
-        if self.spp == 0 {
-            return Err("at least 1 sample per pixel is needed".into());
+        if !(1..=Self::MAX_SPP).contains(&self.spp) {
+            return Err(format!("spp {} is outside 1..={}", self.spp, Self::MAX_SPP));
         }
-        if self.max_depth > Self::MAX_DEPTH {
+        if !(1..=Self::MAX_DEPTH).contains(&self.max_depth) {
             return Err(format!(
-                "max_depth {} is over the limit of {}",
+                "max_depth {} is outside 1..={} (a path needs at least its camera ray)",
                 self.max_depth,
                 Self::MAX_DEPTH
             ));
@@ -115,12 +118,38 @@ pub struct Scene {
     pub vertex_normals: Vec<[Vec3; 3]>,
     /// Mesh triangles left out because they have no area (they can never be hit).
     pub skipped_degenerate: usize,
+    /// The files the scene was read from (scene file, meshes): never to be written over.
+    pub inputs: Vec<PathBuf>,
 }
 
 impl Scene {
     /// Bounding box of every primitive, in primitive order (the BVH builders' input).
     pub fn primitive_bounds(&self) -> Vec<Aabb> {
         self.primitives.iter().map(|p| p.shape.bounds()).collect()
+    }
+
+    /// What is legal but probably not what the author meant, one sentence each.
+    pub fn warnings(&self) -> Vec<String> {
+        let mut warnings = Vec::new();
+        if self.skipped_degenerate > 0 {
+            warnings.push(format!(
+                "{} zero-area mesh triangles were left out",
+                self.skipped_degenerate
+            ));
+        }
+        if self.primitives.is_empty() {
+            warnings.push("the scene has no primitives".into());
+        }
+        let emitters = self
+            .materials
+            .iter()
+            .any(|m| matches!(m, crate::material::Material::Emissive { .. }));
+        if !emitters && self.background == Background::Constant(Vec3::ZERO) {
+            warnings.push(
+                "no light: no emissive material and a black background give a black image".into(),
+            );
+        }
+        warnings
     }
 
     /// Counts of spheres, triangles and cuboids.

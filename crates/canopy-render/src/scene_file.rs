@@ -3,6 +3,7 @@
 
 use crate::camera::CameraSpec;
 use crate::error::SceneError;
+use crate::files::{available_memory, read_regular_file, regular_file_size};
 use crate::geometry::{Cuboid, Shape, Sphere, Triangle};
 use crate::material::Material;
 use crate::mesh::{parse_mesh, MeshFormat};
@@ -18,6 +19,12 @@ use toml::Spanned;
 pub trait Assets {
     /// The bytes of the file at `path` (as written in the scene), or why not.
     fn read(&self, path: &str) -> Result<Vec<u8>, String>;
+
+    /// Where `path` is on disk, when it is a file: the scene records its inputs so that
+    /// nothing is ever written over them.
+    fn locate(&self, _path: &str) -> Option<PathBuf> {
+        None
+    }
 }
 
 /// Files relative to a directory (the scene file's own).
@@ -26,11 +33,14 @@ pub struct DirAssets(pub PathBuf);
 impl Assets for DirAssets {
     fn read(&self, path: &str) -> Result<Vec<u8>, String> {
         let full = self.0.join(path);
-        let size = std::fs::metadata(&full)
-            .map_err(|e| format!("cannot read {}: {e}", full.display()))?
-            .len();
+        let fail = |e: &dyn std::fmt::Display| format!("cannot read {}: {e}", full.display());
+        let size = regular_file_size(&full).map_err(|e| fail(&e))?;
         check_fits_in_memory(size, available_memory())?;
-        std::fs::read(&full).map_err(|e| format!("cannot read {}: {e}", full.display()))
+        read_regular_file(&full, size).map_err(|e| fail(&e))
+    }
+
+    fn locate(&self, path: &str) -> Option<PathBuf> {
+        Some(self.0.join(path))
     }
 }
 
@@ -51,14 +61,6 @@ fn check_fits_in_memory(file_bytes: u64, available: Option<u64>) -> Result<(), S
         )),
         _ => Ok(()),
     }
-}
-
-/// `MemAvailable` from /proc/meminfo, where there is one.
-fn available_memory() -> Option<u64> {
-    let info = std::fs::read_to_string("/proc/meminfo").ok()?;
-    let line = info.lines().find(|l| l.starts_with("MemAvailable:"))?;
-    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kib * 1024)
 }
 
 #[derive(Deserialize)]
@@ -267,13 +269,26 @@ fn finite(values: &[f32]) -> bool {
     values.iter().all(|v| v.is_finite())
 }
 
+/// Largest coordinate, radius or distance a scene may use. Squares and products of
+/// such numbers (ray-sphere tests, areas) stay finite in f32, so geometry never
+/// overflows into an invisible or black render.
+pub const MAX_COORDINATE: f32 = 1e12;
+
+/// Finite and within [`MAX_COORDINATE`] in magnitude.
+fn in_range(values: &[f32]) -> bool {
+    values.iter().all(|v| v.abs() <= MAX_COORDINATE)
+}
+
 impl SceneBuilder<'_> {
     fn camera(&mut self, doc: &Spanned<CameraDoc>) -> Result<(), SceneError> {
         let c = doc.get_ref();
         let span = doc.span();
         let numbers = [&c.look_from[..], &c.look_at, &c.up, &[c.vfov, c.aperture]].concat();
-        if !finite(&numbers) || c.focus_distance.is_some_and(|f| !f.is_finite()) {
-            return self.cx.invalid(span, "camera: every number must be finite");
+        if !in_range(&numbers) || c.focus_distance.is_some_and(|f| !in_range(&[f])) {
+            return self.cx.invalid(
+                span,
+                format!("camera: every number must be finite and within ±{MAX_COORDINATE:e}"),
+            );
         }
         let (from, at, up) = (
             Vec3::from(c.look_from),
@@ -358,12 +373,14 @@ impl SceneBuilder<'_> {
             Err(e) => return self.cx.invalid(span, format!("material: {}", e.message())),
         };
         let colour_ok = |c: &[f32; 3]| finite(c) && c.iter().all(|&v| v >= 0.0);
+        // A surface cannot reflect more light than it receives.
+        let albedo_ok = |c: &[f32; 3]| c.iter().all(|v| (0.0..=1.0).contains(v));
         let material = match doc {
-            MaterialDoc::Lambertian { albedo } if colour_ok(&albedo) => Material::Lambertian {
+            MaterialDoc::Lambertian { albedo } if albedo_ok(&albedo) => Material::Lambertian {
                 albedo: albedo.into(),
             },
             MaterialDoc::Metal { albedo, fuzz }
-                if colour_ok(&albedo) && (0.0..=1.0).contains(&fuzz) =>
+                if albedo_ok(&albedo) && (0.0..=1.0).contains(&fuzz) =>
             {
                 Material::Metal {
                     albedo: albedo.into(),
@@ -379,7 +396,7 @@ impl SceneBuilder<'_> {
             _ => {
                 return self.cx.invalid(
                     span,
-                    "material: colours must be finite and >= 0, `fuzz` in [0, 1], `ior` > 0",
+                    "material: `albedo` components must be in [0, 1], `radiance` finite and >= 0, `fuzz` in [0, 1], `ior` finite and > 0",
                 )
             }
         };
@@ -424,11 +441,11 @@ impl SceneBuilder<'_> {
 
     fn sphere(&mut self, doc: &Spanned<SphereDoc>) -> Result<(), SceneError> {
         let s = doc.get_ref();
-        if !(finite(&s.center) && s.radius.is_finite() && s.radius > 0.0) {
+        if !(in_range(&s.center) && s.radius > 0.0 && s.radius <= MAX_COORDINATE) {
             return self.cx.invalid(
                 doc.span(),
                 format!(
-                    "sphere: `center` must be finite and `radius` > 0 (got {})",
+                    "sphere: `center` must be within ±{MAX_COORDINATE:e} and `radius` in (0, {MAX_COORDINATE:e}] (got {})",
                     s.radius
                 ),
             );
@@ -443,10 +460,13 @@ impl SceneBuilder<'_> {
 
     fn cuboid(&mut self, doc: &Spanned<CuboidDoc>) -> Result<(), SceneError> {
         let c = doc.get_ref();
-        if !finite(&[&c.min[..], &c.max, &c.rotate, &c.translate].concat()) {
-            return self
-                .cx
-                .invalid(doc.span(), "cuboid: every number must be finite");
+        if !finite(&c.rotate) || !in_range(&[&c.min[..], &c.max, &c.translate].concat()) {
+            return self.cx.invalid(
+                doc.span(),
+                format!(
+                    "cuboid: every number must be finite, and positions within ±{MAX_COORDINATE:e}"
+                ),
+            );
         }
         let (min, max) = (Vec3::from(c.min), Vec3::from(c.max));
         if min.cmpgt(max).any() {
@@ -491,12 +511,22 @@ impl SceneBuilder<'_> {
         let bytes = assets
             .read(&m.file)
             .map_err(|e| mesh_error(crate::mesh::MeshError::Invalid(e)))?;
+        self.scene.inputs.extend(assets.locate(&m.file));
         let mut data = parse_mesh(&bytes, format).map_err(mesh_error)?;
         data.transform(&Mat4::from_scale_rotation_translation(
             scale,
             rotation(m.rotate),
             m.translate.into(),
         ));
+        if let Some(i) = data.positions.iter().position(|p| !in_range(&p.to_array())) {
+            return self.cx.invalid(
+                doc.span(),
+                format!(
+                    "mesh `{}`: vertex {i} lies at {} once scaled, rotated and translated, beyond ±{MAX_COORDINATE:e}",
+                    m.file, data.positions[i]
+                ),
+            );
+        }
         match m.smooth {
             Some(false) => data.normals.clear(),
             Some(true) if data.normals.is_empty() => data.compute_vertex_normals(),

@@ -15,7 +15,9 @@ use rayon::prelude::*;
 
 pub(crate) fn build(boxes: &[Aabb], params: &BuildParams) -> Bvh2 {
     let n = boxes.len();
-    let radius = params.ploc_radius.max(1) as usize;
+    // A radius past the last cluster searches nothing more; clamping it keeps the
+    // distance table at n * radius entries for any radius asked for.
+    let radius = (params.ploc_radius.max(1) as usize).min(n.saturating_sub(1).max(1));
     let mut tree = MergeTree::new(n);
     let mut clusters: Vec<u32> = morton_order(&morton_codes(boxes));
     // Boxes of the live clusters, in list order (contiguous for the neighbour search).

@@ -8,7 +8,8 @@ mod table3;
 mod tables;
 
 use crate::build_args::BuildArgs;
-use anyhow::{bail, Context};
+use crate::limits;
+use anyhow::Context;
 use canopy_bvh::Builder;
 use canopy_render::{render, render_counted, Accel, AccelKind, BuiltinScene, BvhWidth, Scene};
 use clap::{Args, Subcommand};
@@ -33,8 +34,8 @@ struct PaperArgs {
     /// Tiny images, 2 spp, 2 runs: a smoke test of the whole pipeline in seconds.
     #[arg(long)]
     quick: bool,
-    /// Renders per measurement [default: 6, as in the report; 2 with --quick].
-    #[arg(long)]
+    /// Renders per measurement, 1 to 1000 [default: 6, as in the report; 2 with --quick].
+    #[arg(long, value_parser = limits::runs())]
     runs: Option<u32>,
     /// Folder for results.md, results.csv, results.json, the plots and table3.png.
     #[arg(short, long, default_value = "bench-paper")]
@@ -44,20 +45,21 @@ struct PaperArgs {
     #[arg(long, value_name = "RESULTS_JSON")]
     from: Option<PathBuf>,
     /// Which reference scenes, comma-separated numbers 1 to 6 [default: all].
-    #[arg(long, value_delimiter = ',')]
-    scenes: Vec<usize>,
+    #[arg(long, value_delimiter = ',', value_parser = clap::value_parser!(u32).range(1..=6))]
+    scenes: Vec<u32>,
     /// `report` for the report's six methods only, `all` to add canopy's builders.
     #[arg(long, default_value = "all", value_parser = ["report", "all"])]
     methods: String,
-    /// Image size WIDTHxHEIGHT [default: 480x480, as in the report; 32x32 with --quick].
-    #[arg(long)]
-    size: Option<String>,
-    /// Samples per pixel [default: 128; 2 with --quick].
-    #[arg(long)]
+    /// Image size WIDTHxHEIGHT, each 1 to 65536 [default: 480x480, as in the report;
+    /// 32x32 with --quick].
+    #[arg(long, value_parser = limits::size)]
+    size: Option<(u32, u32)>,
+    /// Samples per pixel, 1 to 16777216 [default: 128; 2 with --quick].
+    #[arg(long, value_parser = limits::spp())]
     spp: Option<u32>,
-    /// Worker threads [default: all cores].
-    #[arg(long)]
-    threads: Option<usize>,
+    /// Worker threads, 1 to 1024 [default: all cores].
+    #[arg(long, value_parser = limits::threads())]
+    threads: Option<u32>,
     #[command(flatten)]
     build: BuildArgs,
 }
@@ -179,10 +181,12 @@ fn mean_and_std(xs: &[f64]) -> (f64, f64) {
 
 pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
     let BenchCommand::Paper(args) = &args.what;
-    let params = args.build.params()?;
+    let params = args.build.params();
     if let Some(from) = &args.from {
-        let text = std::fs::read_to_string(from)
+        let bytes = canopy_render::files::read_regular_file(from, 256 << 20)
             .with_context(|| format!("cannot read {}", from.display()))?;
+        let text = String::from_utf8(bytes)
+            .with_context(|| format!("{}: not a text (UTF-8) file", from.display()))?;
         let record: RunRecord = serde_json::from_str(&text).with_context(|| {
             format!(
                 "{}: not a results.json of `canopy bench paper`",
@@ -200,26 +204,20 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
         return Ok(());
     }
     let runs = args.runs.unwrap_or(if args.quick { 2 } else { 6 });
-    if runs == 0 {
-        bail!("--runs must be at least 1");
-    }
     let scene_numbers: Vec<usize> = if args.scenes.is_empty() {
         (1..=6).collect()
     } else {
-        args.scenes.clone()
+        args.scenes.iter().map(|&n| n as usize).collect()
     };
-    if let Some(bad) = scene_numbers.iter().find(|&&n| !(1..=6).contains(&n)) {
-        bail!("--scenes: the report has scenes 1 to 6, not {bad}");
-    }
-    let (width, height) = match &args.size {
-        Some(s) => parse_size(s)?,
+    let (width, height) = match args.size {
+        Some(size) => size,
         None if args.quick => (32, 32),
         None => (480, 480),
     };
     let spp = args.spp.unwrap_or(if args.quick { 2 } else { 128 });
     let methods = methods(args.methods == "all");
     let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(args.threads.unwrap_or(0))
+        .num_threads(args.threads.unwrap_or(0) as usize)
         .build()
         .context("cannot start the worker threads")?;
     std::fs::create_dir_all(&args.out)
@@ -363,21 +361,10 @@ fn measure(
     }
 }
 
-fn parse_size(s: &str) -> anyhow::Result<(u32, u32)> {
-    let parsed = s
-        .split_once(['x', 'X'])
-        .and_then(|(w, h)| Some((w.parse().ok()?, h.parse().ok()?)));
-    match parsed {
-        Some((w, h)) if w > 0 && h > 0 => Ok((w, h)),
-        _ => bail!("--size `{s}` is not WIDTHxHEIGHT with positive numbers"),
-    }
-}
-
 /// Writes a text file through a temporary sibling, so a failure leaves no partial file.
 fn write_atomic(path: &Path, text: &str) -> anyhow::Result<()> {
-    let temp = path.with_extension("tmp");
-    std::fs::write(&temp, text)
-        .and_then(|()| std::fs::rename(&temp, path))
+    use std::io::Write;
+    canopy_render::output::write_atomically(path, |w| w.write_all(text.as_bytes()))
         .with_context(|| format!("cannot write {}", path.display()))
 }
 

@@ -1,0 +1,111 @@
+//! The ranges of the command line's numbers, checked by the parser so that a value out of
+//! range is a usage error (exit 2) that names the option and the range, before any work.
+
+use canopy_render::RenderSettings;
+
+/// Most worker threads: far above any core count canopy runs on, low enough that the
+/// threads' stacks and start-up are never the cost of a render.
+pub const MAX_THREADS: u32 = 1024;
+/// Widest or tallest image, in pixels.
+pub const MAX_SIDE: u32 = 1 << 16;
+/// Most neighbours PLOC searches on each side (the literature uses 8 to 100).
+pub const MAX_PLOC_RADIUS: u32 = 1024;
+/// Most primitives in a BVH leaf.
+pub const MAX_LEAF_SIZE: u32 = 256;
+/// Largest relative SAH cost.
+pub const MAX_SAH_COST: f32 = 1e6;
+/// Most repetitions of a measurement.
+pub const MAX_RUNS: u32 = 1000;
+
+/// Peak bytes per pixel of a render: the sums, the film, a checkpoint's copy and the
+/// encoded image.
+pub const BYTES_PER_PIXEL: u64 = 64;
+
+pub fn threads() -> clap::builder::RangedI64ValueParser<u32> {
+    clap::value_parser!(u32).range(1..=MAX_THREADS as i64)
+}
+
+pub fn spp() -> clap::builder::RangedI64ValueParser<u32> {
+    clap::value_parser!(u32).range(1..=RenderSettings::MAX_SPP as i64)
+}
+
+pub fn depth() -> clap::builder::RangedI64ValueParser<u32> {
+    clap::value_parser!(u32).range(1..=RenderSettings::MAX_DEPTH as i64)
+}
+
+pub fn runs() -> clap::builder::RangedI64ValueParser<u32> {
+    clap::value_parser!(u32).range(1..=MAX_RUNS as i64)
+}
+
+pub fn ploc_radius() -> clap::builder::RangedI64ValueParser<u32> {
+    clap::value_parser!(u32).range(1..=MAX_PLOC_RADIUS as i64)
+}
+
+pub fn leaf_size() -> clap::builder::RangedI64ValueParser<u32> {
+    clap::value_parser!(u32).range(1..=MAX_LEAF_SIZE as i64)
+}
+
+/// A relative SAH cost: a finite number in (0, MAX_SAH_COST].
+pub fn sah_cost(s: &str) -> Result<f32, String> {
+    match s.trim().parse::<f32>() {
+        Ok(c) if c > 0.0 && c <= MAX_SAH_COST => Ok(c),
+        _ => Err(format!("`{s}` is not a number in (0, {MAX_SAH_COST:e}]")),
+    }
+}
+
+/// `WIDTHxHEIGHT`, each side in 1..=MAX_SIDE and the image within
+/// [`RenderSettings::MAX_PIXELS`].
+pub fn size(s: &str) -> Result<(u32, u32), String> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .ok_or_else(|| format!("`{s}` is not WIDTHxHEIGHT"))?;
+    let side = |d: &str| {
+        d.trim()
+            .parse::<u32>()
+            .ok()
+            .filter(|v| (1..=MAX_SIDE).contains(v))
+    };
+    let (Some(w), Some(h)) = (side(w), side(h)) else {
+        return Err(format!(
+            "`{s}`: width and height must be whole numbers in 1..={MAX_SIDE}"
+        ));
+    };
+    if w as u64 * h as u64 > RenderSettings::MAX_PIXELS {
+        return Err(format!(
+            "`{s}` has more than {} pixels",
+            RenderSettings::MAX_PIXELS
+        ));
+    }
+    Ok((w, h))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sizes_are_checked_side_by_side_and_in_total() {
+        assert_eq!(size("640x480"), Ok((640, 480)));
+        assert_eq!(size(" 3 X 2 "), Ok((3, 2)));
+        for bad in [
+            "0x4",
+            "4x0",
+            "-1x4",
+            "65537x1",
+            "x",
+            "4",
+            "65536x65536",
+            "nanx1",
+        ] {
+            assert!(size(bad).is_err(), "{bad}");
+        }
+    }
+
+    #[test]
+    fn sah_costs_must_be_positive_and_finite() {
+        assert_eq!(sah_cost("1.5"), Ok(1.5));
+        for bad in ["0", "-1", "nan", "inf", "1e7", ""] {
+            assert!(sah_cost(bad).is_err(), "{bad}");
+        }
+    }
+}

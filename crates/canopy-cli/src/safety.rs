@@ -1,0 +1,145 @@
+//! Checks made before any work starts, so that canopy never writes over a user's file,
+//! never fails after hours because an output cannot be written, and never starts what
+//! memory cannot hold. The guarantees are listed in `docs/guarantees.md`.
+
+use anyhow::bail;
+use canopy_render::checkpoint::Checkpoint;
+use canopy_render::files::available_memory;
+use std::path::{Path, PathBuf};
+
+/// The absolute form of a path that may not exist yet: its directory resolved (links
+/// followed), its file name kept. `None` when the directory does not exist.
+fn resolved(path: &Path) -> Option<PathBuf> {
+    if let Ok(full) = std::fs::canonicalize(path) {
+        return Some(full);
+    }
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    Some(std::fs::canonicalize(dir).ok()?.join(path.file_name()?))
+}
+
+/// Whether two paths name the same file (or would, once created).
+pub fn same_file(a: &Path, b: &Path) -> bool {
+    match (resolved(a), resolved(b)) {
+        (Some(a), Some(b)) => a == b,
+        _ => a == b,
+    }
+}
+
+/// Refuses to write `what` to `path` when it is one of the scene's input files.
+pub fn refuse_inputs(path: &Path, inputs: &[PathBuf], what: &str) -> anyhow::Result<()> {
+    if let Some(input) = inputs.iter().find(|i| same_file(path, i)) {
+        bail!(
+            "{}: refusing to write the {what} over an input of the scene ({})",
+            path.display(),
+            input.display()
+        );
+    }
+    Ok(())
+}
+
+/// Refuses a checkpoint path that holds something other than a canopy checkpoint: such
+/// a file is the user's, and would be overwritten by the first save.
+pub fn check_checkpoint_slot(path: &Path) -> anyhow::Result<()> {
+    if std::fs::symlink_metadata(path).is_ok() && !Checkpoint::is_checkpoint_file(path) {
+        bail!(
+            "{}: exists and is not a canopy checkpoint; refusing to overwrite it (choose another --checkpoint path)",
+            path.display()
+        );
+    }
+    Ok(())
+}
+
+/// Fails unless a file can be created next to `path` (its directory exists and is
+/// writable): found at the start, not after the render.
+pub fn check_writable_dir(path: &Path, what: &str) -> anyhow::Result<()> {
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    if !dir.is_dir() {
+        bail!(
+            "{}: cannot write the {what}: directory {} does not exist",
+            path.display(),
+            dir.display()
+        );
+    }
+    if std::fs::metadata(path).is_ok_and(|m| m.is_dir()) {
+        bail!(
+            "{}: cannot write the {what}: it is a directory",
+            path.display()
+        );
+    }
+    let probe = dir.join(format!(".canopy-probe-{}", std::process::id()));
+    match std::fs::File::create(&probe) {
+        Ok(_) => {
+            let _ = std::fs::remove_file(&probe);
+            Ok(())
+        }
+        Err(e) => bail!(
+            "{}: cannot write the {what} in {}: {e}",
+            path.display(),
+            dir.display()
+        ),
+    }
+}
+
+/// Refuses work that needs more memory than is available (where that is known).
+pub fn check_memory(needed: u64, what: &str) -> anyhow::Result<()> {
+    if let Some(free) = available_memory() {
+        if needed > free {
+            bail!(
+                "{what} needs about {} MiB of memory, more than the {} MiB available",
+                needed >> 20,
+                free >> 20
+            );
+        }
+    }
+    Ok(())
+}
+
+/// A scene's name made into a plain file name in the current directory: path
+/// separators, `..`, control and other unusual characters become `_`.
+pub fn file_stem_from_name(name: &str) -> String {
+    let cleaned: String = name
+        .chars()
+        .map(|c| match c {
+            'a'..='z' | 'A'..='Z' | '0'..='9' | '-' | '_' | '.' => c,
+            _ => '_',
+        })
+        .take(100)
+        .collect();
+    // No hidden files, no `.` or `..`.
+    let cleaned = cleaned.trim_start_matches('.');
+    if cleaned.chars().all(|c| c == '_') {
+        "render".to_owned()
+    } else {
+        cleaned.to_owned()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_become_plain_file_names() {
+        assert_eq!(file_stem_from_name("cornell"), "cornell");
+        assert_eq!(file_stem_from_name("../x"), "_x");
+        assert_eq!(file_stem_from_name("/etc/passwd"), "_etc_passwd");
+        assert_eq!(file_stem_from_name(".."), "render");
+        assert_eq!(file_stem_from_name(""), "render");
+        assert_eq!(file_stem_from_name("my scene\n"), "my_scene_");
+        assert_eq!(file_stem_from_name(&"a".repeat(500)).len(), 100);
+    }
+
+    #[test]
+    fn same_file_sees_through_relative_paths() {
+        let here = std::env::current_dir().unwrap();
+        assert!(same_file(Path::new("Cargo.toml"), &here.join("Cargo.toml")));
+        assert!(same_file(Path::new("./new.png"), &here.join("new.png")));
+        assert!(!same_file(Path::new("a.png"), Path::new("b.png")));
+    }
+}

@@ -1,0 +1,475 @@
+//! canopy never destroys a user's file, never hangs on special files, refuses what it
+//! cannot do before doing any work, and tells scripts what happened by its exit status.
+
+mod common;
+
+use common::{canopy, canopy_within, outputs, scratch, stderr};
+use std::path::Path;
+use std::process::{Command, Stdio};
+use std::time::Duration;
+
+const CAMERA: &str = "[camera]\nlook_from = [0, 0, 5]\nlook_at = [0, 0, 0]\n";
+const TINY: [&str; 4] = ["--size", "8x8", "--spp", "1"];
+
+fn sphere_scene(extra: &str) -> String {
+    format!(
+        "{extra}{CAMERA}[[spheres]]\ncenter = [0, 0, 0]\nradius = 1\nmaterial = {{ type = \"lambertian\", albedo = [0.5, 0.5, 0.5] }}\n"
+    )
+}
+
+fn render(dir: &Path, args: &[&str]) -> std::process::Output {
+    let mut all = vec!["render"];
+    all.extend_from_slice(args);
+    canopy_within(&all, dir, Duration::from_secs(120))
+}
+
+#[test]
+fn a_checkpoint_path_holding_a_user_file_is_refused_and_the_file_kept() {
+    let dir = scratch("notes");
+    std::fs::write(dir.join("notes.txt"), "my notes").unwrap();
+    let out = render(
+        &dir,
+        &[
+            &["cornell", "-o", "a.png", "--checkpoint", "notes.txt"],
+            &TINY[..],
+        ]
+        .concat(),
+    );
+    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("notes.txt: exists and is not a canopy checkpoint"),
+        "{}",
+        stderr(&out)
+    );
+    assert_eq!(
+        std::fs::read_to_string(dir.join("notes.txt")).unwrap(),
+        "my notes"
+    );
+    assert_eq!(outputs(&dir), ["notes.txt"]);
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+#[test]
+fn the_scene_and_its_meshes_are_never_written_over() {
+    let dir = scratch("inputs");
+    std::fs::write(
+        dir.join("m.ply"),
+        "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n",
+    )
+    .unwrap();
+    let scene = sphere_scene("")
+        + "[[meshes]]\nfile = \"m.ply\"\nmaterial = { type = \"lambertian\", albedo = [1, 1, 1] }\n";
+    std::fs::write(dir.join("s.toml"), &scene).unwrap();
+    // A scene file whose name ends in .png must not be rendered over itself.
+    std::fs::write(dir.join("scene.png"), &scene).unwrap();
+    let cases: [&[&str]; 4] = [
+        &["s.toml", "--checkpoint", "s.toml"],
+        &["s.toml", "--checkpoint", "./m.ply"],
+        &["scene.png", "-o", "scene.png"],
+        &["s.toml", "-o", "x.png", "--checkpoint", "x.png"],
+    ];
+    for args in cases {
+        let out = render(&dir, &[args, &TINY[..]].concat());
+        assert_eq!(out.status.code(), Some(1), "{args:?}: {}", stderr(&out));
+        let err = stderr(&out);
+        assert!(
+            err.contains("refusing to write") || err.contains("cannot be the same file"),
+            "{args:?}: {err}"
+        );
+    }
+    assert_eq!(std::fs::read_to_string(dir.join("s.toml")).unwrap(), scene);
+    assert_eq!(
+        std::fs::read_to_string(dir.join("scene.png")).unwrap(),
+        scene
+    );
+    assert!(std::fs::read(dir.join("m.ply"))
+        .unwrap()
+        .starts_with(b"ply"));
+    let mut left = outputs(&dir);
+    left.retain(|f| f != "scene.png");
+    assert!(left.is_empty(), "{left:?}");
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+#[test]
+fn a_finished_render_replaces_and_then_removes_an_old_checkpoint_only() {
+    let dir = scratch("oldck");
+    // An earlier render's checkpoint (a different scene) may be reused and is removed.
+    let first = render(
+        &dir,
+        &[
+            "paper-5",
+            "--size",
+            "64x64",
+            "--spp",
+            "4000",
+            "-o",
+            "a.png",
+            "--checkpoint",
+            "ck",
+            "--every",
+            "0",
+        ],
+    );
+    let _ = first; // finished or not, `ck` is either absent or a checkpoint
+    if !dir.join("ck").exists() {
+        canopy_render::checkpoint::Checkpoint::new(
+            "paper-5",
+            &canopy_render::load_scene("paper-5").unwrap(),
+            canopy_render::Accumulator::new(480, 480),
+        )
+        .save(&dir.join("ck"))
+        .unwrap();
+    }
+    let out = render(
+        &dir,
+        &[&["cornell", "-o", "b.png", "--checkpoint", "ck"], &TINY[..]].concat(),
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(!dir.join("ck").exists(), "the finished render's checkpoint");
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+#[test]
+fn special_files_are_refused_without_hanging() {
+    let dir = scratch("special");
+    std::os::unix::fs::symlink("/dev/zero", dir.join("zero.ply")).unwrap();
+    std::os::unix::fs::symlink("/dev/urandom", dir.join("random.obj")).unwrap();
+    let fifo = Command::new("mkfifo")
+        .arg(dir.join("fifo.ply"))
+        .status()
+        .is_ok_and(|s| s.success());
+    let mut meshes = vec!["zero.ply", "random.obj"];
+    if fifo {
+        meshes.push("fifo.ply");
+    }
+    for mesh in meshes {
+        let scene = sphere_scene("") + &format!(
+            "[[meshes]]\nfile = \"{mesh}\"\nmaterial = {{ type = \"lambertian\", albedo = [1, 1, 1] }}\n"
+        );
+        std::fs::write(dir.join("s.toml"), scene).unwrap();
+        for command in [
+            &["render", "s.toml", "-o", "x.png"][..],
+            &["check", "s.toml"],
+        ] {
+            let out = canopy_within(command, &dir, Duration::from_secs(30));
+            assert_eq!(out.status.code(), Some(1), "{mesh}: {}", stderr(&out));
+            assert!(
+                stderr(&out).contains("not a regular file"),
+                "{mesh}: {}",
+                stderr(&out)
+            );
+        }
+        // A bare mesh argument too.
+        let out = canopy_within(&["check", mesh], &dir, Duration::from_secs(30));
+        assert_eq!(out.status.code(), Some(1), "{mesh}: {}", stderr(&out));
+    }
+    for scene in ["/dev/zero", "/dev/urandom"] {
+        let out = canopy_within(&["render", scene], &dir, Duration::from_secs(30));
+        assert!(
+            stderr(&out).contains("not a regular file"),
+            "{}",
+            stderr(&out)
+        );
+        let out = canopy_within(
+            &["render", "--resume", scene],
+            &dir,
+            Duration::from_secs(30),
+        );
+        assert!(
+            stderr(&out).contains("not a regular file"),
+            "{}",
+            stderr(&out)
+        );
+    }
+    assert!(!dir.join("x.png").exists());
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+#[test]
+fn numbers_out_of_range_are_usage_errors_that_name_the_option_and_range() {
+    let dir = scratch("ranges");
+    let cases: [(&[&str], &str); 8] = [
+        (
+            &["render", "paper-1", "--ploc-radius", "100000000"],
+            "--ploc-radius",
+        ),
+        (&["render", "paper-1", "--threads", "8192"], "--threads"),
+        (&["render", "paper-1", "--threads", "0"], "--threads"),
+        (&["render", "paper-1", "--spp", "0"], "--spp"),
+        (&["render", "paper-1", "--depth", "0"], "--depth"),
+        (
+            &["render", "paper-1", "--sah-traversal", "nan"],
+            "--sah-traversal",
+        ),
+        (
+            &["bvh", "paper-1", "--max-leaf-size", "0"],
+            "--max-leaf-size",
+        ),
+        (&["bvh", "paper-1", "--runs=-1"], "--runs"),
+    ];
+    for (args, option) in cases {
+        let out = canopy_within(args, &dir, Duration::from_secs(30));
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {}", stderr(&out));
+        assert!(stderr(&out).contains(option), "{args:?}: {}", stderr(&out));
+        assert!(
+            stderr(&out).contains("1..=") || stderr(&out).contains("(0, 1e6]"),
+            "{args:?} names no range: {}",
+            stderr(&out)
+        );
+    }
+    assert!(outputs(&dir).is_empty());
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+#[test]
+fn an_output_that_cannot_be_written_fails_before_the_render() {
+    let dir = scratch("nodir");
+    let start = std::time::Instant::now();
+    // paper-1 at its full settings takes many seconds; the refusal must come first.
+    let out = render(&dir, &["paper-1", "-o", "missing/out.png"]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(
+        stderr(&out).contains("directory missing does not exist"),
+        "{}",
+        stderr(&out)
+    );
+    assert!(!String::from_utf8_lossy(&out.stdout).contains("render "));
+    assert!(start.elapsed() < Duration::from_secs(5));
+    let out = render(&dir, &["paper-1", "--checkpoint", "missing/ck"]);
+    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+    assert!(outputs(&dir).is_empty(), "{:?}", outputs(&dir));
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+#[test]
+fn a_failed_checkpoint_save_warns_and_the_render_goes_on() {
+    let dir = scratch("diskfull");
+    std::fs::create_dir(dir.join("cks")).unwrap();
+    let child = Command::new(env!("CARGO_BIN_EXE_canopy"))
+        .args([
+            "render",
+            "paper-5",
+            "--size",
+            "96x96",
+            "--spp",
+            "160",
+            "-o",
+            "out.png",
+            "--checkpoint",
+            "cks/ck",
+            "--every",
+            "0",
+        ])
+        .current_dir(&dir)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(Duration::from_millis(200));
+    // The checkpoint's directory turns into a file: every later save fails, as on a
+    // full disk (and unlike permissions, this holds for root too).
+    std::fs::rename(dir.join("cks"), dir.join("gone")).unwrap();
+    std::fs::write(dir.join("cks"), "in the way").unwrap();
+    let out = child.wait_with_output().unwrap();
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(image::open(dir.join("out.png")).is_ok());
+    let err = stderr(&out);
+    if err.contains("cannot write the checkpoint") {
+        assert!(err.contains("rendering goes on"), "{err}");
+        assert_eq!(
+            err.matches("cannot write the checkpoint").count(),
+            1,
+            "{err}"
+        );
+    } // else the render finished before the directory was replaced
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+#[test]
+fn a_scene_name_cannot_send_the_image_elsewhere() {
+    let dir = scratch("names");
+    std::fs::create_dir(dir.join("work")).unwrap();
+    for (name, expected) in [("../escaped", "_escaped.png"), ("/tmp/abs", "_tmp_abs.png")] {
+        std::fs::write(
+            dir.join("work/s.toml"),
+            sphere_scene(&format!("name = {name:?}\n")),
+        )
+        .unwrap();
+        let out = render(&dir.join("work"), &[&["s.toml"], &TINY[..]].concat());
+        assert!(out.status.success(), "{}", stderr(&out));
+        assert!(dir.join("work").join(expected).exists(), "{name}");
+    }
+    assert!(!dir.join("escaped.png").exists());
+    assert!(!Path::new("/tmp/abs.png").exists() || cfg!(not(unix)));
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+/// Scene, mesh and a render long enough to interrupt.
+fn interruptible_scene(dir: &Path, smooth: bool) {
+    std::fs::write(
+        dir.join("tet.obj"),
+        "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n",
+    )
+    .unwrap();
+    let scene = sphere_scene("")
+        + &format!("[[meshes]]\nfile = \"tet.obj\"\nsmooth = {smooth}\nmaterial = {{ type = \"metal\", albedo = [0.9, 0.9, 0.9] }}\n");
+    std::fs::write(dir.join("s.toml"), scene).unwrap();
+}
+
+#[test]
+fn a_checkpoint_resumes_from_another_directory_and_refuses_a_changed_scene() {
+    let dir = scratch("resume");
+    let scenes = dir.join("scenes");
+    std::fs::create_dir(&scenes).unwrap();
+    interruptible_scene(&scenes, false);
+    let child = Command::new(env!("CARGO_BIN_EXE_canopy"))
+        .args([
+            "render",
+            "s.toml",
+            "--size",
+            "64x64",
+            "--spp",
+            "3000",
+            "-o",
+            "part.png",
+            "--checkpoint",
+            "ck",
+            "--every",
+            "0",
+        ])
+        .current_dir(&scenes)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(Duration::from_millis(400));
+    let _ = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status();
+    let out = child.wait_with_output().unwrap();
+    if out.status.success() {
+        std::fs::remove_dir_all(dir).unwrap();
+        return; // finished before the signal: nothing to resume on this machine
+    }
+    assert_eq!(out.status.code(), Some(130), "{}", stderr(&out));
+    let ck = scenes.join("ck");
+    let saved = canopy_render::checkpoint::Checkpoint::load(&ck).unwrap();
+    let scene_path = std::fs::canonicalize(scenes.join("s.toml")).unwrap();
+    assert_eq!(Path::new(&saved.scene), scene_path);
+
+    // Changing the mesh's shading makes the checkpoint belong to another image.
+    interruptible_scene(&scenes, true);
+    let ck_arg = ck.to_str().unwrap();
+    let out = render(&dir, &["--resume", ck_arg, "-o", "resumed.png"]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(
+        stderr(&out).contains("made for a different scene or settings"),
+        "{}",
+        stderr(&out)
+    );
+    // Back as it was, it resumes from the parent directory.
+    interruptible_scene(&scenes, false);
+    let out = render(&dir, &["--resume", ck_arg, "-o", "resumed.png", "--json"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let summary: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(summary["samples"], 3000);
+    assert_eq!(summary["interrupted"], false);
+    assert!(dir.join("resumed.png").exists());
+    assert!(!ck.exists());
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+#[test]
+fn meaningless_scenes_fail_check_and_render() {
+    let dir = scratch("nonsense");
+    let lambert = "material = { type = \"lambertian\", albedo = [0.5, 0.5, 0.5] }\n";
+    std::fs::write(dir.join("m.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
+    let cases = [
+        (sphere_scene("") + "[render]\nmax_depth = 0\n", "max_depth 0 is outside 1..=1024"),
+        (
+            format!("[camera]\nlook_from = [0, 0, 5]\nlook_at = [0, 0, 0]\naperture = 1e30\n[[spheres]]\ncenter = [0, 0, 0]\nradius = 1\n{lambert}"),
+            "camera: every number must be finite and within",
+        ),
+        (
+            format!("{CAMERA}[[spheres]]\ncenter = [0, 0, 0]\nradius = 1e38\n{lambert}"),
+            "sphere: `center` must be within",
+        ),
+        (
+            format!("{CAMERA}[[meshes]]\nfile = \"m.obj\"\nscale = 1e38\n{lambert}"),
+            "beyond ±1e12",
+        ),
+        (
+            format!("{CAMERA}[[spheres]]\ncenter = [0, 0, 0]\nradius = 1\nmaterial = {{ type = \"lambertian\", albedo = [2, 0.5, 0.5] }}\n"),
+            "`albedo` components must be in [0, 1]",
+        ),
+    ];
+    for (scene, expected) in cases {
+        std::fs::write(dir.join("s.toml"), &scene).unwrap();
+        for command in [
+            &["check", "s.toml"][..],
+            &["render", "s.toml", "-o", "x.png"],
+        ] {
+            let out = canopy_within(command, &dir, Duration::from_secs(30));
+            assert_eq!(out.status.code(), Some(1), "{scene}");
+            assert!(
+                stderr(&out).contains(expected),
+                "{expected}: {}",
+                stderr(&out)
+            );
+        }
+    }
+    assert!(!dir.join("x.png").exists());
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+#[test]
+fn obj_faces_of_two_vertices_are_reported_like_ply_does() {
+    let dir = scratch("obj2");
+    std::fs::write(
+        dir.join("m.obj"),
+        "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2\n",
+    )
+    .unwrap();
+    let out = canopy(&["check", "m.obj"], &dir);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(
+        stderr(&out).contains("line 5: a face needs at least 3 vertices, this one has 2"),
+        "{}",
+        stderr(&out)
+    );
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+#[test]
+fn summaries_are_json_on_request_and_warnings_go_to_stderr() {
+    let dir = scratch("json");
+    std::fs::write(
+        dir.join("dark.toml"),
+        sphere_scene("background = [0, 0, 0]\n"),
+    )
+    .unwrap();
+    let out = render(
+        &dir,
+        &[&["dark.toml", "-o", "d.png", "--json"], &TINY[..]].concat(),
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    let summary: serde_json::Value = serde_json::from_slice(&out.stdout)
+        .unwrap_or_else(|e| panic!("{e}: {}", String::from_utf8_lossy(&out.stdout)));
+    assert_eq!(summary["width"], 8);
+    assert_eq!(summary["spheres"], 1);
+    assert_eq!(summary["image"], "d.png");
+    assert!(summary["rays"].as_u64().unwrap() >= 64);
+    assert!(summary["warnings"][0]
+        .as_str()
+        .unwrap()
+        .contains("no light"));
+    assert!(stderr(&out).contains("warning: no light"));
+
+    let out = canopy(&["check", "dark.toml", "--json"], &dir);
+    assert!(out.status.success());
+    let description: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(description["primitives"], 1);
+    assert!(stderr(&out).contains("warning: no light"));
+    std::fs::remove_dir_all(dir).unwrap();
+}
