@@ -35,6 +35,20 @@ impl BuildArgs {
     }
 }
 
+impl BuildArgs {
+    /// Refuses a build whose scratch memory would exceed what is available, before it
+    /// starts: `builder` over `primitives` boxes. PLOC keeps `radius` distances per
+    /// cluster; the other builders need a few dozen bytes per primitive.
+    pub fn check_memory(&self, builder: Builder, primitives: usize) -> anyhow::Result<()> {
+        let n = primitives as u64;
+        let mut bytes = n * 256;
+        if builder == Builder::Ploc {
+            bytes += n * (self.ploc_radius as u64).min(n) * 4;
+        }
+        crate::safety::check_memory(bytes, &format!("building {builder} over {n} primitives"))
+    }
+}
+
 /// `intro`, then the builders one per line, for `--help`.
 pub fn builders_help(intro: &str) -> String {
     let mut help = format!("{intro}\n");

@@ -71,6 +71,7 @@ pub fn run(args: &BvhArgs) -> anyhow::Result<()> {
     let boxes = scene.primitive_bounds();
     let mut rows = Vec::new();
     for &builder in &builders {
+        args.build.check_memory(builder, boxes.len())?;
         for &width in &args.width {
             rows.push(measure(builder, width, &boxes, &params, args.runs));
         }

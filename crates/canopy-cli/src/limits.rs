@@ -2,6 +2,7 @@
 //! range is a usage error (exit 2) that names the option and the range, before any work.
 
 use canopy_render::RenderSettings;
+use std::time::Duration;
 
 /// Most worker threads: far above any core count canopy runs on, low enough that the
 /// threads' stacks and start-up are never the cost of a render.
@@ -53,6 +54,30 @@ pub fn sah_cost(s: &str) -> Result<f32, String> {
     }
 }
 
+/// Longest interval between checkpoint saves: a year.
+pub const MAX_INTERVAL: Duration = Duration::from_secs(365 * 24 * 3600);
+
+/// A duration: seconds, or a number with s, m or h, from 0 to [`MAX_INTERVAL`].
+pub fn duration(s: &str) -> Result<Duration, String> {
+    let (number, unit) = match s.char_indices().find(|(_, c)| c.is_ascii_alphabetic()) {
+        Some((i, _)) => s.split_at(i),
+        None => (s, "s"),
+    };
+    let scale = match unit {
+        "s" => 1.0,
+        "m" => 60.0,
+        "h" => 3600.0,
+        _ => return Err(format!("`{s}`: use seconds, or a number with s, m or h")),
+    };
+    let seconds = number.trim().parse::<f64>().map(|n| n * scale);
+    match seconds {
+        Ok(secs) if (0.0..=MAX_INTERVAL.as_secs_f64()).contains(&secs) => {
+            Ok(Duration::from_secs_f64(secs))
+        }
+        _ => Err(format!("`{s}` is not a duration from 0 to 8760h")),
+    }
+}
+
 /// `WIDTHxHEIGHT`, each side in 1..=MAX_SIDE and the image within
 /// [`RenderSettings::MAX_PIXELS`].
 pub fn size(s: &str) -> Result<(u32, u32), String> {
@@ -98,6 +123,16 @@ mod tests {
             "nanx1",
         ] {
             assert!(size(bad).is_err(), "{bad}");
+        }
+    }
+
+    #[test]
+    fn durations_are_bounded_and_never_panic() {
+        assert_eq!(duration("90"), Ok(Duration::from_secs(90)));
+        assert_eq!(duration("1.5m"), Ok(Duration::from_secs(90)));
+        assert_eq!(duration("8760h"), Ok(MAX_INTERVAL));
+        for bad in ["8761h", "1e30h", "-1", "nan", "infs", "3d", ""] {
+            assert!(duration(bad).is_err(), "{bad}");
         }
     }
 

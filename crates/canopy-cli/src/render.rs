@@ -70,8 +70,9 @@ pub struct RenderArgs {
     /// Save the render's progress to FILE periodically (atomically), to resume it later.
     #[arg(long, value_name = "FILE")]
     checkpoint: Option<PathBuf>,
-    /// How often to save the checkpoint: seconds, or a number with s, m or h.
-    #[arg(long, default_value = "60s", value_parser = parse_duration, requires = "checkpoint")]
+    /// How often to save the checkpoint: seconds, or a number with s, m or h (at most
+    /// 8760h, a year).
+    #[arg(long, default_value = "60s", value_parser = limits::duration, requires = "checkpoint")]
     every: Duration,
     /// Continue the render saved in a checkpoint (scene and settings come from it).
     #[arg(long, value_name = "FILE", conflicts_with_all = ["scene", "size", "spp", "depth", "seed", "heatmap"])]
@@ -79,23 +80,6 @@ pub struct RenderArgs {
     /// Print the summary as one JSON object (warnings also go to stderr).
     #[arg(long)]
     json: bool,
-}
-
-fn parse_duration(s: &str) -> Result<Duration, String> {
-    let (number, unit) = match s.char_indices().find(|(_, c)| c.is_ascii_alphabetic()) {
-        Some((i, _)) => s.split_at(i),
-        None => (s, "s"),
-    };
-    let scale = match unit {
-        "s" => 1.0,
-        "m" => 60.0,
-        "h" => 3600.0,
-        _ => return Err(format!("`{s}`: use seconds, or a number with s, m or h")),
-    };
-    match number.trim().parse::<f64>() {
-        Ok(n) if n >= 0.0 && n.is_finite() => Ok(Duration::from_secs_f64(n * scale)),
-        _ => Err(format!("`{s}` is not a duration")),
-    }
 }
 
 fn parse_accel(s: &str) -> Result<AccelKind, String> {
@@ -252,6 +236,9 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         .context("cannot start the worker threads")?;
     let params = args.build.params();
     let scene = &job.scene;
+    if let AccelKind::Bvh(builder) = args.bvh {
+        args.build.check_memory(builder, scene.primitives.len())?;
+    }
     let accel = pool.install(|| Accel::build(args.bvh, args.width, &scene.primitives, &params));
     if args.show_bvh && accel.tree().is_none() {
         bail!("--show-bvh needs a BVH; choose a builder with --bvh");

@@ -473,3 +473,48 @@ fn summaries_are_json_on_request_and_warnings_go_to_stderr() {
     assert!(stderr(&out).contains("warning: no light"));
     std::fs::remove_dir_all(dir).unwrap();
 }
+
+#[test]
+fn a_second_ctrl_c_ends_the_render_at_once() {
+    let dir = scratch("twice");
+    // One pass of this render takes seconds, so the first Ctrl-C alone would wait for it.
+    let child = Command::new(env!("CARGO_BIN_EXE_canopy"))
+        .args([
+            "render",
+            "paper-1",
+            "--size",
+            "1600x1600",
+            "--spp",
+            "8",
+            "--depth",
+            "50",
+            "-o",
+            "out.png",
+            "--threads",
+            "1",
+        ])
+        .current_dir(&dir)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let pid = child.id().to_string();
+    std::thread::sleep(Duration::from_millis(800));
+    let interrupt = || Command::new("kill").args(["-INT", &pid]).status().unwrap();
+    interrupt();
+    std::thread::sleep(Duration::from_millis(100));
+    let second = std::time::Instant::now();
+    interrupt();
+    let out = child.wait_with_output().unwrap();
+    assert_eq!(out.status.code(), Some(130), "{}", stderr(&out));
+    assert!(
+        second.elapsed() < Duration::from_millis(700),
+        "the second Ctrl-C took {:?} to end the render",
+        second.elapsed()
+    );
+    assert!(
+        !dir.join("out.png").exists(),
+        "no image after a second Ctrl-C"
+    );
+    std::fs::remove_dir_all(dir).unwrap();
+}

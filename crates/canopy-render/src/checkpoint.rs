@@ -115,7 +115,8 @@ impl Checkpoint {
         }
     }
 
-    fn to_bytes(&self) -> Vec<u8> {
+    /// The checkpoint as the bytes of its file.
+    pub fn to_bytes(&self) -> Vec<u8> {
         let a = &self.accumulator;
         let s = &self.settings;
         let mut out = Vec::with_capacity(96 + self.scene.len() + a.sums.len() * 12);
@@ -164,7 +165,8 @@ impl Checkpoint {
         Self::from_bytes(&bytes).map_err(|what| CheckpointError::Corrupt { file, what })
     }
 
-    fn from_bytes(bytes: &[u8]) -> Result<Self, String> {
+    /// A checkpoint from the bytes of its file, or what is wrong with them.
+    pub fn from_bytes(bytes: &[u8]) -> Result<Self, String> {
         let body_len = bytes.len().checked_sub(8).ok_or("file too short")?;
         let (body, checksum) = bytes.split_at(body_len);
         if fnv1a(body, FNV_OFFSET).to_le_bytes() != checksum {

@@ -173,7 +173,10 @@ fn hostile_obj_files_are_errors() {
             "v 1e39 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n",
             "vertex 0 has a non-finite coordinate",
         ),
-        ("f\n", "line 1: a face needs at least 3 vertices, this one has 0"),
+        (
+            "f\n",
+            "line 1: a face needs at least 3 vertices, this one has 0",
+        ),
         (
             "v 0 0 0\nv 1 0 0\nf 1 2\n",
             "line 3: a face needs at least 3 vertices, this one has 2",

@@ -214,6 +214,10 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
         None if args.quick => (32, 32),
         None => (480, 480),
     };
+    crate::safety::check_memory(
+        width as u64 * height as u64 * crate::limits::BYTES_PER_PIXEL,
+        &format!("a {width}x{height} image"),
+    )?;
     let spp = args.spp.unwrap_or(if args.quick { 2 } else { 128 });
     let methods = methods(args.methods == "all");
     let pool = rayon::ThreadPoolBuilder::new()

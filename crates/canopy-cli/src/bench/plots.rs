@@ -59,10 +59,11 @@ pub fn write_png(
             .map_err(|e| anyhow!("drawing {}: {e}", path.display()))?;
     }
     let image = image::RgbImage::from_raw(w, h, buffer).expect("buffer holds w * h pixels");
-    let temp = path.with_extension("tmp.png");
+    let mut png = std::io::Cursor::new(Vec::new());
     image
-        .save(&temp)
-        .and_then(|()| std::fs::rename(&temp, path).map_err(image::ImageError::IoError))
+        .write_to(&mut png, image::ImageFormat::Png)
+        .with_context(|| format!("cannot encode {}", path.display()))?;
+    canopy_render::output::write_atomically(path, |w| std::io::Write::write_all(w, png.get_ref()))
         .with_context(|| format!("cannot write {}", path.display()))
 }
 
