@@ -1,5 +1,6 @@
 //! The one binary tree format that every builder produces.
 
+use crate::view::{Child, ChildKind, TreeView};
 use crate::Aabb;
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
@@ -150,82 +151,65 @@ impl Bvh2 {
     /// exactly once, every primitive in exactly one leaf, every child inside its parent
     /// and every box the tight union of its contents.
     pub fn validate(&self, boxes: &[Aabb]) -> Result<(), BvhError> {
-        if self.nodes.is_empty() {
-            return match boxes.len() {
-                0 => Ok(()),
-                _ => Err(BvhError::PrimitiveCount { prim: 0, times: 0 }),
-            };
-        }
-        let len = self.nodes.len();
-        let mut reached = vec![false; len];
-        let mut times_seen = vec![0usize; boxes.len()];
-        let mut stack = vec![0usize];
-        reached[0] = true;
-        while let Some(i) = stack.pop() {
-            let node = &self.nodes[i];
-            let tight = if node.is_leaf() {
-                let (first, end) = (
-                    node.first as usize,
-                    node.first as usize + node.count as usize,
-                );
-                if end > self.prim_indices.len() {
-                    return Err(BvhError::LeafOutOfRange {
-                        node: i,
-                        first,
-                        end,
-                        len: self.prim_indices.len(),
-                    });
-                }
-                let mut bounds = Aabb::EMPTY;
-                for &prim in &self.prim_indices[first..end] {
-                    let seen =
-                        times_seen
-                            .get_mut(prim as usize)
-                            .ok_or(BvhError::PrimitiveOutOfRange {
-                                prim,
-                                len: boxes.len(),
-                            })?;
-                    *seen += 1;
-                    bounds = bounds.union(boxes[prim as usize]);
-                }
-                bounds
-            } else {
-                let mut bounds = Aabb::EMPTY;
-                for child in [node.first as usize, node.first as usize + 1] {
-                    if child >= len || child == 0 {
-                        return Err(BvhError::ChildOutOfRange {
-                            node: i,
-                            child,
-                            len,
-                        });
+        crate::view::validate(self, boxes)
+    }
+
+    /// Shape and quality of the tree under the given SAH costs.
+    pub fn stats(&self, costs: &crate::SahCosts) -> crate::TreeStats {
+        crate::view::stats(self, costs)
+    }
+
+    /// A node as a child: its box, and what it is.
+    fn as_child(&self, index: usize) -> Child {
+        match self.nodes.get(index) {
+            Some(node) => Child {
+                bounds: node.bounds(),
+                kind: if node.is_leaf() {
+                    ChildKind::Leaf {
+                        first: node.first as usize,
+                        count: node.count as usize,
                     }
-                    if std::mem::replace(&mut reached[child], true) {
-                        return Err(BvhError::NodeShared { node: child });
-                    }
-                    let child_box = self.nodes[child].bounds();
-                    if !node.bounds().contains(&child_box) {
-                        return Err(BvhError::ChildOutsideParent { node: i, child });
-                    }
-                    bounds = bounds.union(child_box);
-                    stack.push(child);
-                }
-                bounds
-            };
-            if tight != node.bounds() {
-                return Err(BvhError::NotTight { node: i });
-            }
+                } else {
+                    ChildKind::Inner(index)
+                },
+                slot: Some(index),
+            },
+            // Out of range (a damaged tree): validation reports the slot.
+            None => Child {
+                bounds: Aabb::EMPTY,
+                kind: ChildKind::Leaf { first: 0, count: 0 },
+                slot: Some(index),
+            },
         }
-        let unreached = reached.iter().filter(|r| !**r).count();
-        if unreached > 0 {
-            return Err(BvhError::UnreachableNodes { unreached, len });
-        }
-        if let Some((prim, &times)) = times_seen.iter().enumerate().find(|(_, &t)| t != 1) {
-            return Err(BvhError::PrimitiveCount {
-                prim: prim as u32,
-                times,
-            });
-        }
-        Ok(())
+    }
+}
+
+impl TreeView for Bvh2 {
+    fn slot_count(&self) -> usize {
+        self.nodes.len()
+    }
+
+    fn root(&self) -> Option<Child> {
+        (!self.nodes.is_empty()).then(|| self.as_child(0))
+    }
+
+    fn children(&self, node: usize, out: &mut Vec<Child>) {
+        let first = self.nodes[node].first as usize;
+        out.clear();
+        out.extend([first, first + 1].map(|c| self.as_child(c)));
+    }
+
+    fn prim_indices(&self) -> &[u32] {
+        &self.prim_indices
+    }
+
+    fn node_count(&self) -> usize {
+        self.nodes.len()
+    }
+
+    fn memory_bytes(&self) -> usize {
+        std::mem::size_of_val(self.nodes.as_slice())
+            + std::mem::size_of_val(self.prim_indices.as_slice())
     }
 }
 

@@ -3,7 +3,8 @@
 //! benchmarks, pictures of trees) goes through [`Tree`], so a new layout touches only here.
 
 use crate::traverse::TraversalCounter;
-use crate::{Aabb, Bvh2, Bvh4, Bvh8, BvhError, BvhN, Hit, Isa, IsaError, PrimHit, Ray};
+use crate::view::{self, TreeView};
+use crate::{Aabb, Bvh2, Bvh4, Bvh8, BvhError, Hit, Isa, IsaError, PrimHit, Ray};
 use crate::{SahCosts, TreeStats};
 use glam::Vec3;
 use std::fmt;
@@ -102,32 +103,27 @@ impl Tree {
         }
     }
 
-    pub fn stats(&self, costs: &SahCosts) -> TreeStats {
+    /// The tree as a walk over boxes, children and leaves, whatever its layout.
+    pub fn view(&self) -> &dyn TreeView {
         match self {
-            Tree::Binary(t) => t.stats(costs),
-            Tree::Four(t) => t.stats(costs),
-            Tree::Eight(t) => t.stats(costs),
+            Tree::Binary(t) => t,
+            Tree::Four(t) => t,
+            Tree::Eight(t) => t,
         }
+    }
+
+    pub fn stats(&self, costs: &SahCosts) -> TreeStats {
+        view::stats(self.view(), costs)
     }
 
     pub fn validate(&self, boxes: &[Aabb]) -> Result<(), BvhError> {
-        match self {
-            Tree::Binary(t) => t.validate(boxes),
-            Tree::Four(t) => t.validate(boxes),
-            Tree::Eight(t) => t.validate(boxes),
-        }
+        view::validate(self.view(), boxes)
     }
 
-    /// Every node box whose level is in `first..=last` (the root is level 0; a wide node's
+    /// Every box whose level is in `first..=last` (the root's is level 0; a wide node's
     /// children are one level below it), shallowest first; for pictures of the tree.
     pub fn boxes_at_levels(&self, first: usize, last: usize) -> Vec<(Aabb, usize)> {
-        let mut boxes = match self {
-            Tree::Binary(t) => binary_boxes(t, first, last),
-            Tree::Four(t) => wide_boxes(t, first, last),
-            Tree::Eight(t) => wide_boxes(t, first, last),
-        };
-        boxes.sort_by_key(|&(_, level)| level);
-        boxes
+        view::boxes_at_levels(self.view(), first, last)
     }
 
     /// Closest hit; same contract as [`Bvh2::intersect`].
@@ -157,50 +153,4 @@ impl Tree {
             Tree::Eight(t) => t.occluded(ray, hit_prim),
         }
     }
-}
-
-fn binary_boxes(bvh: &Bvh2, first: usize, last: usize) -> Vec<(Aabb, usize)> {
-    let mut boxes = Vec::new();
-    if bvh.nodes().is_empty() {
-        return boxes;
-    }
-    let mut stack = vec![(0usize, 0usize)];
-    while let Some((index, level)) = stack.pop() {
-        let node = &bvh.nodes()[index];
-        if level >= first {
-            boxes.push((node.bounds(), level));
-        }
-        if !node.is_leaf() && level < last {
-            stack.push((node.first as usize + 1, level + 1));
-            stack.push((node.first as usize, level + 1));
-        }
-    }
-    boxes
-}
-
-fn wide_boxes<const N: usize>(bvh: &BvhN<N>, first: usize, last: usize) -> Vec<(Aabb, usize)> {
-    let mut boxes = Vec::new();
-    let Some(root) = bvh.nodes().first() else {
-        return boxes;
-    };
-    if first == 0 {
-        let all = (0..root.len()).fold(Aabb::EMPTY, |b, i| b.union(root.slot_bounds(i)));
-        boxes.push((all, 0));
-    }
-    let mut stack = vec![(0usize, 1usize)];
-    while let Some((index, level)) = stack.pop() {
-        if level > last {
-            continue;
-        }
-        let node = &bvh.nodes()[index];
-        for i in 0..node.len() {
-            if level >= first {
-                boxes.push((node.slot_bounds(i), level));
-            }
-            if node.count[i] == 0 && level < last {
-                stack.push((node.child[i] as usize, level + 1));
-            }
-        }
-    }
-    boxes
 }

@@ -29,6 +29,7 @@ mod ray;
 mod stats;
 mod traverse;
 mod triangle;
+pub mod view;
 mod wide;
 
 pub use aabb::Aabb;
@@ -40,4 +41,5 @@ pub use ray::{Hit, PrimHit, Ray};
 pub use stats::TreeStats;
 pub use traverse::{TraversalCounter, TraversalStats};
 pub use triangle::{intersect_triangle, ShearedRay, TrianglePack, NO_PRIM, PACK_LANES};
+pub use view::TreeView;
 pub use wide::{Bvh4, Bvh8, BvhN, WideNode, EMPTY_SLOT};

@@ -13,6 +13,7 @@ mod traverse;
 
 use crate::traverse::TraversalCounter;
 use crate::triangle::{PackRay, TrianglePack, NO_PRIM, PACK_LANES};
+use crate::view::{Child, ChildKind, TreeView};
 use crate::{Aabb, Bvh2, BvhError, Hit, Isa, IsaError, PrimHit, Ray, SahCosts, TreeStats};
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
@@ -97,7 +98,7 @@ impl<const N: usize> WideNode<N> {
 /// traversal kernels use.
 #[derive(Clone, Debug, PartialEq)]
 pub struct BvhN<const N: usize> {
-    nodes: Vec<WideNode<N>>,
+    pub(crate) nodes: Vec<WideNode<N>>,
     prim_indices: Vec<u32>,
     /// Empty, or `packs[k]` holds positions `4k..4k + 4` of `prim_indices`.
     packs: Vec<TrianglePack>,
@@ -256,113 +257,72 @@ impl<const N: usize> BvhN<N> {
     /// Checks every primitive is in exactly one leaf, every slot box is the tight box of
     /// its contents, and every node is reached exactly once.
     pub fn validate(&self, boxes: &[Aabb]) -> Result<(), BvhError> {
-        if self.nodes.is_empty() {
-            return match boxes.len() {
-                0 => Ok(()),
-                _ => Err(BvhError::PrimitiveCount { prim: 0, times: 0 }),
-            };
-        }
-        let mut seen = vec![0usize; boxes.len()];
-        let mut reached = vec![false; self.nodes.len()];
-        reached[0] = true;
-        let mut stack = vec![0usize];
-        while let Some(n) = stack.pop() {
-            let node = &self.nodes[n];
-            for i in 0..node.len() {
-                let (child, count) = (node.child[i] as usize, node.count[i]);
-                let contents = if count > 0 {
-                    let end = child + count as usize;
-                    let prims =
-                        self.prim_indices
-                            .get(child..end)
-                            .ok_or(BvhError::LeafOutOfRange {
-                                node: n,
-                                first: child,
-                                end,
-                                len: self.prim_indices.len(),
-                            })?;
-                    let mut b = Aabb::EMPTY;
-                    for &p in prims {
-                        *seen
-                            .get_mut(p as usize)
-                            .ok_or(BvhError::PrimitiveOutOfRange {
-                                prim: p,
-                                len: boxes.len(),
-                            })? += 1;
-                        b = b.union(boxes[p as usize]);
-                    }
-                    b
-                } else {
-                    if child >= self.nodes.len() || child == 0 {
-                        return Err(BvhError::ChildOutOfRange {
-                            node: n,
-                            child,
-                            len: self.nodes.len(),
-                        });
-                    }
-                    if std::mem::replace(&mut reached[child], true) {
-                        return Err(BvhError::NodeShared { node: child });
-                    }
-                    stack.push(child);
-                    let c = &self.nodes[child];
-                    (0..c.len()).fold(Aabb::EMPTY, |b, j| b.union(c.slot_bounds(j)))
-                };
-                if contents != node.slot_bounds(i) {
-                    return Err(BvhError::NotTight { node: n });
-                }
-            }
-        }
-        let unreached = reached.iter().filter(|r| !**r).count();
-        if unreached > 0 {
-            return Err(BvhError::UnreachableNodes {
-                unreached,
-                len: self.nodes.len(),
-            });
-        }
-        if let Some((prim, &times)) = seen.iter().enumerate().find(|(_, &t)| t != 1) {
-            return Err(BvhError::PrimitiveCount {
-                prim: prim as u32,
-                times,
-            });
-        }
-        Ok(())
+        crate::view::validate(self, boxes)
     }
 
-    /// Shape and quality; the SAH charges one traversal step per wide node entered.
+    /// Shape and quality of the tree under the given SAH costs; memory includes the
+    /// triangle packs.
     pub fn stats(&self, costs: &SahCosts) -> TreeStats {
-        let mut stats = TreeStats::sized(&self.nodes, &self.prim_indices);
-        stats.memory_bytes += std::mem::size_of_val(self.packs.as_slice());
-        let Some(root) = self.nodes.first() else {
-            return stats;
-        };
-        let root_box = (0..root.len()).fold(Aabb::EMPTY, |b, i| b.union(root.slot_bounds(i)));
-        let root_area = root_box.surface_area();
-        let relative = |b: Aabb| {
-            if root_area > 0.0 {
-                (b.surface_area() / root_area) as f64
-            } else {
-                1.0
+        crate::view::stats(self, costs)
+    }
+}
+
+impl<const N: usize> TreeView for BvhN<N> {
+    fn slot_count(&self) -> usize {
+        self.nodes.len()
+    }
+
+    fn root(&self) -> Option<Child> {
+        let root = self.nodes.first()?;
+        Some(Child {
+            bounds: (0..root.len()).fold(Aabb::EMPTY, |b, i| b.union(root.slot_bounds(i))),
+            kind: ChildKind::Inner(0),
+            slot: Some(0),
+        })
+    }
+
+    fn children(&self, node: usize, out: &mut Vec<Child>) {
+        let n = &self.nodes[node];
+        out.clear();
+        out.extend((0..n.len()).map(|i| {
+            let (child, count) = (n.child[i] as usize, n.count[i] as usize);
+            let bounds = n.slot_bounds(i);
+            match count {
+                0 if child < self.nodes.len() => Child {
+                    bounds,
+                    kind: ChildKind::Inner(child),
+                    slot: Some(child),
+                },
+                // Out of range (a damaged tree): validation reports the slot.
+                0 => Child {
+                    bounds,
+                    kind: ChildKind::Leaf { first: 0, count: 0 },
+                    slot: Some(child),
+                },
+                _ => Child {
+                    bounds,
+                    kind: ChildKind::Leaf {
+                        first: child,
+                        count,
+                    },
+                    slot: None,
+                },
             }
-        };
-        let mut cost = costs.traversal as f64;
-        let mut stack = vec![(0usize, 1usize)];
-        while let Some((n, depth)) = stack.pop() {
-            stats.max_depth = stats.max_depth.max(depth);
-            let node = &self.nodes[n];
-            for i in 0..node.len() {
-                let area = relative(node.slot_bounds(i));
-                if node.count[i] > 0 {
-                    stats.leaves += 1;
-                    stats.max_leaf_size = stats.max_leaf_size.max(node.count[i] as usize);
-                    cost += area * node.count[i] as f64 * costs.intersection as f64;
-                } else {
-                    cost += area * costs.traversal as f64;
-                    stack.push((node.child[i] as usize, depth + 1));
-                }
-            }
-        }
-        stats.sah_cost = cost as f32;
-        stats
+        }));
+    }
+
+    fn prim_indices(&self) -> &[u32] {
+        &self.prim_indices
+    }
+
+    fn node_count(&self) -> usize {
+        self.nodes.len()
+    }
+
+    fn memory_bytes(&self) -> usize {
+        std::mem::size_of_val(self.nodes.as_slice())
+            + std::mem::size_of_val(self.prim_indices.as_slice())
+            + std::mem::size_of_val(self.packs.as_slice())
     }
 }
 
