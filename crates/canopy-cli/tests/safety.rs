@@ -403,6 +403,14 @@ fn meaningless_scenes_fail_check_and_render() {
             format!("{CAMERA}[[spheres]]\ncenter = [0, 0, 0]\nradius = 1\nmaterial = {{ type = \"lambertian\", albedo = [2, 0.5, 0.5] }}\n"),
             "`albedo` components must be in [0, 1]",
         ),
+        (
+            format!("{CAMERA}[[spheres]]\ncenter = [0, 0, 0]\nradius = 1\nmaterial = {{ type = \"emissive\", radiance = [1e38, 1, 1] }}\n"),
+            "`radiance` in [0, 1e12]",
+        ),
+        (
+            sphere_scene("background = [1, 1e30, 1]\n"),
+            "background: expected \"sky\" or an [r, g, b] colour with each number in [0, 1e12]",
+        ),
     ];
     for (scene, expected) in cases {
         std::fs::write(dir.join("s.toml"), &scene).unwrap();

@@ -274,6 +274,14 @@ fn finite(values: &[f32]) -> bool {
 /// overflows into an invisible or black render.
 pub const MAX_COORDINATE: f32 = 1e12;
 
+/// Brightest radiance (emitters, background): sums of many samples of it stay finite.
+pub const MAX_RADIANCE: f32 = 1e12;
+
+/// A radiance: every component in [0, MAX_RADIANCE].
+fn radiance_ok(c: &[f32; 3]) -> bool {
+    c.iter().all(|v| (0.0..=MAX_RADIANCE).contains(v))
+}
+
 /// Finite and within [`MAX_COORDINATE`] in magnitude.
 fn in_range(values: &[f32]) -> bool {
     values.iter().all(|v| v.abs() <= MAX_COORDINATE)
@@ -354,12 +362,10 @@ impl SceneBuilder<'_> {
         self.scene.background = match value.get_ref() {
             toml::Value::String(s) if s == "sky" => Background::Sky,
             other => match other.clone().try_into::<[f32; 3]>() {
-                Ok(c) if finite(&c) && c.iter().all(|&v| v >= 0.0) => {
-                    Background::Constant(Vec3::from(c))
-                }
+                Ok(c) if radiance_ok(&c) => Background::Constant(Vec3::from(c)),
                 _ => return self.cx.invalid(
                     span,
-                    "background: expected \"sky\" or an [r, g, b] colour of non-negative numbers",
+                    format!("background: expected \"sky\" or an [r, g, b] colour with each number in [0, {MAX_RADIANCE:e}]"),
                 ),
             },
         };
@@ -372,7 +378,6 @@ impl SceneBuilder<'_> {
             Ok(doc) => doc,
             Err(e) => return self.cx.invalid(span, format!("material: {}", e.message())),
         };
-        let colour_ok = |c: &[f32; 3]| finite(c) && c.iter().all(|&v| v >= 0.0);
         // A surface cannot reflect more light than it receives.
         let albedo_ok = |c: &[f32; 3]| c.iter().all(|v| (0.0..=1.0).contains(v));
         let material = match doc {
@@ -390,13 +395,13 @@ impl SceneBuilder<'_> {
             MaterialDoc::Dielectric { ior } if ior.is_finite() && ior > 0.0 => {
                 Material::Dielectric { ior }
             }
-            MaterialDoc::Emissive { radiance } if colour_ok(&radiance) => Material::Emissive {
+            MaterialDoc::Emissive { radiance } if radiance_ok(&radiance) => Material::Emissive {
                 radiance: radiance.into(),
             },
             _ => {
                 return self.cx.invalid(
                     span,
-                    "material: `albedo` components must be in [0, 1], `radiance` finite and >= 0, `fuzz` in [0, 1], `ior` finite and > 0",
+                    "material: `albedo` components must be in [0, 1], `radiance` in [0, 1e12], `fuzz` in [0, 1], `ior` finite and > 0",
                 )
             }
         };
