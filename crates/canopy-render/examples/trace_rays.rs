@@ -57,6 +57,12 @@ fn run() -> Result<(), String> {
             .ok()
             .and_then(|s| s.parse().ok())
             .unwrap_or(BuildParams::default().max_leaf_size),
+        // Leaves priced in packs for the packed wide layouts, as the renderer builds them.
+        leaf_block: if width == "2" {
+            1
+        } else {
+            canopy_bvh::PACK_LANES as u32
+        },
         ..BuildParams::default()
     };
     let bvh = pool.install(|| build(builder, &boxes, &params));

@@ -50,7 +50,7 @@ struct BinnedSah<'a> {
 
 impl Splitter for BinnedSah<'_> {
     fn split(&self, prims: &mut [u32], bounds: Aabb, must_split: bool) -> Option<usize> {
-        let leaf_cost = prims.len() as f32 * self.params.sah.intersection;
+        let leaf_cost = self.params.leaf_tests(prims.len()) * self.params.sah.intersection;
         let split = self.find_split(prims, bounds)?;
         (split.cost < leaf_cost || must_split).then(|| self.partition(prims, &split))
     }
@@ -109,7 +109,8 @@ impl BinnedSah<'_> {
                 let cost = sah.traversal
                     + sah.intersection
                         * inv_area
-                        * (acc.surface_area() * n as f32 + right_area[b] * right_count[b] as f32);
+                        * (acc.surface_area() * self.params.leaf_tests(n as usize)
+                            + right_area[b] * self.params.leaf_tests(right_count[b] as usize));
                 if best.as_ref().is_none_or(|s| cost < s.cost) {
                     best = Some(Split {
                         axis,

@@ -53,7 +53,8 @@ impl Splitter for SweepSah<'_> {
                 let cost = sah.traversal
                     + sah.intersection
                         * inv_area
-                        * (acc.surface_area() * i as f32 + right_area[i] * (n - i) as f32);
+                        * (acc.surface_area() * self.params.leaf_tests(i)
+                            + right_area[i] * self.params.leaf_tests(n - i));
                 if axis_best.is_none_or(|(c, _)| cost < c) {
                     axis_best = Some((cost, i));
                 }
@@ -65,7 +66,7 @@ impl Splitter for SweepSah<'_> {
             }
         }
         let (cost, mid, sorted) = best?;
-        let leaf_cost = n as f32 * sah.intersection;
+        let leaf_cost = self.params.leaf_tests(n) * sah.intersection;
         (cost < leaf_cost || must_split).then(|| {
             prims.copy_from_slice(&sorted);
             mid
