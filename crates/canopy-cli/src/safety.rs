@@ -72,14 +72,35 @@ pub fn check_writable_dir(path: &Path, what: &str) -> anyhow::Result<()> {
             path.display()
         );
     }
-    let probe = dir.join(format!(".canopy-probe-{}", std::process::id()));
-    match std::fs::File::create(&probe) {
-        Ok(_) => {
-            let _ = std::fs::remove_file(&probe);
-            Ok(())
+    // A probe file of a fresh name (never an existing one: create_new does not open
+    // what is there), removed at once.
+    let mut last_error = None;
+    for attempt in 0..16 {
+        let probe = dir.join(format!(".canopy-probe-{}-{attempt}", std::process::id()));
+        match std::fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(&probe)
+        {
+            Ok(_) => {
+                let _ = std::fs::remove_file(&probe);
+                return Ok(());
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => continue,
+            Err(e) => {
+                last_error = Some(e);
+                break;
+            }
         }
-        Err(e) => bail!(
+    }
+    match last_error {
+        Some(e) => bail!(
             "{}: cannot write the {what} in {}: {e}",
+            path.display(),
+            dir.display()
+        ),
+        None => bail!(
+            "{}: cannot write the {what} in {}: no free name for a test file",
             path.display(),
             dir.display()
         ),
