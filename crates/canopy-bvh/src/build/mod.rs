@@ -158,7 +158,47 @@ pub struct BuildParams {
     pub leaf_block: u32,
 }
 
+/// Why build parameters cannot be used as given.
+#[derive(Clone, Debug, Error, PartialEq)]
+pub enum ParamsError {
+    #[error("max_leaf_size must be at least 1")]
+    LeafSize,
+    #[error("leaf_block must be at least 1")]
+    LeafBlock,
+    #[error("bins must be in 2..={max}, not {bins}", max = binned_sah::MAX_BINS)]
+    Bins { bins: u32 },
+    #[error("the SAH cost `{name}` must be a positive finite number, not {value}")]
+    SahCost { name: &'static str, value: f32 },
+    #[error("ploc_radius must be at least 1")]
+    PlocRadius,
+}
+
 impl BuildParams {
+    /// Checks every parameter; [`build`] would clamp what this refuses.
+    pub fn check(&self) -> Result<(), ParamsError> {
+        if self.max_leaf_size == 0 {
+            return Err(ParamsError::LeafSize);
+        }
+        if self.leaf_block == 0 {
+            return Err(ParamsError::LeafBlock);
+        }
+        if !(2..=binned_sah::MAX_BINS as u32).contains(&self.bins) {
+            return Err(ParamsError::Bins { bins: self.bins });
+        }
+        for (name, value) in [
+            ("traversal", self.sah.traversal),
+            ("intersection", self.sah.intersection),
+        ] {
+            if !(value.is_finite() && value > 0.0) {
+                return Err(ParamsError::SahCost { name, value });
+            }
+        }
+        if self.ploc_radius == 0 {
+            return Err(ParamsError::PlocRadius);
+        }
+        Ok(())
+    }
+
     /// The SAH price of testing `n` primitives in a leaf, in units of one test.
     #[inline]
     pub(crate) fn leaf_tests(&self, n: usize) -> f32 {
@@ -178,9 +218,22 @@ impl Default for BuildParams {
     }
 }
 
+/// [`build`], refusing parameters that [`BuildParams::check`] refuses instead of
+/// clamping them.
+pub fn try_build(
+    builder: Builder,
+    boxes: &[Aabb],
+    params: &BuildParams,
+) -> Result<Bvh2, ParamsError> {
+    params.check()?;
+    Ok(build(builder, boxes, params))
+}
+
 /// Builds a BVH over primitives given by their bounding boxes.
 ///
-/// Boxes must not contain NaN; an empty box is allowed and is never hit.
+/// Boxes must not contain NaN; an empty box is allowed and is never hit. Parameters out
+/// of range are clamped (a leaf size or block of 0 to 1, bins to 2..=32); use
+/// [`try_build`] or [`BuildParams::check`] to refuse them instead.
 pub fn build(builder: Builder, boxes: &[Aabb], params: &BuildParams) -> Bvh2 {
     let params = BuildParams {
         max_leaf_size: params.max_leaf_size.max(1),
@@ -243,5 +296,58 @@ mod tests {
                 "{builder}: {packed} leaves priced in fours, {single} priced one by one"
             );
         }
+    }
+
+    #[test]
+    fn check_names_what_is_wrong_and_try_build_refuses_it() {
+        let ok = BuildParams::default();
+        assert_eq!(ok.check(), Ok(()));
+        let cases = [
+            (
+                BuildParams {
+                    max_leaf_size: 0,
+                    ..ok
+                },
+                ParamsError::LeafSize,
+            ),
+            (
+                BuildParams {
+                    leaf_block: 0,
+                    ..ok
+                },
+                ParamsError::LeafBlock,
+            ),
+            (BuildParams { bins: 1, ..ok }, ParamsError::Bins { bins: 1 }),
+            (
+                BuildParams { bins: 33, ..ok },
+                ParamsError::Bins { bins: 33 },
+            ),
+            (
+                BuildParams {
+                    ploc_radius: 0,
+                    ..ok
+                },
+                ParamsError::PlocRadius,
+            ),
+        ];
+        for (params, expected) in cases {
+            assert_eq!(params.check(), Err(expected.clone()));
+            assert_eq!(
+                try_build(Builder::BinnedSah, &[Aabb::EMPTY], &params).unwrap_err(),
+                expected
+            );
+        }
+        for value in [0.0, -1.0, f32::NAN, f32::INFINITY] {
+            let params = BuildParams {
+                sah: SahCosts {
+                    traversal: value,
+                    intersection: 1.0,
+                },
+                ..ok
+            };
+            let e = params.check().unwrap_err();
+            assert!(e.to_string().contains("`traversal`"), "{e}");
+        }
+        assert!(try_build(Builder::Ploc, &[Aabb::EMPTY; 3], &ok).is_ok());
     }
 }
