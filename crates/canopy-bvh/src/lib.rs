@@ -33,7 +33,9 @@ pub mod view;
 mod wide;
 
 pub use aabb::Aabb;
-pub use build::{build, try_build, BuildParams, Builder, ParamsError, SahCosts, UnknownBuilder};
+pub use build::{
+    build, try_build, BuildParams, Builder, ParamsError, Preset, SahCosts, UnknownBuilder,
+};
 pub use bvh2::{Bvh2, Bvh2Node, BvhError};
 pub use isa::{Isa, IsaError};
 pub use layout::{BvhWidth, Tree};

@@ -1,6 +1,6 @@
 //! Regression guard on tree quality: binned SAH must stay close to the full sweep.
 
-use canopy_bvh::{build, BuildParams, Builder};
+use canopy_bvh::{build, BuildParams, Builder, Preset};
 use canopy_render::load_scene;
 
 #[test]
@@ -19,5 +19,26 @@ fn binned_sah_is_within_ten_percent_of_sweep_sah_on_the_bunny() {
     assert!(
         binned <= 1.10 * sweep,
         "binned SAH {binned} is more than 10% above sweep SAH {sweep}"
+    );
+}
+
+#[test]
+fn presets_trade_build_time_for_tree_quality_in_order_on_the_bunny() {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../scenes/meshes/bunny.ply");
+    let boxes = load_scene(path).unwrap().primitive_bounds();
+    let sah = |preset: Preset| {
+        let (builder, params) = preset.choice();
+        let bvh = canopy_bvh::try_build(builder, &boxes, &params).unwrap();
+        bvh.validate(&boxes).unwrap();
+        bvh.stats(&params.sah).sah_cost
+    };
+    let (fast, balanced, best) = (
+        sah(Preset::FastBuild),
+        sah(Preset::Balanced),
+        sah(Preset::BestTrees),
+    );
+    assert!(
+        best <= balanced * 1.01 && balanced < fast,
+        "SAH: fast-build {fast}, balanced {balanced}, best-trees {best}"
     );
 }

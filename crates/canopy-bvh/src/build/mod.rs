@@ -8,8 +8,11 @@ mod median;
 mod merge_tree;
 mod morton;
 mod ploc;
+mod presets;
 mod sweep_sah;
 mod top_down;
+
+pub use presets::Preset;
 
 use crate::{Aabb, Bvh2};
 use std::fmt;
