@@ -213,6 +213,25 @@ impl PackHits {
         self.u[lane] = hit.u;
         self.v[lane] = hit.v;
     }
+
+    /// Tests the `lanes` of `pack` one by one in the scalar core, adding their hits.
+    #[inline(always)]
+    fn add_scalar_lanes(
+        &mut self,
+        pack: &TrianglePack,
+        ray: &PackRay,
+        mut lanes: u32,
+        t_min: f32,
+        t_max: f32,
+    ) {
+        while lanes != 0 {
+            let lane = lanes.trailing_zeros() as usize;
+            lanes &= lanes - 1;
+            if let Some(hit) = pack.lane_edges(lane, ray).hit(ray.shear, t_min, t_max) {
+                self.set(lane, hit);
+            }
+        }
+    }
 }
 
 /// A 4-lane triangle test: [`Scalar`] or [`Sse2`], identical in every bit.
@@ -231,14 +250,7 @@ impl PackKernel for ScalarPack {
     #[inline(always)]
     unsafe fn test(pack: &TrianglePack, ray: &PackRay, t_min: f32, t_max: f32) -> PackHits {
         let mut hits = PackHits::default();
-        let mut lanes = pack.triangles;
-        while lanes != 0 {
-            let lane = lanes.trailing_zeros() as usize;
-            lanes &= lanes - 1;
-            if let Some(hit) = pack.lane_edges(lane, ray).hit(ray.shear, t_min, t_max) {
-                hits.set(lane, hit);
-            }
-        }
+        hits.add_scalar_lanes(pack, ray, pack.triangles, t_min, t_max);
         hits
     }
 }
@@ -337,14 +349,9 @@ mod sse2 {
                     _mm_storeu_ps(hits.u.as_mut_ptr(), _mm_div_ps(v, det));
                     _mm_storeu_ps(hits.v.as_mut_ptr(), _mm_div_ps(w, det));
                 }
-                let mut redo = redo;
-                while redo != 0 {
-                    let lane = redo.trailing_zeros() as usize;
-                    redo &= redo - 1;
-                    if let Some(hit) = pack.lane_edges(lane, ray).hit(ray.shear, t_min, t_max) {
-                        hits.set(lane, hit);
-                    }
-                }
+                // Lanes with an exactly-zero edge function go to the scalar core's
+                // f64 fallback.
+                hits.add_scalar_lanes(pack, ray, redo, t_min, t_max);
                 hits
             }
         }

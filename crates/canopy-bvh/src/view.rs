@@ -29,15 +29,14 @@ pub enum ChildKind {
 
 /// A layout as a walk over boxes, children and leaf ranges.
 pub trait TreeView {
-    /// Storage entries, each of which must be reached exactly once from the root.
+    /// Storage entries (the layout's nodes, [`TreeStats::nodes`]), each of which must be
+    /// reached exactly once from the root.
     fn slot_count(&self) -> usize;
     /// The root: an inner node, or a leaf (a tree of one leaf); `None` when empty.
     fn root(&self) -> Option<Child>;
     /// Replaces `out` with the children of inner node `node`.
     fn children(&self, node: usize, out: &mut Vec<Child>);
     fn prim_indices(&self) -> &[u32];
-    /// Node storage in the layout's own terms (for [`TreeStats::nodes`]).
-    fn node_count(&self) -> usize;
     /// Bytes the layout keeps: nodes, indices and any packed primitives.
     fn memory_bytes(&self) -> usize;
 }
@@ -144,7 +143,7 @@ pub fn validate(view: &dyn TreeView, boxes: &[Aabb]) -> Result<(), BvhError> {
 /// Depth counts boxes from the root's to the deepest leaf's, both included.
 pub fn stats(view: &dyn TreeView, costs: &SahCosts) -> TreeStats {
     let mut stats = TreeStats {
-        nodes: view.node_count(),
+        nodes: view.slot_count(),
         memory_bytes: view.memory_bytes(),
         ..TreeStats::default()
     };

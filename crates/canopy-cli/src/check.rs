@@ -1,5 +1,6 @@
 //! `canopy check`: load and validate a scene, then describe it without rendering.
 
+use crate::scene_facts::SceneFacts;
 use crate::units::human_bytes;
 use canopy_bvh::Aabb;
 use canopy_bvh::Bvh2Node;
@@ -25,18 +26,10 @@ pub struct CheckArgs {
 /// What `canopy check` reports.
 #[derive(Serialize)]
 struct Description {
-    scene: String,
+    #[serde(flatten)]
+    facts: SceneFacts,
     name: String,
     description: String,
-    width: u32,
-    height: u32,
-    spp: u32,
-    max_depth: u32,
-    seed: u64,
-    primitives: usize,
-    spheres: usize,
-    triangles: usize,
-    cuboids: usize,
     materials: usize,
     emissive_materials: usize,
     bounds_min: [f32; 3],
@@ -65,25 +58,14 @@ pub fn run(args: &CheckArgs) -> anyhow::Result<()> {
 }
 
 fn describe(arg: &str, scene: &Scene) -> Description {
-    let s = scene.settings;
-    let counts = scene.shape_counts();
     let bounds = scene
         .primitive_bounds()
         .into_iter()
         .fold(Aabb::EMPTY, Aabb::union);
     Description {
-        scene: arg.to_owned(),
+        facts: SceneFacts::of(arg, scene),
         name: scene.name.clone(),
         description: scene.description.clone(),
-        width: s.width,
-        height: s.height,
-        spp: s.spp,
-        max_depth: s.max_depth,
-        seed: s.seed,
-        primitives: scene.primitives.len(),
-        spheres: counts.spheres,
-        triangles: counts.triangles,
-        cuboids: counts.cuboids,
         materials: scene.materials.len(),
         emissive_materials: scene
             .materials
@@ -92,7 +74,7 @@ fn describe(arg: &str, scene: &Scene) -> Description {
             .count(),
         bounds_min: bounds.min.to_array(),
         bounds_max: bounds.max.to_array(),
-        film_bytes: s.film_bytes(),
+        film_bytes: scene.settings.film_bytes(),
         geometry_bytes: scene.primitives.len() as u64 * BYTES_PER_PRIMITIVE,
         warnings: scene.warnings(),
     }
@@ -107,14 +89,8 @@ fn lines(scene: &Scene, d: &Description) -> Vec<String> {
             "camera      from {} to {}, up {}, vfov {}°, aperture {}",
             c.look_from, c.look_at, c.up, c.vfov, c.aperture
         ),
-        format!(
-            "render      {}x{}, {} spp, depth {}, seed {}",
-            d.width, d.height, d.spp, d.max_depth, d.seed
-        ),
-        format!(
-            "primitives  {} ({} spheres, {} triangles, {} cuboids)",
-            d.primitives, d.spheres, d.triangles, d.cuboids
-        ),
+        format!("render      {}", d.facts.settings_text()),
+        format!("primitives  {}", d.facts.primitives_text()),
         format!(
             "materials   {} ({} emissive)",
             d.materials, d.emissive_materials

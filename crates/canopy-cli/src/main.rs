@@ -7,6 +7,7 @@ mod check;
 mod limits;
 mod render;
 mod safety;
+mod scene_facts;
 mod units;
 
 use clap::{Parser, Subcommand};

@@ -7,6 +7,7 @@ use crate::safety::{
     check_checkpoint_slot, check_memory, check_writable_dir, file_stem_from_name, refuse_inputs,
     same_file,
 };
+use crate::scene_facts::SceneFacts;
 use crate::Interrupted;
 use anyhow::{bail, Context};
 use canopy_render::camera::Camera;
@@ -91,16 +92,8 @@ fn parse_accel(s: &str) -> Result<AccelKind, String> {
 /// `--json`. Warnings also go to stderr as they happen.
 #[derive(Default, Serialize)]
 struct Summary {
-    scene: String,
-    width: u32,
-    height: u32,
-    spp: u32,
-    max_depth: u32,
-    seed: u64,
-    primitives: usize,
-    spheres: usize,
-    triangles: usize,
-    cuboids: usize,
+    #[serde(flatten)]
+    facts: SceneFacts,
     /// `none`, or the builder's name.
     bvh: String,
     bvh_width: u32,
@@ -347,19 +340,8 @@ fn finish(summary: &Summary, json: bool) -> anyhow::Result<()> {
 }
 
 fn scene_summary(args: &RenderArgs, job: &Job, accel: &Accel, threads: usize) -> Summary {
-    let s = job.scene.settings;
-    let counts = job.scene.shape_counts();
     Summary {
-        scene: job.source.clone(),
-        width: s.width,
-        height: s.height,
-        spp: s.spp,
-        max_depth: s.max_depth,
-        seed: s.seed,
-        primitives: job.scene.primitives.len(),
-        spheres: counts.spheres,
-        triangles: counts.triangles,
-        cuboids: counts.cuboids,
+        facts: SceneFacts::of(&job.source, &job.scene),
         bvh: args.bvh.to_string(),
         bvh_width: args.width.children(),
         build_ms: accel.build_time.as_secs_f64() * 1e3,
@@ -452,22 +434,11 @@ fn describe_levels(levels: LevelRange) -> String {
 fn print_scene_summary(s: &Summary, json: bool) {
     say!(
         json,
-        "scene       {} ({}x{}, {} spp, depth {}, seed {})",
-        s.scene,
-        s.width,
-        s.height,
-        s.spp,
-        s.max_depth,
-        s.seed
+        "scene       {} ({})",
+        s.facts.scene,
+        s.facts.settings_text()
     );
-    say!(
-        json,
-        "primitives  {} ({} spheres, {} triangles, {} cuboids)",
-        s.primitives,
-        s.spheres,
-        s.triangles,
-        s.cuboids
-    );
+    say!(json, "primitives  {}", s.facts.primitives_text());
     if s.bvh == "none" {
         say!(json, "bvh         none");
     } else {

@@ -7,17 +7,25 @@ use canopy_render::checkpoint::Checkpoint;
 use canopy_render::files::available_memory;
 use std::path::{Path, PathBuf};
 
+/// The directory a file at `path` lives in (`.` for a bare file name).
+fn directory_of(path: &Path) -> &Path {
+    match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    }
+}
+
 /// The absolute form of a path that may not exist yet: its directory resolved (links
 /// followed), its file name kept. `None` when the directory does not exist.
 fn resolved(path: &Path) -> Option<PathBuf> {
     if let Ok(full) = std::fs::canonicalize(path) {
         return Some(full);
     }
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
-    Some(std::fs::canonicalize(dir).ok()?.join(path.file_name()?))
+    Some(
+        std::fs::canonicalize(directory_of(path))
+            .ok()?
+            .join(path.file_name()?),
+    )
 }
 
 /// Whether two paths name the same file (or would, once created).
@@ -55,10 +63,7 @@ pub fn check_checkpoint_slot(path: &Path) -> anyhow::Result<()> {
 /// Fails unless a file can be created next to `path` (its directory exists and is
 /// writable): found at the start, not after the render.
 pub fn check_writable_dir(path: &Path, what: &str) -> anyhow::Result<()> {
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
+    let dir = directory_of(path);
     if !dir.is_dir() {
         bail!(
             "{}: cannot write the {what}: directory {} does not exist",

@@ -5,24 +5,13 @@
 //! The dragons are read from `$CANOPY_MESHES`, else `../shared/assets/meshes` next to
 //! the repository; without them those inputs are skipped with a note.
 
-use canopy_bvh::{build, Aabb, BuildParams, Builder, Bvh4, Bvh8, Ray};
-use canopy_render::camera::Camera;
-use canopy_render::rng::Rng;
-use canopy_render::{load_scene, Scene};
-use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
-use std::path::PathBuf;
-use std::time::Duration;
+mod common;
 
-fn mesh_dir() -> PathBuf {
-    std::env::var_os("CANOPY_MESHES")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| {
-            PathBuf::from(concat!(
-                env!("CARGO_MANIFEST_DIR"),
-                "/../../../shared/assets/meshes"
-            ))
-        })
-}
+use canopy_bvh::{build, Aabb, BuildParams, Builder, Bvh4, Bvh8, Ray};
+use canopy_render::{load_scene, Scene};
+use common::{camera_rays, mesh_dir};
+use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
+use std::time::Duration;
 
 /// (label, scene) for every input that is available.
 fn inputs() -> Vec<(&'static str, Scene)> {
@@ -70,27 +59,11 @@ fn build_times(c: &mut Criterion) {
     }
 }
 
-/// Camera rays through a 256x256 grid, one per pixel.
-fn camera_rays(scene: &Scene) -> Vec<Ray> {
-    let (w, h) = (256, 256);
-    let camera = Camera::new(&scene.camera, w, h);
-    let mut rng = Rng::for_sample(0, 0, 0);
-    (0..w * h)
-        .map(|i| {
-            camera.ray(
-                ((i % w) as f32 + 0.5) / w as f32,
-                ((i / w) as f32 + 0.5) / h as f32,
-                &mut rng,
-            )
-        })
-        .collect()
-}
-
 fn closest_hit(c: &mut Criterion) {
     let params = BuildParams::default();
     for (label, scene) in inputs() {
         let boxes = scene.primitive_bounds();
-        let rays = camera_rays(&scene);
+        let rays = camera_rays(&scene, 256);
         let test = |p: u32, r: &Ray| scene.primitives[p as usize].shape.intersect(r);
         let mut group = c.benchmark_group(format!("trace/{label}"));
         group

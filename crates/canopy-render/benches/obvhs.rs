@@ -13,31 +13,24 @@
 //! same build time as embree but with faster traversal") and its Möller-Trumbore triangle
 //! test, as in its examples.
 
+mod common;
+
 use canopy_bvh::{build, BuildParams, Builder, Bvh8, Ray, PACK_LANES};
-use canopy_render::camera::Camera;
 use canopy_render::geometry::Shape;
 use canopy_render::rng::Rng;
 use canopy_render::{load_scene, Scene};
+use common::{camera_rays, mesh_dir};
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use glam::Vec3;
 use obvhs::cwbvh::{builder::build_cwbvh_from_tris, CwBvh};
 use obvhs::ray::RayHit;
-use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 /// Rays per set: enough to leave the caches, few enough for criterion's samples.
 const RAYS_SIDE: u32 = 256;
 
 fn mesh() -> (String, Scene) {
-    let dir = std::env::var_os("CANOPY_MESHES")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| {
-            PathBuf::from(concat!(
-                env!("CARGO_MANIFEST_DIR"),
-                "/../../../shared/assets/meshes"
-            ))
-        });
-    let dragon = dir.join("dragon_res2.ply");
+    let dragon = mesh_dir().join("dragon_res2.ply");
     let bunny = concat!(env!("CARGO_MANIFEST_DIR"), "/../../scenes/meshes/bunny.ply");
     match load_scene(&dragon.display().to_string()) {
         Ok(scene) => ("dragon-202k".into(), scene),
@@ -149,21 +142,6 @@ impl Trees {
     }
 }
 
-/// Camera rays, one per pixel of a RAYS_SIDE² image.
-fn primary_rays(scene: &Scene) -> Vec<Ray> {
-    let camera = Camera::new(&scene.camera, RAYS_SIDE, RAYS_SIDE);
-    let mut rng = Rng::for_sample(0, 0, 0);
-    (0..RAYS_SIDE * RAYS_SIDE)
-        .map(|i| {
-            camera.ray(
-                ((i % RAYS_SIDE) as f32 + 0.5) / RAYS_SIDE as f32,
-                ((i / RAYS_SIDE) as f32 + 0.5) / RAYS_SIDE as f32,
-                &mut rng,
-            )
-        })
-        .collect()
-}
-
 /// Rays leaving the primary hits, just off the surface, in directions uniform on the
 /// sphere (as the Embree comparison makes them).
 fn incoherent_rays(trees: &Trees, tris: &[[Vec3; 3]], primary: &[Ray], scale: f32) -> Vec<Ray> {
@@ -235,7 +213,7 @@ fn versus_obvhs(c: &mut Criterion) {
     let (label, scene) = mesh();
     let tris = triangles(&scene);
     let trees = trees(&tris);
-    let primary = primary_rays(&scene);
+    let primary = camera_rays(&scene, RAYS_SIDE);
     let bounds = scene
         .primitive_bounds()
         .into_iter()

@@ -156,10 +156,7 @@ impl Checkpoint {
         let bytes = read_regular_file(path, MAX_CHECKPOINT_BYTES).map_err(|cause| {
             CheckpointError::Read {
                 file: file.clone(),
-                cause: match cause {
-                    crate::files::ReadError::Io(e) => e,
-                    other => std::io::Error::other(other.to_string()),
-                },
+                cause: cause.into(),
             }
         })?;
         Self::from_bytes(&bytes).map_err(|what| CheckpointError::Corrupt { file, what })

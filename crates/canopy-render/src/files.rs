@@ -21,6 +21,17 @@ pub enum ReadError {
     TooLarge { size: u64, limit: u64 },
 }
 
+/// For errors that carry an `io::Error` cause: I/O errors as they are, refusals as
+/// errors of their own kind with the same message.
+impl From<ReadError> for io::Error {
+    fn from(e: ReadError) -> Self {
+        match e {
+            ReadError::Io(e) => e,
+            other => io::Error::other(other.to_string()),
+        }
+    }
+}
+
 /// What kind of non-regular thing a path names, for the message.
 fn kind_of(meta: &std::fs::Metadata) -> &'static str {
     use std::os::unix::fs::FileTypeExt;

@@ -41,10 +41,7 @@ pub fn load_scene_file(path: &Path) -> Result<Scene, SceneError> {
     let display = path.display().to_string();
     let read_error = |cause: files::ReadError| SceneError::Read {
         file: display.clone(),
-        cause: match cause {
-            files::ReadError::Io(e) => e,
-            other => std::io::Error::other(other.to_string()),
-        },
+        cause: cause.into(),
     };
     let bytes = files::read_regular_file(path, MAX_SCENE_FILE_BYTES).map_err(read_error)?;
     let source = String::from_utf8(bytes).map_err(|_| SceneError::Read {

@@ -315,10 +315,6 @@ impl<const N: usize> TreeView for BvhN<N> {
         &self.prim_indices
     }
 
-    fn node_count(&self) -> usize {
-        self.nodes.len()
-    }
-
     fn memory_bytes(&self) -> usize {
         std::mem::size_of_val(self.nodes.as_slice())
             + std::mem::size_of_val(self.prim_indices.as_slice())

@@ -1,0 +1,55 @@
+//! What `canopy render` and `canopy check` both report about a scene, in text and JSON.
+
+use canopy_render::Scene;
+use serde::Serialize;
+
+/// The scene as given, its render settings and its primitive counts.
+#[derive(Default, Serialize)]
+pub struct SceneFacts {
+    /// The scene as the command names it (built-in name or path).
+    pub scene: String,
+    pub width: u32,
+    pub height: u32,
+    pub spp: u32,
+    pub max_depth: u32,
+    pub seed: u64,
+    pub primitives: usize,
+    pub spheres: usize,
+    pub triangles: usize,
+    pub cuboids: usize,
+}
+
+impl SceneFacts {
+    pub fn of(source: &str, scene: &Scene) -> Self {
+        let s = scene.settings;
+        let counts = scene.shape_counts();
+        Self {
+            scene: source.to_owned(),
+            width: s.width,
+            height: s.height,
+            spp: s.spp,
+            max_depth: s.max_depth,
+            seed: s.seed,
+            primitives: scene.primitives.len(),
+            spheres: counts.spheres,
+            triangles: counts.triangles,
+            cuboids: counts.cuboids,
+        }
+    }
+
+    /// `WxH, N spp, depth D, seed S`
+    pub fn settings_text(&self) -> String {
+        format!(
+            "{}x{}, {} spp, depth {}, seed {}",
+            self.width, self.height, self.spp, self.max_depth, self.seed
+        )
+    }
+
+    /// `N (a spheres, b triangles, c cuboids)`
+    pub fn primitives_text(&self) -> String {
+        format!(
+            "{} ({} spheres, {} triangles, {} cuboids)",
+            self.primitives, self.spheres, self.triangles, self.cuboids
+        )
+    }
+}

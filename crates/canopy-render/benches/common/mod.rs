@@ -1,0 +1,35 @@
+//! What the benchmarks share: where the large meshes are, and camera rays.
+#![allow(dead_code)] // each benchmark uses its own subset
+
+use canopy_bvh::Ray;
+use canopy_render::camera::Camera;
+use canopy_render::rng::Rng;
+use canopy_render::Scene;
+use std::path::PathBuf;
+
+/// `$CANOPY_MESHES`, else `../shared/assets/meshes` next to the repository.
+pub fn mesh_dir() -> PathBuf {
+    std::env::var_os("CANOPY_MESHES")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| {
+            PathBuf::from(concat!(
+                env!("CARGO_MANIFEST_DIR"),
+                "/../../../shared/assets/meshes"
+            ))
+        })
+}
+
+/// Camera rays through a `side` x `side` grid, one per pixel centre.
+pub fn camera_rays(scene: &Scene, side: u32) -> Vec<Ray> {
+    let camera = Camera::new(&scene.camera, side, side);
+    let mut rng = Rng::for_sample(0, 0, 0);
+    (0..side * side)
+        .map(|i| {
+            camera.ray(
+                ((i % side) as f32 + 0.5) / side as f32,
+                ((i / side) as f32 + 0.5) / side as f32,
+                &mut rng,
+            )
+        })
+        .collect()
+}
