@@ -83,7 +83,7 @@ pub fn run(args: &BvhArgs) -> anyhow::Result<()> {
         rows,
     };
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&report)?);
+        outln!("{}", serde_json::to_string_pretty(&report)?);
     } else {
         print_table(&report);
     }
@@ -124,16 +124,27 @@ fn measure(
 }
 
 fn print_table(report: &Report) {
-    println!(
+    outln!(
         "{}: {} primitives, {} threads",
-        report.input, report.primitives, report.threads
+        report.input,
+        report.primitives,
+        report.threads
     );
-    println!(
+    outln!(
         "{:<14} {:>5} {:>10} {:>8} {:>8} {:>6} {:>5} {:>6} {:>9} {:>10}",
-        "builder", "width", "build ms", "nodes", "leaves", "leaf", "max", "depth", "SAH", "memory"
+        "builder",
+        "width",
+        "build ms",
+        "nodes",
+        "leaves",
+        "leaf",
+        "max",
+        "depth",
+        "SAH",
+        "memory"
     );
     for r in &report.rows {
-        println!(
+        outln!(
             "{:<14} {:>5} {:>10.2} {:>8} {:>8} {:>6.2} {:>5} {:>6} {:>9.2} {:>10}",
             r.builder,
             r.width,

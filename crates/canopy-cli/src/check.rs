@@ -47,12 +47,12 @@ pub fn run(args: &CheckArgs) -> anyhow::Result<()> {
         eprintln!("warning: {warning}");
     }
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&description)?);
+        outln!("{}", serde_json::to_string_pretty(&description)?);
     } else {
         for line in lines(&scene, &description) {
-            println!("{line}");
+            outln!("{line}");
         }
-        println!("ok          {} is valid", args.scene);
+        outln!("ok          {} is valid", args.scene);
     }
     Ok(())
 }

@@ -1,5 +1,14 @@
 //! `canopy`: render scenes with a choice of BVH, list the built-in scenes.
 
+/// `println!` that never panics: a closed stdout (`canopy render … | head -1`) must not
+/// abort a render or lose its image, so what cannot be printed is dropped.
+macro_rules! outln {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stdout(), $($arg)*);
+    }};
+}
+
 mod bench;
 mod build_args;
 mod bvh;
@@ -82,9 +91,13 @@ fn list_scenes() -> anyhow::Result<()> {
     for builtin in canopy_render::BUILTIN_SCENES {
         let scene = builtin.load()?;
         let counts = scene.shape_counts();
-        println!(
+        outln!(
             "{:<12} {:>4} spheres {:>5} triangles {:>3} cuboids  {}",
-            builtin.name, counts.spheres, counts.triangles, counts.cuboids, scene.description
+            builtin.name,
+            counts.spheres,
+            counts.triangles,
+            counts.cuboids,
+            scene.description
         );
     }
     Ok(())

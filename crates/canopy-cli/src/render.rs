@@ -124,7 +124,7 @@ impl Summary {
 macro_rules! say {
     ($json:expr, $($arg:tt)*) => {
         if !$json {
-            println!($($arg)*);
+            outln!($($arg)*);
         }
     };
 }
@@ -332,9 +332,9 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
 /// Prints the image line, or the whole summary as JSON.
 fn finish(summary: &Summary, json: bool) -> anyhow::Result<()> {
     if json {
-        println!("{}", serde_json::to_string_pretty(summary)?);
+        outln!("{}", serde_json::to_string_pretty(summary)?);
     } else {
-        println!("image       {}", summary.image);
+        outln!("image       {}", summary.image);
     }
     Ok(())
 }

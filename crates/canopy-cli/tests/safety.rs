@@ -526,3 +526,23 @@ fn a_second_ctrl_c_ends_the_render_at_once() {
     );
     std::fs::remove_dir_all(dir).unwrap();
 }
+
+#[test]
+fn a_closed_stdout_neither_panics_nor_loses_the_image() {
+    let dir = scratch("pipe");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_canopy"))
+        .args([
+            "render", "cornell", "--size", "8x8", "--spp", "1", "-o", "out.png",
+        ])
+        .current_dir(&dir)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take()); // as `| head -0` would
+    let out = child.wait_with_output().unwrap();
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(!stderr(&out).contains("panicked"), "{}", stderr(&out));
+    assert!(image::open(dir.join("out.png")).is_ok());
+    std::fs::remove_dir_all(dir).unwrap();
+}

@@ -196,7 +196,7 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
         std::fs::create_dir_all(&args.out)
             .with_context(|| format!("cannot create {}", args.out.display()))?;
         write_outputs(&record, &args.out, &params)?;
-        println!(
+        outln!(
             "remade the outputs of {} measurements in {}",
             record.measurements.len(),
             args.out.display()
@@ -279,7 +279,7 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
         &serde_json::to_string_pretty(&record)?,
     )?;
     pool.install(|| write_outputs(&record, &args.out, &params))?;
-    println!(
+    outln!(
         "wrote {} measurements to {}",
         record.measurements.len(),
         args.out.display()
