@@ -15,7 +15,7 @@ use canopy_render::checkpoint::Checkpoint;
 use canopy_render::visualize::{draw_bvh, render_heatmap, LevelRange};
 use canopy_render::{
     output::image_format, render_samples, write_image, Accel, AccelKind, Accumulator, BvhWidth,
-    RenderStats, Scene,
+    Integrator, RenderStats, Scene,
 };
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -46,6 +46,14 @@ pub struct RenderArgs {
     /// Seed of the random sampling.
     #[arg(long)]
     seed: Option<u64>,
+    /// Estimator: `path` (light sampling with multiple importance sampling) or `bsdf`
+    /// (the report's: light found only by chance) [default: from the scene, else path].
+    #[arg(long)]
+    integrator: Option<Integrator>,
+    /// Never end paths early by Russian roulette (the path integrator's default is to,
+    /// after three bounces; the image's expected value is the same).
+    #[arg(long)]
+    no_roulette: bool,
     /// Worker threads, 1 to 1024 [default: all cores].
     #[arg(long, value_parser = limits::threads())]
     threads: Option<u32>,
@@ -76,7 +84,7 @@ pub struct RenderArgs {
     #[arg(long, default_value = "60s", value_parser = limits::duration, requires = "checkpoint")]
     every: Duration,
     /// Continue the render saved in a checkpoint (scene and settings come from it).
-    #[arg(long, value_name = "FILE", conflicts_with_all = ["scene", "size", "spp", "depth", "seed", "heatmap"])]
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["scene", "size", "spp", "depth", "seed", "integrator", "no_roulette", "heatmap"])]
     resume: Option<PathBuf>,
     /// Print the summary as one JSON object (warnings also go to stderr).
     #[arg(long)]
@@ -103,6 +111,8 @@ struct Summary {
     samples: u32,
     render_seconds: f64,
     rays: u64,
+    /// The shadow rays among `rays`.
+    shadow_rays: u64,
     mrays_per_second: f64,
     image: String,
     /// Where the render's state was saved, when it was interrupted.
@@ -284,6 +294,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     summary.samples = run.accumulator.samples;
     summary.render_seconds = stats.elapsed.as_secs_f64();
     summary.rays = stats.rays;
+    summary.shadow_rays = stats.shadow_rays;
     summary.mrays_per_second = stats.mrays_per_second();
     say!(
         args.json,
@@ -293,9 +304,10 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     );
     say!(
         args.json,
-        "rays        {} ({:.2} Mrays/s)",
+        "rays        {} ({:.2} Mrays/s), {} of them shadow rays",
         stats.rays,
-        summary.mrays_per_second
+        summary.mrays_per_second,
+        stats.shadow_rays
     );
     if run.accumulator.invalid_samples > 0 {
         summary.warn(format!(
@@ -394,6 +406,7 @@ fn progressive(
     while accumulator.samples < scene.settings.spp && !interrupted.load(Ordering::SeqCst) {
         let pass = render_samples(scene, accel, &mut accumulator, 1, &|| progress.inc(1));
         stats.rays += pass.rays;
+        stats.shadow_rays += pass.shadow_rays;
         stats.elapsed += pass.elapsed;
         if let Some(path) = checkpoint {
             if last_save.elapsed() >= every && accumulator.samples < scene.settings.spp {
@@ -460,6 +473,8 @@ fn apply_overrides(scene: &mut Scene, args: &RenderArgs) -> anyhow::Result<()> {
     s.spp = args.spp.unwrap_or(s.spp);
     s.max_depth = args.depth.unwrap_or(s.max_depth);
     s.seed = args.seed.unwrap_or(s.seed);
+    s.integrator = args.integrator.unwrap_or(s.integrator);
+    s.russian_roulette &= !args.no_roulette;
     s.check().map_err(anyhow::Error::msg)?;
     Ok(())
 }

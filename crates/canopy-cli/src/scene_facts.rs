@@ -13,6 +13,9 @@ pub struct SceneFacts {
     pub spp: u32,
     pub max_depth: u32,
     pub seed: u64,
+    /// `path` or `bsdf`.
+    pub integrator: String,
+    pub russian_roulette: bool,
     pub primitives: usize,
     pub spheres: usize,
     pub triangles: usize,
@@ -30,6 +33,8 @@ impl SceneFacts {
             spp: s.spp,
             max_depth: s.max_depth,
             seed: s.seed,
+            integrator: s.integrator.to_string(),
+            russian_roulette: s.russian_roulette,
             primitives: scene.primitives.len(),
             spheres: counts.spheres,
             triangles: counts.triangles,
@@ -37,11 +42,15 @@ impl SceneFacts {
         }
     }
 
-    /// `WxH, N spp, depth D, seed S`
+    /// `WxH, N spp, depth D, seed S, I integrator`
     pub fn settings_text(&self) -> String {
+        let roulette = match (self.integrator.as_str(), self.russian_roulette) {
+            ("path", false) => " without Russian roulette",
+            _ => "",
+        };
         format!(
-            "{}x{}, {} spp, depth {}, seed {}",
-            self.width, self.height, self.spp, self.max_depth, self.seed
+            "{}x{}, {} spp, depth {}, seed {}, {} integrator{roulette}",
+            self.width, self.height, self.spp, self.max_depth, self.seed, self.integrator
         )
     }
 

@@ -89,6 +89,48 @@ fn exr_output_and_brute_force_mode() {
 }
 
 #[test]
+fn integrator_options_choose_the_estimator_and_are_reported() {
+    let dir = scratch("integrator");
+    let run = |extra: &[&str]| {
+        let args = [
+            &["render", "cornell", "--size", "8x8", "--spp", "2", "--json"][..],
+            extra,
+        ]
+        .concat();
+        let out = canopy(&args, &dir);
+        assert!(out.status.success(), "{}", stderr(&out));
+        serde_json::from_slice::<serde_json::Value>(&out.stdout).unwrap()
+    };
+    let path = run(&["-o", "path.png"]);
+    assert_eq!(path["integrator"], "path");
+    assert_eq!(path["russian_roulette"], true);
+    assert!(path["shadow_rays"].as_u64().unwrap() > 0);
+    let bsdf = run(&["-o", "bsdf.png", "--integrator", "bsdf"]);
+    assert_eq!(bsdf["integrator"], "bsdf");
+    assert_eq!(bsdf["shadow_rays"], 0);
+    let no_rr = run(&["-o", "no_rr.png", "--no-roulette"]);
+    assert_eq!(no_rr["russian_roulette"], false);
+    let out = canopy(
+        &[
+            "render",
+            "cornell",
+            "--integrator",
+            "photons",
+            "-o",
+            "x.png",
+        ],
+        &dir,
+    );
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        stderr(&out).contains("expected one of: path, bsdf"),
+        "{}",
+        stderr(&out)
+    );
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+#[test]
 fn scenes_lists_every_builtin() {
     let out = canopy(&["scenes"], &std::env::temp_dir());
     let list = String::from_utf8_lossy(&out.stdout);

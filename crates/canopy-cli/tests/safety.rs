@@ -409,7 +409,7 @@ fn meaningless_scenes_fail_check_and_render() {
         ),
         (
             sphere_scene("background = [1, 1e30, 1]\n"),
-            "background: expected \"sky\" or an [r, g, b] colour with each number in [0, 1e12]",
+            "background: expected \"sky\", an [r, g, b] colour with each number in [0, 1e12]",
         ),
     ];
     for (scene, expected) in cases {

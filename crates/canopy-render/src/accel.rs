@@ -159,6 +159,40 @@ impl Accel {
     }
 }
 
+impl Accel {
+    /// Whether anything blocks `ray` within its range (any hit, not the closest): the
+    /// shadow-ray query.
+    #[inline]
+    pub fn occluded(&self, primitives: &[Primitive], ray: &Ray) -> bool {
+        let sheared = if self.has_triangles {
+            ShearedRay::new(ray)
+        } else {
+            ShearedRay::UNUSED
+        };
+        let test = |prim: u32, ray: &Ray| {
+            primitives[prim as usize]
+                .shape
+                .intersect_sheared(ray, &sheared)
+                .is_some()
+        };
+        let test_other = |prim: u32, ray: &Ray| {
+            primitives[prim as usize]
+                .shape
+                .intersect_non_triangle(ray)
+                .is_some()
+        };
+        match &self.tree {
+            Some(tree) if tree.has_triangle_packs() || !self.has_triangles => {
+                tree.occluded(ray, test_other)
+            }
+            Some(tree) => tree.occluded(ray, test),
+            None => primitives
+                .iter()
+                .any(|p| p.shape.intersect_sheared(ray, &sheared).is_some()),
+        }
+    }
+}
+
 fn has_triangles(primitives: &[Primitive]) -> bool {
     primitives
         .iter()

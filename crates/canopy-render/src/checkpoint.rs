@@ -7,6 +7,7 @@
 //! ```text
 //! b"CANOPYCK" | version u32 | fingerprint u64 | scene: u32 length + UTF-8 |
 //! width u32 | height u32 | spp u32 | max_depth u32 | seed u64 |
+//! integrator u32 (0 path, 1 bsdf) | russian_roulette u32 (0 or 1) |
 //! samples u32 | rays u64 | invalid u64 | sums: width*height*3 f32 | checksum u64
 //! ```
 //!
@@ -18,7 +19,7 @@ use crate::files::{read_prefix, read_regular_file};
 use crate::geometry::Shape;
 use crate::integrator::Accumulator;
 use crate::output::write_atomically;
-use crate::scene::{RenderSettings, Scene};
+use crate::scene::{Integrator, RenderSettings, Scene};
 use glam::Vec3;
 use std::io::Write;
 use std::path::Path;
@@ -26,7 +27,8 @@ use thiserror::Error;
 
 const MAGIC: &[u8; 8] = b"CANOPYCK";
 /// Version 2: the scene path is absolute and the fingerprint covers all geometry.
-const VERSION: u32 = 2;
+/// Version 3: the integrator and Russian roulette settings.
+const VERSION: u32 = 3;
 
 /// Largest checkpoint read: the header and the largest film allowed.
 const MAX_CHECKPOINT_BYTES: u64 = 1024 * 1024 + RenderSettings::MAX_PIXELS * 12;
@@ -129,6 +131,12 @@ impl Checkpoint {
             out.extend(v.to_le_bytes());
         }
         out.extend(s.seed.to_le_bytes());
+        let integrator = Integrator::ALL
+            .iter()
+            .position(|&i| i == s.integrator)
+            .expect("every integrator is listed") as u32;
+        out.extend(integrator.to_le_bytes());
+        out.extend((s.russian_roulette as u32).to_le_bytes());
         out.extend(a.samples.to_le_bytes());
         out.extend(a.rays.to_le_bytes());
         out.extend(a.invalid_samples.to_le_bytes());
@@ -192,6 +200,14 @@ impl Checkpoint {
             spp: r.u32()?,
             max_depth: r.u32()?,
             seed: r.u64()?,
+            integrator: *Integrator::ALL
+                .get(r.u32()? as usize)
+                .ok_or("unknown integrator")?,
+            russian_roulette: match r.u32()? {
+                0 => false,
+                1 => true,
+                _ => return Err("bad Russian roulette flag".into()),
+            },
         };
         settings.check()?;
         let (samples, rays, invalid_samples) = (r.u32()?, r.u64()?, r.u64()?);
@@ -305,6 +321,14 @@ mod tests {
         let back = Checkpoint::from_bytes(&checkpoint.to_bytes()).unwrap();
         assert_eq!(back, checkpoint);
         assert!(back.matches(&scene, Path::new("x")).is_ok());
+        // The integrator settings travel too.
+        let mut bsdf = scene.clone();
+        bsdf.settings.integrator = Integrator::Bsdf;
+        bsdf.settings.russian_roulette = false;
+        let other = Checkpoint::new("cornell", &bsdf, checkpoint.accumulator.clone());
+        let back = Checkpoint::from_bytes(&other.to_bytes()).unwrap();
+        assert_eq!(back.settings, bsdf.settings);
+        assert!(back.matches(&scene, Path::new("x")).is_err());
     }
 
     #[test]

@@ -5,6 +5,7 @@
 //! [`Film`] -> image file.
 
 pub mod accel;
+pub mod background;
 pub mod builtin;
 pub mod camera;
 pub mod checkpoint;
@@ -13,22 +14,25 @@ pub mod files;
 pub mod film;
 pub mod geometry;
 pub mod integrator;
+pub mod lights;
 pub mod material;
 pub mod mesh;
 pub mod output;
 pub mod rng;
+pub mod sampling;
 pub mod scene;
 pub mod scene_file;
 pub mod visualize;
 
 pub use accel::{Accel, AccelKind};
+pub use background::{Background, EnvironmentMap};
 pub use builtin::{BuiltinScene, BUILTIN_SCENES};
 pub use canopy_bvh::BvhWidth;
 pub use error::{OutputError, SceneError};
 pub use film::Film;
 pub use integrator::{render, render_counted, render_samples, Accumulator, RenderStats};
 pub use output::write_image;
-pub use scene::{Background, RenderSettings, Scene};
+pub use scene::{Integrator, RenderSettings, Scene};
 
 use scene_file::{parse_scene, DirAssets};
 use std::path::Path;

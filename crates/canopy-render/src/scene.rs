@@ -1,5 +1,6 @@
 //! The validated, in-memory scene that the integrator renders.
 
+pub use crate::background::Background;
 use crate::camera::CameraSpec;
 use crate::geometry::Shape;
 use crate::material::Material;
@@ -7,25 +8,43 @@ use canopy_bvh::Aabb;
 use glam::Vec3;
 use std::path::PathBuf;
 
-/// What a ray that leaves the scene sees.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub enum Background {
-    /// The report's sky: white at the horizon blending to light blue overhead.
+/// How the radiance of a pixel sample is estimated.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Integrator {
+    /// Path tracing with light sampling (next-event estimation) and multiple importance
+    /// sampling against the BSDF, with Russian roulette when the settings allow.
     #[default]
-    Sky,
-    Constant(Vec3),
+    Path,
+    /// The report's estimator: follow the BSDF and count light only where a path happens
+    /// to hit it. No light sampling, no Russian roulette.
+    Bsdf,
 }
 
-impl Background {
-    #[inline]
-    pub fn radiance(&self, dir: Vec3) -> Vec3 {
-        match *self {
-            Background::Sky => {
-                let a = 0.5 * (dir.normalize().y + 1.0);
-                (1.0 - a) * Vec3::ONE + a * Vec3::new(0.5, 0.7, 1.0)
-            }
-            Background::Constant(c) => c,
+impl Integrator {
+    pub const ALL: [Integrator; 2] = [Integrator::Path, Integrator::Bsdf];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Integrator::Path => "path",
+            Integrator::Bsdf => "bsdf",
         }
+    }
+}
+
+impl std::fmt::Display for Integrator {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for Integrator {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Integrator::ALL
+            .into_iter()
+            .find(|i| i.name() == s)
+            .ok_or_else(|| format!("unknown integrator `{s}`, expected one of: path, bsdf"))
     }
 }
 
@@ -39,6 +58,10 @@ pub struct RenderSettings {
     /// Most ray segments per path, the camera ray included (the report's "bounces").
     pub max_depth: u32,
     pub seed: u64,
+    pub integrator: Integrator,
+    /// Let the path integrator end paths at random after a few bounces, weighting the
+    /// survivors up (unbiased; saves time on long, dim paths).
+    pub russian_roulette: bool,
 }
 
 impl RenderSettings {
@@ -94,6 +117,8 @@ impl Default for RenderSettings {
             spp: 64,
             max_depth: 8,
             seed: 0,
+            integrator: Integrator::Path,
+            russian_roulette: true,
         }
     }
 }

@@ -1,6 +1,7 @@
 //! The TOML scene format (documented in `docs/scene-format.md`) and its translation into a
 //! validated [`Scene`]. Every error names the file and the line of the offending entry.
 
+use crate::background::decode_environment;
 use crate::camera::CameraSpec;
 use crate::error::SceneError;
 use crate::files::{available_memory, read_regular_file, regular_file_size};
@@ -13,6 +14,7 @@ use glam::{EulerRot, Mat3, Mat4, Quat, Vec3};
 use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
+use std::sync::Arc;
 use toml::Spanned;
 
 /// Where a scene's mesh files come from.
@@ -81,6 +83,28 @@ struct SceneDoc {
     meshes: Vec<Spanned<MeshDoc>>,
 }
 
+/// `background = { environment = "file.hdr", rotate = 90, strength = 1 }`
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct EnvironmentDoc {
+    environment: String,
+    rotate: Option<RotateDoc>,
+    #[serde(default = "one")]
+    strength: f32,
+}
+
+fn one() -> f32 {
+    1.0
+}
+
+/// Degrees about the vertical axis, or about x, then y, then z.
+#[derive(Deserialize)]
+#[serde(untagged)]
+enum RotateDoc {
+    AboutUp(f32),
+    Euler([f32; 3]),
+}
+
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct CameraDoc {
@@ -111,6 +135,8 @@ struct RenderDoc {
     spp: Option<u32>,
     max_depth: Option<u32>,
     seed: Option<u64>,
+    integrator: Option<Spanned<String>>,
+    russian_roulette: Option<bool>,
 }
 
 #[derive(Deserialize)]
@@ -238,7 +264,7 @@ pub fn parse_scene(source: &str, file: &str, assets: &dyn Assets) -> Result<Scen
     builder.camera(&doc.camera)?;
     builder.settings(doc.render.as_ref())?;
     if let Some(bg) = &doc.background {
-        builder.background(bg)?;
+        builder.background(bg, assets)?;
     }
     for (name, value) in &doc.materials {
         let material = builder.material_from_table(value)?;
@@ -349,6 +375,16 @@ impl SceneBuilder<'_> {
             spp: r.spp.unwrap_or(d.spp),
             max_depth: r.max_depth.unwrap_or(d.max_depth),
             seed: r.seed.unwrap_or(d.seed),
+            integrator: match &r.integrator {
+                None => d.integrator,
+                Some(name) => match name.get_ref().parse() {
+                    Ok(integrator) => integrator,
+                    Err(problem) => {
+                        return self.cx.invalid(name.span(), format!("render: {problem}"))
+                    }
+                },
+            },
+            russian_roulette: r.russian_roulette.unwrap_or(d.russian_roulette),
         };
         if let Err(problem) = settings.check() {
             return self.cx.invalid(doc.span(), format!("render: {problem}"));
@@ -357,19 +393,54 @@ impl SceneBuilder<'_> {
         Ok(())
     }
 
-    fn background(&mut self, value: &Spanned<toml::Value>) -> Result<(), SceneError> {
+    fn background(
+        &mut self,
+        value: &Spanned<toml::Value>,
+        assets: &dyn Assets,
+    ) -> Result<(), SceneError> {
         let span = value.span();
         self.scene.background = match value.get_ref() {
             toml::Value::String(s) if s == "sky" => Background::Sky,
+            toml::Value::Table(table) => {
+                let doc: EnvironmentDoc = match toml::Value::Table(table.clone()).try_into() {
+                    Ok(doc) => doc,
+                    Err(e) => return self.cx.invalid(span, format!("background: {}", e.message())),
+                };
+                self.environment(&doc, assets)
+                    .or_else(|problem| self.cx.invalid(span, format!("background: {problem}")))?
+            }
             other => match other.clone().try_into::<[f32; 3]>() {
                 Ok(c) if radiance_ok(&c) => Background::Constant(Vec3::from(c)),
                 _ => return self.cx.invalid(
                     span,
-                    format!("background: expected \"sky\" or an [r, g, b] colour with each number in [0, {MAX_RADIANCE:e}]"),
+                    format!("background: expected \"sky\", an [r, g, b] colour with each number in [0, {MAX_RADIANCE:e}], or {{ environment = \"file.hdr\" }}"),
                 ),
             },
         };
         Ok(())
+    }
+
+    fn environment(
+        &mut self,
+        doc: &EnvironmentDoc,
+        assets: &dyn Assets,
+    ) -> Result<Background, String> {
+        let degrees = match doc.rotate {
+            None => [0.0; 3],
+            Some(RotateDoc::AboutUp(y)) => [0.0, y, 0.0],
+            Some(RotateDoc::Euler(xyz)) => xyz,
+        };
+        if !finite(&degrees) {
+            return Err("`rotate` must be finite".into());
+        }
+        if !(doc.strength.is_finite() && (0.0..=MAX_RADIANCE).contains(&doc.strength)) {
+            return Err(format!("`strength` must be in [0, {MAX_RADIANCE:e}]"));
+        }
+        let bytes = assets.read(&doc.environment)?;
+        self.scene.inputs.extend(assets.locate(&doc.environment));
+        let to_world = Mat3::from_quat(rotation(degrees));
+        let map = decode_environment(&doc.environment, &bytes, to_world, doc.strength)?;
+        Ok(Background::Environment(Arc::new(map)))
     }
 
     fn material_from_table(&self, value: &Spanned<toml::Value>) -> Result<Material, SceneError> {
@@ -573,6 +644,24 @@ mod tests {
         fn read(&self, path: &str) -> Result<Vec<u8>, String> {
             if path == "quad.obj" {
                 Ok(b"v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n".to_vec())
+            } else if path == "sky.hdr" {
+                let mut pixels = vec![image::Rgb([0.5f32, 0.5, 0.5]); 8];
+                pixels[5] = image::Rgb([2.0; 3]);
+                let mut bytes = Vec::new();
+                image::codecs::hdr::HdrEncoder::new(&mut bytes)
+                    .encode(&pixels, 4, 2)
+                    .map_err(|e| e.to_string())?;
+                Ok(bytes)
+            } else if path == "nan.exr" {
+                let mut image = image::Rgb32FImage::from_pixel(4, 2, image::Rgb([0.5; 3]));
+                image.put_pixel(1, 1, image::Rgb([f32::NAN; 3]));
+                let mut bytes = std::io::Cursor::new(Vec::new());
+                image
+                    .write_to(&mut bytes, image::ImageFormat::OpenExr)
+                    .map_err(|e| e.to_string())?;
+                Ok(bytes.into_inner())
+            } else if path == "sky.png" {
+                Ok(vec![0x89, b'P', b'N', b'G'])
             } else {
                 Err(format!("no such file {path}"))
             }
@@ -583,6 +672,11 @@ mod tests {
 
     fn parse(body: &str) -> Result<Scene, SceneError> {
         parse_scene(&format!("{CAMERA}{body}"), "test.toml", &NoAssets)
+    }
+
+    /// A scene whose top-level keys (before the tables) are `top`.
+    fn parse_top(top: &str) -> Result<Scene, SceneError> {
+        parse_scene(&format!("{top}{CAMERA}"), "test.toml", &NoAssets)
     }
 
     fn error(body: &str) -> String {
@@ -695,6 +789,101 @@ mod tests {
         );
         assert_eq!((scene.settings.width, scene.settings.spp), (32, 3));
         assert_eq!(scene.settings.height, RenderSettings::default().height);
+    }
+
+    #[test]
+    fn integrator_and_roulette_are_read_and_checked() {
+        let scene = parse("[render]\nintegrator = \"bsdf\"\nrussian_roulette = false\n").unwrap();
+        assert_eq!(scene.settings.integrator, crate::scene::Integrator::Bsdf);
+        assert!(!scene.settings.russian_roulette);
+        let defaults = parse("").unwrap().settings;
+        assert_eq!(defaults.integrator, crate::scene::Integrator::Path);
+        assert!(defaults.russian_roulette);
+        let e = error("[render]\nintegrator = \"photon\"\n");
+        assert!(
+            e.contains("test.toml:5") && e.contains("unknown integrator `photon`"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn environment_background_is_loaded_rotated_and_scaled() {
+        let scene =
+            parse_top("background = { environment = \"sky.hdr\", rotate = 90, strength = 3 }\n")
+                .unwrap();
+        let Background::Environment(map) = &scene.background else {
+            panic!("{:?}", scene.background);
+        };
+        assert_eq!(map.size(), (4, 2));
+        assert_eq!(map.source, "sky.hdr");
+        // Pixel 5 (column 1, lower row) holds 2 x strength 3; the others 0.5 x 3.
+        let values: Vec<f32> = (0..64)
+            .map(|i| {
+                let phi = i as f32 / 64.0 * std::f32::consts::TAU;
+                map.radiance(Vec3::new(phi.cos(), -0.5, phi.sin())).x
+            })
+            .collect();
+        assert!(values
+            .iter()
+            .all(|&v| (v - 1.5).abs() < 1e-3 || (v - 6.0).abs() < 1e-2));
+        assert!(values.iter().any(|&v| (v - 6.0).abs() < 1e-2));
+        // Turning the map moves its bright pixel.
+        let turned =
+            parse_top("background = { environment = \"sky.hdr\", rotate = 180 }\n").unwrap();
+        let plain = parse_top("background = { environment = \"sky.hdr\" }\n").unwrap();
+        let bright_from = |s: &Scene| {
+            (0..64)
+                .find(|i| {
+                    let phi = *i as f32 / 64.0 * std::f32::consts::TAU;
+                    s.background
+                        .radiance(Vec3::new(phi.cos(), -0.5, phi.sin()))
+                        .x
+                        > 1.0
+                })
+                .unwrap()
+        };
+        assert_eq!(
+            (bright_from(&turned) + 32) % 64 / 4,
+            bright_from(&plain) / 4
+        );
+    }
+
+    #[test]
+    fn bad_environment_maps_are_errors_naming_the_file() {
+        for (body, expected) in [
+            (
+                "{ environment = \"sky.png\" }",
+                "must be a .hdr or .exr file",
+            ),
+            (
+                "{ environment = \"missing.hdr\" }",
+                "no such file missing.hdr",
+            ),
+            (
+                "{ environment = \"nan.exr\" }",
+                "`nan.exr`: pixel (1, 1) is not a finite colour",
+            ),
+            (
+                "{ environment = \"sky.hdr\", strength = -1 }",
+                "`strength` must be in",
+            ),
+            (
+                "{ environment = \"sky.hdr\", rotate = [1, 2] }",
+                "background",
+            ),
+            (
+                "{ environment = \"sky.hdr\", spin = 3 }",
+                "unknown field `spin`",
+            ),
+        ] {
+            let e = parse_top(&format!("background = {body}\n"))
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.contains("test.toml:1") && e.contains(expected),
+                "{body}: {e}"
+            );
+        }
     }
 
     #[test]

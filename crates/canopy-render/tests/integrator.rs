@@ -8,7 +8,8 @@ use canopy_render::geometry::{Cuboid, Shape, Sphere, Triangle};
 use canopy_render::material::Material;
 use canopy_render::scene::Primitive;
 use canopy_render::{
-    render, Accel, AccelKind, Background, BuiltinScene, BvhWidth, Film, RenderSettings, Scene,
+    render, Accel, AccelKind, Background, BuiltinScene, BvhWidth, Film, Integrator, RenderSettings,
+    Scene,
 };
 use glam::Vec3;
 
@@ -27,6 +28,8 @@ fn furnace(shapes: Vec<Shape>, material: Material, max_depth: u32) -> Scene {
             spp: 16,
             max_depth,
             seed: 7,
+            integrator: Integrator::Bsdf,
+            russian_roulette: false,
         },
         background: Background::Constant(Vec3::ONE),
         materials: vec![material],
@@ -164,6 +167,8 @@ fn image_is_identical_for_any_number_of_threads() {
     assert_eq!(one, render_on(3));
 }
 
+/// With light sampling (the default integrator) this also holds the shadow rays' any-hit
+/// queries to brute force.
 #[test]
 fn bvh_and_brute_force_render_the_same_image() {
     for name in ["paper-1", "paper-3", "cornell"] {
@@ -198,10 +203,12 @@ fn counted_render_is_the_same_image_and_counts_the_work() {
     let (plain, _) = render(&scene, &none, &|| {});
     let (counted, stats) = canopy_render::render_counted(&scene, &none, &|| {});
     assert_eq!(plain, counted);
-    // Brute force tests every primitive for every ray and visits no node.
+    // Brute force tests every primitive for every closest-hit ray and visits no node
+    // (shadow rays are timed, not counted).
+    assert!(stats.shadow_rays > 0 && stats.shadow_time > std::time::Duration::ZERO);
     assert_eq!(
         stats.traversal.primitives_tested,
-        stats.rays * scene.primitives.len() as u64
+        (stats.rays - stats.shadow_rays) * scene.primitives.len() as u64
     );
     assert_eq!(stats.traversal.nodes_visited, 0);
     let bvh = Accel::build(

@@ -1,6 +1,6 @@
-use super::{max_abs, Surface, POINT_ERROR_ULPS};
+use super::{area_to_solid_angle, max_abs, Surface, SurfaceSample, POINT_ERROR_ULPS};
 use canopy_bvh::{Aabb, Ray};
-use glam::{Mat3, Vec3};
+use glam::{Mat3, Vec2, Vec3};
 
 /// A box given by its corners in its own frame, then rotated and translated into the
 /// world: `world = rotation * local + translation`.
@@ -70,6 +70,73 @@ impl Cuboid {
         }
     }
 
+    /// Area of the surface across each axis (x, y, z): two faces, or one where the box is
+    /// flat along that axis (its two faces are then the same points).
+    fn surface_areas(&self) -> Vec3 {
+        let e = self.local.extent();
+        let sides = e.cmpgt(Vec3::ZERO);
+        let faces = Vec3::new(e.y * e.z, e.x * e.z, e.x * e.y);
+        Vec3::select(sides, 2.0 * faces, faces)
+    }
+
+    /// Area of the distinct surface points (a flat box counts its rectangle once).
+    pub fn area(&self) -> f32 {
+        self.surface_areas().element_sum()
+    }
+
+    fn error(&self) -> f32 {
+        let magnitude =
+            max_abs(self.translation) + max_abs(self.local.min).max(max_abs(self.local.max));
+        POINT_ERROR_ULPS * magnitude
+    }
+
+    /// A point uniform over the surface's area: an axis by the area across it, a face,
+    /// then a point on it. A flat box's rectangle faces the reference.
+    pub fn sample_toward(&self, reference: Vec3, u: Vec2) -> Option<SurfaceSample> {
+        let areas = self.surface_areas();
+        // Pick the axis with u.x and reuse what is left of it for the face and the point.
+        let mut pick = u.x * areas.element_sum();
+        let mut axis = 0;
+        while axis < 2 && pick >= areas[axis] {
+            pick -= areas[axis];
+            axis += 1;
+        }
+        if areas[axis] <= 0.0 {
+            return None;
+        }
+        let rest = (pick / areas[axis]).clamp(0.0, 1.0);
+        let (lo, hi) = (self.local.min, self.local.max);
+        let flat = lo[axis] == hi[axis];
+        let (positive, along) = if flat {
+            let to_reference = self.rotation.transpose() * (reference - self.translation);
+            (to_reference[axis] >= lo[axis], rest)
+        } else if rest >= 0.5 {
+            (true, 2.0 * rest - 1.0)
+        } else {
+            (false, 2.0 * rest)
+        };
+        let (a, b) = ((axis + 1) % 3, (axis + 2) % 3);
+        let mut local = Vec3::ZERO;
+        local[axis] = if positive { hi[axis] } else { lo[axis] };
+        local[a] = lo[a] + along.min(1.0) * (hi[a] - lo[a]);
+        local[b] = lo[b] + u.y * (hi[b] - lo[b]);
+        let mut local_normal = Vec3::ZERO;
+        local_normal[axis] = if positive { 1.0 } else { -1.0 };
+        let p = self.transform_point(local);
+        let normal = self.rotation * local_normal;
+        let pdf = area_to_solid_angle(1.0 / self.area(), reference, p, normal)?;
+        Some(SurfaceSample {
+            p,
+            normal,
+            error: self.error(),
+            pdf,
+        })
+    }
+
+    pub fn pdf_toward(&self, reference: Vec3, p: Vec3, normal: Vec3) -> f32 {
+        area_to_solid_angle(1.0 / self.area(), reference, p, normal).unwrap_or(0.0)
+    }
+
     pub fn surface(&self, ray: &Ray, t: f32) -> Surface {
         let r = self.local_ray(ray);
         let mut p = r.at(t);
@@ -103,13 +170,11 @@ impl Cuboid {
             self.local.min[axis]
         };
         let normal = self.rotation * local_normal;
-        let magnitude =
-            max_abs(self.translation) + max_abs(self.local.min).max(max_abs(self.local.max));
         Surface {
             p: self.transform_point(p),
             geometric_normal: normal,
             shading_normal: normal,
-            error: POINT_ERROR_ULPS * magnitude,
+            error: self.error(),
         }
     }
 }

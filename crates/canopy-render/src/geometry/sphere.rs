@@ -1,6 +1,8 @@
-use super::{max_abs, Surface, POINT_ERROR_ULPS};
+use super::{area_to_solid_angle, max_abs, Surface, SurfaceSample, POINT_ERROR_ULPS};
+use crate::sampling::{spherical_direction, uniform_sphere, Frame};
 use canopy_bvh::{Aabb, Ray};
-use glam::Vec3;
+use glam::{Vec2, Vec3};
+use std::f32::consts::{PI, TAU};
 
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Sphere {
@@ -48,6 +50,60 @@ impl Sphere {
         }
     }
 
+    pub fn area(&self) -> f32 {
+        4.0 * PI * self.radius * self.radius
+    }
+
+    fn error(&self) -> f32 {
+        POINT_ERROR_ULPS * (max_abs(self.center) + self.radius)
+    }
+
+    /// From outside, a direction uniform in the cone the sphere subtends and the point
+    /// where it meets the sphere first (pbrt-v4's construction, precise for small and far
+    /// spheres); from inside, a point uniform over the area.
+    pub fn sample_toward(&self, reference: Vec3, u: Vec2) -> Option<SurfaceSample> {
+        let Some(cone) = Cone::of(self, reference) else {
+            let normal = uniform_sphere(u);
+            let p = self.center + self.radius * normal;
+            let pdf = area_to_solid_angle(1.0 / self.area(), reference, p, normal)?;
+            return Some(SurfaceSample {
+                p,
+                normal,
+                error: self.error(),
+                pdf,
+            });
+        };
+        // The angle θ from the axis to the drawn direction, then the angle α at the
+        // centre between the axis and the point where that direction meets the sphere.
+        let (sin2_theta, cos_theta) = if cone.sin2_max < SMALL_CONE_SIN2 {
+            // 1 - cos θ underflows: use sin² θ directly (its Taylor expansion).
+            let sin2 = cone.sin2_max * u.x;
+            (sin2, (1.0 - sin2).sqrt())
+        } else {
+            let cos = (cone.cos_max - 1.0) * u.x + 1.0;
+            (1.0 - cos * cos, cos)
+        };
+        let cos_alpha = sin2_theta / cone.sin_max
+            + cos_theta * (1.0 - sin2_theta / cone.sin2_max).max(0.0).sqrt();
+        let sin_alpha = (1.0 - cos_alpha * cos_alpha).max(0.0).sqrt();
+        // The frame's z points from the reference to the centre; the normal faces back.
+        let frame = Frame::from_z((self.center - reference) / cone.distance);
+        let normal = -frame.to_world(spherical_direction(sin_alpha, cos_alpha, TAU * u.y));
+        Some(SurfaceSample {
+            p: self.center + self.radius * normal,
+            normal,
+            error: self.error(),
+            pdf: cone.pdf(),
+        })
+    }
+
+    pub fn pdf_toward(&self, reference: Vec3, p: Vec3, normal: Vec3) -> f32 {
+        match Cone::of(self, reference) {
+            Some(cone) => cone.pdf(),
+            None => area_to_solid_angle(1.0 / self.area(), reference, p, normal).unwrap_or(0.0),
+        }
+    }
+
     pub fn surface(&self, ray: &Ray, t: f32) -> Surface {
         // Re-project onto the sphere: removes most of the error of o + t d.
         let offset = ray.at(t) - self.center;
@@ -59,6 +115,48 @@ impl Sphere {
             shading_normal: normal,
             error: POINT_ERROR_ULPS * (max_abs(self.center) + self.radius),
         }
+    }
+}
+
+/// Below this sin² of the cone's half-angle, 1 - cos is computed from sin² (pbrt-v4's
+/// threshold, about 1.5 degrees).
+const SMALL_CONE_SIN2: f32 = 0.000_685_23;
+
+/// The cone of directions in which a sphere is seen from a point outside it.
+struct Cone {
+    distance: f32,
+    sin2_max: f32,
+    sin_max: f32,
+    cos_max: f32,
+    /// 1 - cos of the half-angle: the cone's solid angle over 2π.
+    one_minus_cos_max: f32,
+}
+
+impl Cone {
+    /// `None` from inside the sphere (or on it).
+    fn of(sphere: &Sphere, reference: Vec3) -> Option<Self> {
+        let distance = (sphere.center - reference).length();
+        let sin2_max = (sphere.radius / distance).powi(2);
+        if sin2_max.is_nan() || sin2_max >= 1.0 {
+            return None;
+        }
+        let cos_max = (1.0 - sin2_max).sqrt();
+        let one_minus_cos_max = if sin2_max < SMALL_CONE_SIN2 {
+            sin2_max / 2.0
+        } else {
+            1.0 - cos_max
+        };
+        (one_minus_cos_max > 0.0).then_some(Self {
+            distance,
+            sin2_max,
+            sin_max: sin2_max.sqrt(),
+            cos_max,
+            one_minus_cos_max,
+        })
+    }
+
+    fn pdf(&self) -> f32 {
+        1.0 / (TAU * self.one_minus_cos_max)
     }
 }
 

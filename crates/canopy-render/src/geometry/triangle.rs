@@ -1,6 +1,7 @@
-use super::{max_abs, Surface, POINT_ERROR_ULPS};
+use super::{area_to_solid_angle, max_abs, Surface, SurfaceSample, POINT_ERROR_ULPS};
+use crate::sampling::uniform_triangle;
 use canopy_bvh::{intersect_triangle, Aabb, PrimHit, Ray, ShearedRay};
-use glam::{DVec3, Vec3};
+use glam::{DVec3, Vec2, Vec3};
 
 /// A triangle, stored as its three vertices exactly as the mesh gives them: triangles
 /// that share an edge then share its end points bit for bit, which the watertight test
@@ -33,6 +34,37 @@ impl Triangle {
             .length()
     }
 
+    fn normal(&self) -> Vec3 {
+        (self.v[1] - self.v[0])
+            .cross(self.v[2] - self.v[0])
+            .normalize_or(Vec3::Y)
+    }
+
+    fn error(&self) -> f32 {
+        POINT_ERROR_ULPS
+            * max_abs(self.v[0])
+                .max(max_abs(self.v[1]))
+                .max(max_abs(self.v[2]))
+    }
+
+    /// A point uniform over the area (see [`crate::geometry::Shape::sample_toward`]).
+    pub fn sample_toward(&self, reference: Vec3, u: Vec2) -> Option<SurfaceSample> {
+        let b = uniform_triangle(u);
+        let p = b[0] * self.v[0] + b[1] * self.v[1] + b[2] * self.v[2];
+        let normal = self.normal();
+        let pdf = area_to_solid_angle(1.0 / self.area(), reference, p, normal)?;
+        Some(SurfaceSample {
+            p,
+            normal,
+            error: self.error(),
+            pdf,
+        })
+    }
+
+    pub fn pdf_toward(&self, reference: Vec3, p: Vec3, normal: Vec3) -> f32 {
+        area_to_solid_angle(1.0 / self.area(), reference, p, normal).unwrap_or(0.0)
+    }
+
     /// The hit of `ray` within its range: distance and the barycentric weights of
     /// vertices 1 and 2. Watertight (canopy-bvh's test, the one its triangle packs run).
     #[inline]
@@ -56,9 +88,7 @@ impl Triangle {
                 p + weights[i] as f64 * self.v[i].as_dvec3()
             })
             .as_vec3();
-        let geometric_normal = (self.v[1] - self.v[0])
-            .cross(self.v[2] - self.v[0])
-            .normalize_or(Vec3::Y);
+        let geometric_normal = self.normal();
         let shading_normal = match vertex_normals.get(self.normals as usize) {
             Some(n) => {
                 let interpolated = (0..3)
@@ -76,10 +106,7 @@ impl Triangle {
             p,
             geometric_normal,
             shading_normal,
-            error: POINT_ERROR_ULPS
-                * max_abs(self.v[0])
-                    .max(max_abs(self.v[1]))
-                    .max(max_abs(self.v[2])),
+            error: self.error(),
         }
     }
 }

@@ -1,13 +1,17 @@
-//! Unidirectional path tracing over image rows, in parallel with rayon.
+//! Unidirectional path tracing over image rows, in parallel with rayon. The estimators
+//! of one sample are in [`path`].
+
+mod path;
 
 use crate::accel::Accel;
 use crate::camera::Camera;
 use crate::film::Film;
-use crate::geometry::Surface;
+use crate::lights::Lights;
 use crate::rng::Rng;
 use crate::scene::Scene;
-use canopy_bvh::{Ray, TraversalCounter, TraversalStats};
+use canopy_bvh::{TraversalCounter, TraversalStats};
 use glam::Vec3;
+use path::{Tracer, Work};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
@@ -15,11 +19,18 @@ use std::time::{Duration, Instant};
 /// What a render did, for the closing summary.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct RenderStats {
-    /// Ray segments traced (camera and scattered rays).
+    /// Rays traced: camera, scattered and shadow rays.
     pub rays: u64,
-    /// Node visits and primitive tests over all rays; zero unless counted
+    /// The shadow rays among them (light sampling's occlusion queries).
+    pub shadow_rays: u64,
+    /// Node visits and primitive tests of the closest-hit queries; zero unless counted
     /// ([`render_counted`]).
     pub traversal: TraversalStats,
+    /// Time the workers spent in shadow-ray queries, summed over threads; zero unless
+    /// counted ([`render_counted`]).
+    pub shadow_time: Duration,
+    /// Time the workers spent rendering, summed over threads (for shares of it).
+    pub thread_time: Duration,
     /// Samples whose radiance was NaN or infinite; they were dropped from the image.
     pub invalid_samples: u64,
     pub elapsed: Duration,
@@ -44,40 +55,79 @@ pub fn render(
     render_with::<()>(scene, accel, on_row_done)
 }
 
-/// [`render`], also counting the BVH work of every ray into [`RenderStats::traversal`]
+/// [`render`], also counting the BVH work of every closest-hit query into
+/// [`RenderStats::traversal`] and timing the shadow rays into [`RenderStats::shadow_time`]
 /// (slightly slower; the image is the same).
 pub fn render_counted(
     scene: &Scene,
     accel: &Accel,
     on_row_done: &(dyn Fn() + Sync),
 ) -> (Film, RenderStats) {
-    render_with::<TraversalStats>(scene, accel, on_row_done)
+    render_with::<Profile>(scene, accel, on_row_done)
 }
 
-/// A traversal counter that can report its totals (nothing, for `()`).
-trait RowCounter: TraversalCounter + Default {
+/// What a render measures besides the image: nothing, or traversal work and shadow-ray
+/// time.
+pub(crate) trait Probe: TraversalCounter + Default {
     fn totals(&self) -> TraversalStats;
+    /// Runs a shadow-ray query, timing it if this probe times.
+    fn time_shadow(&mut self, query: impl FnOnce() -> bool) -> bool;
+    fn shadow_time(&self) -> Duration;
 }
 
-impl RowCounter for () {
+impl Probe for () {
     fn totals(&self) -> TraversalStats {
         TraversalStats::default()
     }
-}
-
-impl RowCounter for TraversalStats {
-    fn totals(&self) -> TraversalStats {
-        *self
+    #[inline(always)]
+    fn time_shadow(&mut self, query: impl FnOnce() -> bool) -> bool {
+        query()
+    }
+    fn shadow_time(&self) -> Duration {
+        Duration::ZERO
     }
 }
 
-fn render_with<C: RowCounter>(
+/// Counts closest-hit traversal work and times shadow rays.
+#[derive(Default)]
+pub(crate) struct Profile {
+    work: TraversalStats,
+    shadow: Duration,
+}
+
+impl TraversalCounter for Profile {
+    #[inline(always)]
+    fn visit_node(&mut self) {
+        self.work.visit_node();
+    }
+    #[inline(always)]
+    fn test_primitive(&mut self) {
+        self.work.test_primitive();
+    }
+}
+
+impl Probe for Profile {
+    fn totals(&self) -> TraversalStats {
+        self.work
+    }
+    fn time_shadow(&mut self, query: impl FnOnce() -> bool) -> bool {
+        let start = Instant::now();
+        let blocked = query();
+        self.shadow += start.elapsed();
+        blocked
+    }
+    fn shadow_time(&self) -> Duration {
+        self.shadow
+    }
+}
+
+fn render_with<P: Probe>(
     scene: &Scene,
     accel: &Accel,
     on_row_done: &(dyn Fn() + Sync),
 ) -> (Film, RenderStats) {
     let mut accumulator = Accumulator::new(scene.settings.width, scene.settings.height);
-    let stats = accumulate::<C>(
+    let stats = accumulate::<P>(
         scene,
         accel,
         &mut accumulator,
@@ -138,7 +188,7 @@ pub fn render_samples(
     accumulate::<()>(scene, accel, accumulator, count, on_row_done)
 }
 
-fn accumulate<C: RowCounter>(
+fn accumulate<P: Probe>(
     scene: &Scene,
     accel: &Accel,
     accumulator: &mut Accumulator,
@@ -152,11 +202,14 @@ fn accumulate<C: RowCounter>(
         "accumulator and scene differ in image size"
     );
     let camera = Camera::new(&scene.camera, settings.width, settings.height);
+    let lights = Lights::new(scene);
+    let tracer = Tracer {
+        scene,
+        accel,
+        lights: &lights,
+    };
     let first_sample = accumulator.samples;
-    let rays = AtomicU64::new(0);
-    let invalid = AtomicU64::new(0);
-    let nodes = AtomicU64::new(0);
-    let prims = AtomicU64::new(0);
+    let totals = Totals::default();
     let start = Instant::now();
     let width = settings.width as usize;
     accumulator
@@ -164,9 +217,9 @@ fn accumulate<C: RowCounter>(
         .par_chunks_mut(width.max(1))
         .enumerate()
         .for_each(|(y, row)| {
-            let mut row_rays = 0;
-            let mut row_invalid = 0;
-            let mut counter = C::default();
+            let row_start = Instant::now();
+            let mut work = Work::<P>::default();
+            let mut invalid = 0;
             for (x, sum) in row.iter_mut().enumerate() {
                 let index = (y * width + x) as u64;
                 for sample in first_sample..first_sample + count {
@@ -174,80 +227,67 @@ fn accumulate<C: RowCounter>(
                     let s = (x as f32 + rng.next_f32()) / settings.width as f32;
                     let t = (y as f32 + rng.next_f32()) / settings.height as f32;
                     let ray = camera.ray(s, t, &mut rng);
-                    let l = trace_path(scene, accel, ray, &mut rng, &mut row_rays, &mut counter);
+                    let l = tracer.radiance(ray, &mut rng, &mut work);
                     if l.is_finite() {
                         *sum += l;
                     } else {
-                        row_invalid += 1;
+                        invalid += 1;
                     }
                 }
             }
-            rays.fetch_add(row_rays, Ordering::Relaxed);
-            invalid.fetch_add(row_invalid, Ordering::Relaxed);
-            let work = counter.totals();
-            nodes.fetch_add(work.nodes_visited, Ordering::Relaxed);
-            prims.fetch_add(work.primitives_tested, Ordering::Relaxed);
+            totals.add(&work, invalid, row_start.elapsed());
             on_row_done();
         });
     accumulator.samples += count;
-    let stats = RenderStats {
-        rays: rays.into_inner(),
-        invalid_samples: invalid.into_inner(),
-        traversal: TraversalStats {
-            nodes_visited: nodes.into_inner(),
-            primitives_tested: prims.into_inner(),
-        },
-        elapsed: start.elapsed(),
-    };
+    let stats = totals.stats(start.elapsed());
     accumulator.rays += stats.rays;
     accumulator.invalid_samples += stats.invalid_samples;
     stats
 }
 
-/// Radiance arriving along `ray`, following one path of at most `max_depth` segments.
-fn trace_path<C: TraversalCounter>(
-    scene: &Scene,
-    accel: &Accel,
-    mut ray: Ray,
-    rng: &mut Rng,
-    rays: &mut u64,
-    counter: &mut C,
-) -> Vec3 {
-    let mut throughput = Vec3::ONE;
-    let mut radiance = Vec3::ZERO;
-    for _ in 0..scene.settings.max_depth {
-        *rays += 1;
-        let Some(hit) = accel.intersect_counted(&scene.primitives, &ray, counter) else {
-            radiance += throughput * scene.background.radiance(ray.dir);
-            break;
-        };
-        let primitive = &scene.primitives[hit.prim as usize];
-        let material = &scene.materials[primitive.material as usize];
-        let surface = primitive.shape.surface(&ray, &hit, &scene.vertex_normals);
-        radiance += throughput * material.emitted();
-        let Some(scatter) = material.scatter(ray.dir, &surface, rng) else {
-            break;
-        };
-        throughput *= scatter.attenuation;
-        if throughput == Vec3::ZERO {
-            break;
-        }
-        ray = spawn_ray(&surface, scatter.direction);
-    }
-    radiance
+/// Sums of the workers' counts, added once per row.
+#[derive(Default)]
+struct Totals {
+    rays: AtomicU64,
+    shadow_rays: AtomicU64,
+    invalid: AtomicU64,
+    nodes: AtomicU64,
+    prims: AtomicU64,
+    shadow_nanos: AtomicU64,
+    thread_nanos: AtomicU64,
 }
 
-/// A ray leaving `surface`, its origin pushed off the surface (to the side it leaves
-/// towards) by the bound on the hit point's rounding error, so it cannot re-hit the
-/// surface it starts on.
-#[inline]
-fn spawn_ray(surface: &Surface, direction: Vec3) -> Ray {
-    let n = surface.geometric_normal;
-    let offset = 2.0 * surface.error.max(f32::MIN_POSITIVE);
-    let side = if direction.dot(n) >= 0.0 {
-        offset
-    } else {
-        -offset
-    };
-    Ray::new(surface.p + side * n, direction, 0.0, f32::INFINITY)
+impl Totals {
+    fn add<P: Probe>(&self, work: &Work<P>, invalid: u64, busy: Duration) {
+        let traversal = work.probe.totals();
+        for (total, value) in [
+            (&self.rays, work.rays),
+            (&self.shadow_rays, work.shadow_rays),
+            (&self.invalid, invalid),
+            (&self.nodes, traversal.nodes_visited),
+            (&self.prims, traversal.primitives_tested),
+            (
+                &self.shadow_nanos,
+                work.probe.shadow_time().as_nanos() as u64,
+            ),
+            (&self.thread_nanos, busy.as_nanos() as u64),
+        ] {
+            total.fetch_add(value, Ordering::Relaxed);
+        }
+    }
+
+    fn stats(self, elapsed: Duration) -> RenderStats {
+        RenderStats {
+            rays: self.rays.into_inner(),
+            shadow_rays: self.shadow_rays.into_inner(),
+            invalid_samples: self.invalid.into_inner(),
+            traversal: TraversalStats {
+                nodes_visited: self.nodes.into_inner(),
+                primitives_tested: self.prims.into_inner(),
+            },
+            shadow_time: Duration::from_nanos(self.shadow_nanos.into_inner()),
+            thread_time: Duration::from_nanos(self.thread_nanos.into_inner()),
+            elapsed,
+        }
+    }
 }

@@ -1,0 +1,245 @@
+//! The radiance along one camera ray: the report's estimator (follow the BSDF until light
+//! is found by chance) and the path tracer with next-event estimation, which also samples
+//! the lights and the background at every vertex and weights both strategies by multiple
+//! importance sampling (Veach 1997, power heuristic).
+
+use super::Probe;
+use crate::accel::Accel;
+use crate::geometry::Surface;
+use crate::lights::Lights;
+use crate::material::Material;
+use crate::rng::Rng;
+use crate::sampling::power_heuristic;
+use crate::scene::{Integrator, Scene};
+use canopy_bvh::Ray;
+use glam::Vec3;
+
+/// Segments a path has before Russian roulette may end it.
+const ROULETTE_AFTER: u32 = 3;
+
+/// Most survival probability of Russian roulette: even bright paths end now and then.
+const ROULETTE_MAX_SURVIVAL: f32 = 0.95;
+
+/// Shadow rays stop this fraction short of the light's point, so the light itself (or a
+/// rounding error on it) never counts as an occluder.
+const SHADOW_SHORTENING: f32 = 1e-4;
+
+/// What a path can see of the render: scene, structures and the lights.
+pub(super) struct Tracer<'a> {
+    pub scene: &'a Scene,
+    pub accel: &'a Accel,
+    pub lights: &'a Lights,
+}
+
+/// Rays traced by one worker, and its probe.
+#[derive(Default)]
+pub(super) struct Work<P> {
+    /// Every ray: camera, scattered and shadow rays.
+    pub rays: u64,
+    pub shadow_rays: u64,
+    pub probe: P,
+}
+
+/// The previous vertex of a path that arrived by sampling a non-delta BSDF: an emitter or
+/// the background found next shares its light with light sampling from there.
+#[derive(Clone, Copy)]
+struct BsdfVertex {
+    p: Vec3,
+    pdf: f32,
+}
+
+impl Tracer<'_> {
+    /// One sample of the radiance arriving along the camera ray `ray`.
+    pub fn radiance<P: Probe>(&self, ray: Ray, rng: &mut Rng, work: &mut Work<P>) -> Vec3 {
+        match self.scene.settings.integrator {
+            Integrator::Path => self.path(ray, rng, work),
+            Integrator::Bsdf => self.bsdf_only(ray, rng, work),
+        }
+    }
+
+    /// The report's estimator: at most `max_depth` segments, light only where a path
+    /// happens to end on an emitter or in the background.
+    fn bsdf_only<P: Probe>(&self, mut ray: Ray, rng: &mut Rng, work: &mut Work<P>) -> Vec3 {
+        let scene = self.scene;
+        let mut throughput = Vec3::ONE;
+        let mut radiance = Vec3::ZERO;
+        for _ in 0..scene.settings.max_depth {
+            work.rays += 1;
+            let Some(hit) = self
+                .accel
+                .intersect_counted(&scene.primitives, &ray, &mut work.probe)
+            else {
+                radiance += throughput * scene.background.radiance(ray.dir);
+                break;
+            };
+            let primitive = &scene.primitives[hit.prim as usize];
+            let material = &scene.materials[primitive.material as usize];
+            let surface = primitive.shape.surface(&ray, &hit, &scene.vertex_normals);
+            radiance += throughput * material.emitted();
+            let Some(sample) = material.sample(ray.dir, &surface, rng) else {
+                break;
+            };
+            throughput *= sample.weight;
+            if throughput == Vec3::ZERO {
+                break;
+            }
+            ray = spawn_ray(&surface, sample.direction);
+        }
+        radiance
+    }
+
+    /// Path tracing with next-event estimation and MIS: every non-delta vertex sends one
+    /// shadow ray to a point on a light and one towards the background (when it is not
+    /// black), and the emitter or background the BSDF-sampled ray finds next is weighted
+    /// against those. Paths have at most `max_depth` segments, shadow rays counted, so
+    /// both estimators sum the same paths.
+    fn path<P: Probe>(&self, mut ray: Ray, rng: &mut Rng, work: &mut Work<P>) -> Vec3 {
+        let scene = self.scene;
+        let settings = scene.settings;
+        let sample_background = !scene.background.is_black();
+        let mut throughput = Vec3::ONE;
+        let mut radiance = Vec3::ZERO;
+        // None for the camera ray and after delta bounces: nothing else could find the light.
+        let mut previous: Option<BsdfVertex> = None;
+        for segments in 1..=settings.max_depth {
+            work.rays += 1;
+            let Some(hit) = self
+                .accel
+                .intersect_counted(&scene.primitives, &ray, &mut work.probe)
+            else {
+                let weight = match previous {
+                    Some(v) if sample_background => {
+                        power_heuristic(v.pdf, scene.background.pdf(ray.dir))
+                    }
+                    _ => 1.0,
+                };
+                radiance += throughput * weight * scene.background.radiance(ray.dir);
+                break;
+            };
+            let primitive = &scene.primitives[hit.prim as usize];
+            let material = &scene.materials[primitive.material as usize];
+            let surface = primitive.shape.surface(&ray, &hit, &scene.vertex_normals);
+            let emitted = material.emitted();
+            if emitted != Vec3::ZERO {
+                let weight = match previous {
+                    Some(v) => {
+                        let light_pdf = self.lights.pdf(
+                            scene,
+                            hit.prim,
+                            v.p,
+                            surface.p,
+                            surface.geometric_normal,
+                        );
+                        power_heuristic(v.pdf, light_pdf)
+                    }
+                    None => 1.0,
+                };
+                radiance += throughput * weight * emitted;
+            }
+            if !material.scatters() || segments == settings.max_depth {
+                break;
+            }
+            if !material.is_delta() {
+                radiance += throughput * self.sample_lights(material, &ray, &surface, rng, work);
+            }
+            let Some(sample) = material.sample(ray.dir, &surface, rng) else {
+                break;
+            };
+            throughput *= sample.weight;
+            previous = (!sample.delta).then_some(BsdfVertex {
+                p: surface.p,
+                pdf: sample.pdf,
+            });
+            if settings.russian_roulette && segments >= ROULETTE_AFTER {
+                let survival = throughput.max_element().min(ROULETTE_MAX_SURVIVAL);
+                if rng.next_f32() >= survival {
+                    break;
+                }
+                throughput /= survival;
+            }
+            if throughput == Vec3::ZERO {
+                break;
+            }
+            ray = spawn_ray(&surface, sample.direction);
+        }
+        radiance
+    }
+
+    /// Light reaching `surface` directly, towards the viewer of `ray`: one sample of the
+    /// emitters and one of the background, each MIS-weighted against BSDF sampling.
+    fn sample_lights<P: Probe>(
+        &self,
+        material: &Material,
+        ray: &Ray,
+        surface: &Surface,
+        rng: &mut Rng,
+        work: &mut Work<P>,
+    ) -> Vec3 {
+        let scene = self.scene;
+        let mut direct = Vec3::ZERO;
+        if let Some(light) = self.lights.sample(scene, surface.p, rng) {
+            let to_light = light.point.p - surface.p;
+            let wi = to_light.normalize_or_zero();
+            let f = material.eval(ray.dir, surface, wi);
+            if f != Vec3::ZERO {
+                // Aim at the light's point pushed off its surface towards us.
+                let lift = 2.0 * light.point.error * light.point.normal;
+                let target = if light.point.normal.dot(to_light) < 0.0 {
+                    light.point.p + lift
+                } else {
+                    light.point.p - lift
+                };
+                let origin = offset_origin(surface, wi);
+                let shadow = Ray::new(origin, target - origin, 0.0, 1.0 - SHADOW_SHORTENING);
+                if !self.occluded(&shadow, work) {
+                    let weight = power_heuristic(light.pdf, material.pdf(ray.dir, surface, wi));
+                    direct += f * light.radiance * (weight / light.pdf);
+                }
+            }
+        }
+        if let Some(sky) = scene.background.sample(rng) {
+            let f = material.eval(ray.dir, surface, sky.direction);
+            if f != Vec3::ZERO {
+                let origin = offset_origin(surface, sky.direction);
+                let shadow = Ray::new(origin, sky.direction, 0.0, f32::INFINITY);
+                if !self.occluded(&shadow, work) {
+                    let bsdf_pdf = material.pdf(ray.dir, surface, sky.direction);
+                    let weight = power_heuristic(sky.pdf, bsdf_pdf);
+                    direct += f * sky.radiance * (weight / sky.pdf);
+                }
+            }
+        }
+        direct
+    }
+
+    fn occluded<P: Probe>(&self, shadow: &Ray, work: &mut Work<P>) -> bool {
+        work.rays += 1;
+        work.shadow_rays += 1;
+        work.probe
+            .time_shadow(|| self.accel.occluded(&self.scene.primitives, shadow))
+    }
+}
+
+/// The start of a ray leaving `surface` in `direction`: the hit point pushed off the
+/// surface (to the side the ray leaves towards) by the bound on its rounding error, so
+/// the ray cannot re-hit the surface it starts on.
+#[inline]
+fn offset_origin(surface: &Surface, direction: Vec3) -> Vec3 {
+    let n = surface.geometric_normal;
+    let offset = 2.0 * surface.error.max(f32::MIN_POSITIVE);
+    if direction.dot(n) >= 0.0 {
+        surface.p + offset * n
+    } else {
+        surface.p - offset * n
+    }
+}
+
+#[inline]
+fn spawn_ray(surface: &Surface, direction: Vec3) -> Ray {
+    Ray::new(
+        offset_origin(surface, direction),
+        direction,
+        0.0,
+        f32::INFINITY,
+    )
+}

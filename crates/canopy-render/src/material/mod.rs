@@ -1,0 +1,379 @@
+//! Materials: how a surface scatters and emits light.
+
+mod fuzz;
+
+use crate::geometry::Surface;
+use crate::rng::Rng;
+use glam::Vec3;
+use std::f32::consts::FRAC_1_PI;
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Material {
+    /// Ideal diffuse reflector, sampled by cosine (normal + random unit vector).
+    Lambertian { albedo: Vec3 },
+    /// Mirror reflection perturbed by `fuzz` (0 = perfect mirror): the mirror direction
+    /// plus a uniform point on the sphere of radius `fuzz`, the lobe of "Ray Tracing in One
+    /// Weekend", whose exact density is in [`fuzz`](self::fuzz).
+    Metal { albedo: Vec3, fuzz: f32 },
+    /// Glass-like: Snell refraction, total internal reflection and Schlick's
+    /// approximation of the Fresnel reflectance. Attenuates nothing.
+    Dielectric { ior: f32 },
+    /// A diffuse emitter, emitting `radiance` on both sides; it scatters nothing.
+    Emissive { radiance: Vec3 },
+}
+
+/// A direction drawn from a material's scattering distribution.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BsdfSample {
+    /// Unit direction the path continues in.
+    pub direction: Vec3,
+    /// BSDF times cosine over the density: what the path's throughput is multiplied by.
+    pub weight: Vec3,
+    /// Density of `direction` per unit solid angle; meaningless when `delta`.
+    pub pdf: f32,
+    /// Drawn from a mirror or glass lobe: a single direction that light sampling can never
+    /// hit, so an emitter found next gets its full weight.
+    pub delta: bool,
+}
+
+/// The normals of a hit turned to face the side the ray arrived from.
+#[derive(Clone, Copy, Debug)]
+struct Facing {
+    geometric: Vec3,
+    shading: Vec3,
+    entering: bool,
+}
+
+impl Facing {
+    #[inline]
+    fn new(dir: Vec3, surface: &Surface) -> Self {
+        let entering = dir.dot(surface.geometric_normal) < 0.0;
+        let (geometric, shading) = if entering {
+            (surface.geometric_normal, surface.shading_normal)
+        } else {
+            (-surface.geometric_normal, -surface.shading_normal)
+        };
+        Self {
+            geometric,
+            shading,
+            entering,
+        }
+    }
+}
+
+impl Material {
+    /// Light emitted towards the viewer.
+    #[inline]
+    pub fn emitted(&self) -> Vec3 {
+        match self {
+            Material::Emissive { radiance } => *radiance,
+            _ => Vec3::ZERO,
+        }
+    }
+
+    /// Whether a path can continue from this material (emitters absorb).
+    #[inline]
+    pub fn scatters(&self) -> bool {
+        !matches!(self, Material::Emissive { .. })
+    }
+
+    /// Whether every direction it scatters into is a single one (mirror, glass): light
+    /// sampling cannot help there and is skipped.
+    #[inline]
+    pub fn is_delta(&self) -> bool {
+        match *self {
+            Material::Metal { fuzz, .. } => fuzz == 0.0,
+            Material::Dielectric { .. } => true,
+            Material::Lambertian { .. } | Material::Emissive { .. } => false,
+        }
+    }
+
+    /// Draws the direction a ray arriving along the unit vector `dir` continues in, or
+    /// `None` when the path ends here (absorbed, an emitter, or drawn under the surface).
+    ///
+    /// Reflection never goes below the geometric surface: with smooth-shading normals a
+    /// drawn direction can, and that sample is absorbed (its density stays counted, so
+    /// [`Material::eval`] and [`Material::pdf`] describe exactly this distribution).
+    pub fn sample(&self, dir: Vec3, surface: &Surface, rng: &mut Rng) -> Option<BsdfSample> {
+        let facing = Facing::new(dir, surface);
+        match *self {
+            Material::Lambertian { albedo } => {
+                // Normal plus a uniform unit vector: cosine-distributed about the normal.
+                let d = facing.shading + rng.unit_vector();
+                let direction = if d.length_squared() < 1e-12 {
+                    facing.shading
+                } else {
+                    d.normalize()
+                };
+                let cos = direction.dot(facing.shading);
+                (direction.dot(facing.geometric) > 0.0 && cos > 0.0).then_some(BsdfSample {
+                    direction,
+                    weight: albedo,
+                    pdf: cos * FRAC_1_PI,
+                    delta: false,
+                })
+            }
+            Material::Metal { albedo, fuzz } => {
+                let reflected = reflect(dir, facing.shading);
+                let direction = (reflected + fuzz * rng.unit_vector()).normalize_or_zero();
+                let delta = fuzz == 0.0;
+                (direction.dot(facing.geometric) > 0.0).then(|| BsdfSample {
+                    direction,
+                    weight: albedo,
+                    pdf: if delta {
+                        0.0
+                    } else {
+                        fuzz::pdf(reflected, fuzz, direction)
+                    },
+                    delta,
+                })
+            }
+            Material::Dielectric { ior } => {
+                let eta = if facing.entering { 1.0 / ior } else { ior };
+                let cos_theta = (-dir).dot(facing.shading).min(1.0);
+                let sin_theta = (1.0 - cos_theta * cos_theta).max(0.0).sqrt();
+                let total_internal = eta * sin_theta > 1.0;
+                let direction = if total_internal || schlick(cos_theta, eta) > rng.next_f32() {
+                    reflect(dir, facing.shading)
+                } else {
+                    refract(dir, facing.shading, eta, cos_theta)
+                };
+                Some(BsdfSample {
+                    direction: direction.normalize(),
+                    weight: Vec3::ONE,
+                    pdf: 0.0,
+                    delta: true,
+                })
+            }
+            Material::Emissive { .. } => None,
+        }
+    }
+
+    /// BSDF times cosine for light arriving from the unit direction `wi` and leaving
+    /// against `dir` (zero for delta lobes, which no other direction can match).
+    pub fn eval(&self, dir: Vec3, surface: &Surface, wi: Vec3) -> Vec3 {
+        let facing = Facing::new(dir, surface);
+        if wi.dot(facing.geometric) <= 0.0 {
+            return Vec3::ZERO;
+        }
+        match *self {
+            Material::Lambertian { albedo } => {
+                albedo * (wi.dot(facing.shading).max(0.0) * FRAC_1_PI)
+            }
+            // The lobe is defined by its sampling: weight `albedo` for every direction.
+            Material::Metal { albedo, fuzz } if fuzz > 0.0 => {
+                albedo * fuzz::pdf(reflect(dir, facing.shading), fuzz, wi)
+            }
+            _ => Vec3::ZERO,
+        }
+    }
+
+    /// Density per solid angle with which [`Material::sample`] draws `wi` (zero for delta
+    /// lobes).
+    pub fn pdf(&self, dir: Vec3, surface: &Surface, wi: Vec3) -> f32 {
+        let facing = Facing::new(dir, surface);
+        match *self {
+            Material::Lambertian { .. } => wi.dot(facing.shading).max(0.0) * FRAC_1_PI,
+            Material::Metal { fuzz, .. } if fuzz > 0.0 => {
+                fuzz::pdf(reflect(dir, facing.shading), fuzz, wi)
+            }
+            _ => 0.0,
+        }
+    }
+}
+
+#[inline]
+fn reflect(v: Vec3, n: Vec3) -> Vec3 {
+    v - 2.0 * v.dot(n) * n
+}
+
+/// Refraction of unit `v` through a surface with unit normal `n` facing it.
+#[inline]
+fn refract(v: Vec3, n: Vec3, eta: f32, cos_theta: f32) -> Vec3 {
+    let perpendicular = eta * (v + cos_theta * n);
+    let parallel = -(1.0 - perpendicular.length_squared()).abs().sqrt() * n;
+    perpendicular + parallel
+}
+
+/// Schlick's approximation of the Fresnel reflectance.
+#[inline]
+fn schlick(cos_theta: f32, eta: f32) -> f32 {
+    let r0 = ((1.0 - eta) / (1.0 + eta)).powi(2);
+    r0 + (1.0 - r0) * (1.0 - cos_theta).powi(5)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn surface_facing_up() -> Surface {
+        Surface {
+            p: Vec3::ZERO,
+            geometric_normal: Vec3::Y,
+            shading_normal: Vec3::Y,
+            error: 0.0,
+        }
+    }
+
+    #[test]
+    fn lambertian_scatters_into_the_upper_hemisphere() {
+        let m = Material::Lambertian {
+            albedo: Vec3::splat(0.5),
+        };
+        let mut rng = Rng::for_sample(0, 0, 0);
+        for _ in 0..1000 {
+            let s = m.sample(-Vec3::Y, &surface_facing_up(), &mut rng).unwrap();
+            assert!(s.direction.y >= 0.0);
+            assert!((s.direction.length() - 1.0).abs() < 1e-5);
+        }
+    }
+
+    /// A tilted surface with a smooth-shading normal that differs from the geometric one.
+    fn smooth_surface() -> Surface {
+        Surface {
+            p: Vec3::ZERO,
+            geometric_normal: Vec3::Y,
+            shading_normal: Vec3::new(0.3, 1.0, -0.2).normalize(),
+            error: 0.0,
+        }
+    }
+
+    #[test]
+    fn sampled_weight_equals_eval_over_pdf() {
+        let materials = [
+            Material::Lambertian {
+                albedo: Vec3::new(0.2, 0.5, 0.9),
+            },
+            Material::Metal {
+                albedo: Vec3::new(0.9, 0.6, 0.3),
+                fuzz: 0.4,
+            },
+            Material::Metal {
+                albedo: Vec3::ONE,
+                fuzz: 1.5,
+            },
+        ];
+        let mut rng = Rng::for_sample(8, 8, 8);
+        for m in materials {
+            for surface in [surface_facing_up(), smooth_surface()] {
+                for _ in 0..2000 {
+                    let dir = (rng.unit_vector() - 2.0 * Vec3::Y).normalize();
+                    let Some(s) = m.sample(dir, &surface, &mut rng) else {
+                        continue;
+                    };
+                    assert!(!s.delta && s.pdf > 0.0);
+                    let pdf = m.pdf(dir, &surface, s.direction);
+                    let eval = m.eval(dir, &surface, s.direction);
+                    assert!(
+                        (pdf - s.pdf).abs() <= 1e-3 * pdf,
+                        "{m:?}: {pdf} vs {}",
+                        s.pdf
+                    );
+                    let weight = eval / pdf;
+                    assert!(
+                        (weight - s.weight).abs().max_element() < 1e-3,
+                        "{m:?}: {weight} vs {}",
+                        s.weight
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn lambertian_reflects_its_albedo_and_nothing_below_the_surface() {
+        // ∫ eval dω over the sphere = albedo (energy), by stratified directions.
+        let m = Material::Lambertian {
+            albedo: Vec3::splat(0.8),
+        };
+        let n = 300;
+        let mut sum = 0.0f64;
+        for i in 0..n {
+            for j in 0..n {
+                let u = glam::Vec2::new((i as f32 + 0.5) / n as f32, (j as f32 + 0.5) / n as f32);
+                let wi = crate::sampling::uniform_sphere(u);
+                let f = m.eval(-Vec3::Y, &surface_facing_up(), wi);
+                if wi.y <= 0.0 {
+                    assert_eq!(f, Vec3::ZERO);
+                }
+                sum += f.x as f64;
+            }
+        }
+        let energy = sum * 4.0 * std::f64::consts::PI / (n * n) as f64;
+        assert!((energy - 0.8).abs() < 1e-3, "{energy}");
+    }
+
+    #[test]
+    fn delta_lobes_are_never_evaluated() {
+        for m in [
+            Material::Dielectric { ior: 1.5 },
+            Material::Metal {
+                albedo: Vec3::ONE,
+                fuzz: 0.0,
+            },
+        ] {
+            assert!(m.is_delta());
+            let d = Vec3::new(1.0, -1.0, 0.0).normalize();
+            let s = m
+                .sample(d, &surface_facing_up(), &mut Rng::for_sample(0, 0, 0))
+                .unwrap();
+            assert!(s.delta);
+            assert_eq!(m.eval(d, &surface_facing_up(), s.direction), Vec3::ZERO);
+            assert_eq!(m.pdf(d, &surface_facing_up(), s.direction), 0.0);
+        }
+    }
+
+    #[test]
+    fn perfect_mirror_reflects() {
+        let m = Material::Metal {
+            albedo: Vec3::ONE,
+            fuzz: 0.0,
+        };
+        let d = Vec3::new(1.0, -1.0, 0.0).normalize();
+        let s = m
+            .sample(d, &surface_facing_up(), &mut Rng::for_sample(0, 0, 0))
+            .unwrap();
+        assert!((s.direction - Vec3::new(1.0, 1.0, 0.0).normalize()).length() < 1e-6);
+    }
+
+    #[test]
+    fn glass_at_normal_incidence_mostly_refracts_straight_through() {
+        let m = Material::Dielectric { ior: 1.5 };
+        let mut rng = Rng::for_sample(0, 0, 0);
+        let through = (0..1000)
+            .filter(|_| {
+                let s = m.sample(-Vec3::Y, &surface_facing_up(), &mut rng).unwrap();
+                (s.direction + Vec3::Y).length() < 1e-5
+            })
+            .count();
+        // Schlick gives 4% reflectance at normal incidence for ior 1.5.
+        assert!((930..=990).contains(&through), "{through}");
+    }
+
+    #[test]
+    fn grazing_exit_from_glass_is_totally_reflected() {
+        let m = Material::Dielectric { ior: 1.5 };
+        // Leaving the glass (travelling along the outward normal's side) at a grazing angle.
+        let d = Vec3::new(1.0, 0.2, 0.0).normalize();
+        let mut rng = Rng::for_sample(0, 0, 0);
+        for _ in 0..100 {
+            let s = m.sample(d, &surface_facing_up(), &mut rng).unwrap();
+            assert!(s.direction.y < 0.0, "must stay inside: {:?}", s.direction);
+        }
+    }
+
+    #[test]
+    fn emitter_emits_and_does_not_scatter() {
+        let m = Material::Emissive {
+            radiance: Vec3::splat(4.0),
+        };
+        assert_eq!(m.emitted(), Vec3::splat(4.0));
+        assert!(m
+            .sample(
+                -Vec3::Y,
+                &surface_facing_up(),
+                &mut Rng::for_sample(0, 0, 0)
+            )
+            .is_none());
+    }
+}
