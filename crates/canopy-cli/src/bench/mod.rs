@@ -2,6 +2,7 @@
 //! machine — every reference scene rendered with the report's methods and canopy's other
 //! builders at every width, repeated, timed and tabulated.
 
+mod lights;
 mod plots;
 mod report_figures;
 mod table3;
@@ -11,7 +12,9 @@ use crate::build_args::BuildArgs;
 use crate::limits;
 use anyhow::Context;
 use canopy_bvh::Builder;
-use canopy_render::{render, render_counted, Accel, AccelKind, BuiltinScene, BvhWidth, Scene};
+use canopy_render::{
+    render, render_counted, Accel, AccelKind, BuiltinScene, BvhWidth, Integrator, Scene,
+};
 use clap::{Args, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::{Deserialize, Serialize};
@@ -27,6 +30,9 @@ pub struct BenchArgs {
 enum BenchCommand {
     /// Reproduce the report's Tables 1 and 2 (and more) on this machine.
     Paper(PaperArgs),
+    /// Equal-time error of light sampling against the report's integrator, with the
+    /// shadow rays' share of the time.
+    Lights(lights::LightsArgs),
 }
 
 #[derive(Args)]
@@ -60,6 +66,10 @@ struct PaperArgs {
     /// Worker threads, 1 to 1024 [default: all cores].
     #[arg(long, value_parser = limits::threads())]
     threads: Option<u32>,
+    /// Estimator: `bsdf` is the report's (no light sampling), so the times compare with
+    /// its tables; `path` adds light sampling.
+    #[arg(long, default_value = "bsdf")]
+    integrator: Integrator,
     #[command(flatten)]
     build: BuildArgs,
 }
@@ -180,7 +190,13 @@ fn mean_and_std(xs: &[f64]) -> (f64, f64) {
 }
 
 pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
-    let BenchCommand::Paper(args) = &args.what;
+    match &args.what {
+        BenchCommand::Paper(args) => paper(args),
+        BenchCommand::Lights(args) => lights::run(args),
+    }
+}
+
+fn paper(args: &PaperArgs) -> anyhow::Result<()> {
     let params = args.build.params();
     if let Some(from) = &args.from {
         let bytes = canopy_render::files::read_regular_file(from, 256 << 20)
@@ -242,6 +258,7 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
         scene.settings.width = width;
         scene.settings.height = height;
         scene.settings.spp = spp;
+        scene.settings.integrator = args.integrator;
         let mut none_mean = None;
         for method in &methods {
             let m = pool.install(|| measure(&scene, n, method, &params, runs, &progress));
@@ -256,8 +273,9 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
     progress.finish_and_clear();
 
     let settings = format!(
-        "{width}x{height}, {spp} spp, depth {}, {runs} runs per measurement, {} threads ({} cores), canopy {}.",
+        "{width}x{height}, {spp} spp, depth {}, {} integrator, {runs} runs per measurement, {} threads ({} cores), canopy {}.",
         BuiltinScene::find("paper-1").expect("built in").load()?.settings.max_depth,
+        args.integrator,
         pool.current_num_threads(),
         std::thread::available_parallelism().map_or(0, |n| n.get()),
         env!("CARGO_PKG_VERSION")
