@@ -1,0 +1,265 @@
+"""canopy: a BVH laboratory and path tracer, from Python.
+
+Build a BVH over a triangle mesh (or boxes) from numpy arrays and trace batches of rays
+through it, Embree-style; render canopy's scenes to numpy images.
+
+>>> import numpy as np, canopy
+>>> vertices = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], dtype=np.float32)
+>>> bvh = canopy.Bvh(vertices, np.array([[0, 1, 2]]))
+>>> hits = bvh.intersect([[0.2, 0.2, 1.0]], [[0, 0, -1]])
+>>> float(hits.t[0]), int(hits.prim[0])
+(1.0, 0)
+
+Every call that does real work releases the GIL and runs in parallel (all cores, or
+``threads=n``). Arguments are converted to the dtypes canopy uses (float32 coordinates,
+int64 indices) and checked: a wrong shape, a NaN, an index past the vertex count raise
+``ValueError``/``TypeError`` naming the argument.
+"""
+
+from __future__ import annotations
+
+from typing import Callable, NamedTuple, Optional, Sequence, Tuple, Union
+
+import numpy as np
+
+from . import _canopy
+
+__version__: str = _canopy.__version__
+
+__all__ = [
+    "Bvh",
+    "Hits",
+    "SceneInfo",
+    "builders",
+    "load_mesh",
+    "load_scene",
+    "read_image",
+    "render",
+    "__version__",
+]
+
+SceneInfo = _canopy.SceneInfo
+
+
+class Hits(NamedTuple):
+    """Closest hits of a batch of rays, one row per ray."""
+
+    t: np.ndarray
+    """(n,) float32 distance along the ray (in units of its direction's length); inf on a miss."""
+    prim: np.ndarray
+    """(n,) int64 index of the triangle (face row) or box hit; -1 on a miss."""
+    uv: np.ndarray
+    """(n, 2) float32 barycentric weights of the triangle's vertices 1 and 2 (0 for boxes and misses)."""
+
+
+def builders() -> list:
+    """The names of the BVH builders, e.g. ``["sort-x", ..., "binned-sah", ...]``."""
+    return _canopy.builders()
+
+
+def _array(value, name: str, dtype, ndim: int, shape_text: str) -> np.ndarray:
+    """``value`` as a C-contiguous array of ``dtype`` with ``ndim`` dimensions."""
+    try:
+        array = np.asarray(value)
+    except Exception as e:  # ragged lists and the like
+        raise TypeError(f"{name} must be an array of shape {shape_text}: {e}") from None
+    if array.dtype == object or not (
+        np.issubdtype(array.dtype, np.number) or array.dtype == np.bool_
+    ):
+        raise TypeError(f"{name} must be numeric with shape {shape_text}, not dtype {array.dtype}")
+    if np.issubdtype(dtype, np.integer) and array.size:
+        if not np.issubdtype(array.dtype, np.integer):
+            if not (np.all(np.isfinite(array)) and np.all(array == np.round(array))):
+                raise TypeError(f"{name} must hold integer indices, not dtype {array.dtype} with fractions")
+        elif array.dtype.kind == "u" and array.max() > np.iinfo(np.int64).max:
+            raise ValueError(f"{name} holds index {array.max()}, beyond any vertex count")
+    if array.ndim != ndim:
+        raise ValueError(f"{name} must have shape {shape_text}, not {array.shape}")
+    return np.ascontiguousarray(array, dtype=dtype)
+
+
+def _per_ray(value, name: str, n: int) -> np.ndarray:
+    array = np.asarray(value, dtype=np.float32)
+    if array.ndim == 0:
+        return np.full(n, array, dtype=np.float32)
+    if array.shape != (n,):
+        raise ValueError(f"{name} must be a number or have shape ({n},), not {array.shape}")
+    return np.ascontiguousarray(array)
+
+
+def _options(builder, width, max_leaf_size, sah_traversal, sah_intersection, ploc_radius, threads):
+    if not isinstance(builder, str):
+        raise TypeError(f"builder must be a name (see canopy.builders()), not {builder!r}")
+    return dict(
+        builder=builder,
+        width=int(width),
+        max_leaf_size=max_leaf_size,
+        sah_traversal=sah_traversal,
+        sah_intersection=sah_intersection,
+        ploc_radius=ploc_radius,
+        threads=threads,
+    )
+
+
+class Bvh:
+    """A bounding volume hierarchy over a triangle mesh or over boxes.
+
+    ``Bvh(vertices, faces)``: ``vertices`` (V, 3) float coordinates, ``faces`` (F, 3)
+    integer vertex indices. ``Bvh.from_boxes(boxes)``: (N, 2, 3) min and max corners.
+
+    ``builder`` names how the tree is built (``canopy.builders()``: ``binned-sah`` by
+    default, ``sweep-sah`` for the best trees, ``lbvh`` for the fastest build, the
+    report's ``agglomerative``, ``ploc`` ...; or ``none``, a plain loop over every
+    primitive, the reference every tree is tested against); ``width`` is the layout: 2 (binary), 4 or 8
+    (SIMD wide nodes with triangles packed in the leaves; the fastest). The other options
+    are the builders' (``max_leaf_size``, the SAH costs, ``ploc_radius``).
+    """
+
+    def __init__(
+        self,
+        vertices,
+        faces,
+        builder: str = "binned-sah",
+        width: int = 8,
+        *,
+        max_leaf_size: Optional[int] = None,
+        sah_traversal: Optional[float] = None,
+        sah_intersection: Optional[float] = None,
+        ploc_radius: Optional[int] = None,
+        threads: Optional[int] = None,
+    ):
+        vertices = _array(vertices, "vertices", np.float32, 2, "(V, 3)")
+        faces = _array(faces, "faces", np.int64, 2, "(F, 3)")
+        self._native = _canopy.Bvh(
+            vertices,
+            faces,
+            **_options(builder, width, max_leaf_size, sah_traversal, sah_intersection, ploc_radius, threads),
+        )
+
+    @classmethod
+    def from_boxes(
+        cls,
+        boxes,
+        builder: str = "binned-sah",
+        width: int = 8,
+        *,
+        max_leaf_size: Optional[int] = None,
+        sah_traversal: Optional[float] = None,
+        sah_intersection: Optional[float] = None,
+        ploc_radius: Optional[int] = None,
+        threads: Optional[int] = None,
+    ) -> "Bvh":
+        """A BVH over axis-aligned boxes, (N, 2, 3): a ray hits a box where it enters it
+        (or, starting inside, where it leaves)."""
+        boxes = _array(boxes, "boxes", np.float32, 3, "(N, 2, 3)")
+        self = cls.__new__(cls)
+        self._native = _canopy.Bvh.from_boxes(
+            boxes,
+            **_options(builder, width, max_leaf_size, sah_traversal, sah_intersection, ploc_radius, threads),
+        )
+        return self
+
+    @property
+    def primitive_count(self) -> int:
+        return self._native.primitive_count
+
+    @property
+    def builder(self) -> str:
+        return self._native.builder
+
+    @property
+    def width(self) -> int:
+        return self._native.width
+
+    def stats(self) -> dict:
+        """SAH cost (root area 1), nodes, leaves, depth, leaf sizes, memory and build time."""
+        return self._native.stats()
+
+    def validate(self) -> None:
+        """Checks the tree's invariants; raises ValueError naming the first one broken."""
+        self._native.validate()
+
+    def _rays(self, origins, directions, tnear, tfar):
+        origins = _array(origins, "origins", np.float32, 2, "(n, 3)")
+        directions = _array(directions, "directions", np.float32, 2, "(n, 3)")
+        n = origins.shape[0]
+        return origins, directions, _per_ray(tnear, "tnear", n), _per_ray(tfar, "tfar", n)
+
+    def intersect(
+        self, origins, directions, tnear=0.0, tfar=np.inf, *, threads: Optional[int] = None
+    ) -> Hits:
+        """Closest hits of the rays ``origin + t * direction``, ``tnear <= t <= tfar``.
+
+        ``origins`` and ``directions`` are (n, 3); ``tnear`` and ``tfar`` numbers or (n,).
+        Directions need not be unit length (``t`` is in their units). Ties go to the
+        lower primitive index, so every builder and width gives the same answer.
+        """
+        t, prim, uv = self._native.intersect(*self._rays(origins, directions, tnear, tfar), threads)
+        return Hits(t, prim, uv)
+
+    def occluded(
+        self, origins, directions, tnear=0.0, tfar=np.inf, *, threads: Optional[int] = None
+    ) -> np.ndarray:
+        """(n,) bool: whether anything lies on each ray within ``[tnear, tfar]`` (any hit,
+        not the closest: faster, for shadow and visibility rays)."""
+        return self._native.occluded(*self._rays(origins, directions, tnear, tfar), threads)
+
+    def __repr__(self) -> str:
+        return repr(self._native)
+
+
+def load_mesh(path) -> Tuple[np.ndarray, np.ndarray]:
+    """The vertices (V, 3) float32 and triangles (F, 3) int64 of an OBJ or PLY file, read
+    as canopy's scenes read them (polygons fan-triangulated)."""
+    return _canopy.load_mesh(str(path))
+
+
+def load_scene(scene: str) -> SceneInfo:
+    """Loads a built-in scene by name (``"cornell"``), a scene file, or an OBJ/PLY mesh,
+    and describes it: ``name``, ``settings``, ``counts``, ``bounds``, ``warnings``."""
+    return _canopy.load_scene(str(scene))
+
+
+def render(
+    scene: str,
+    *,
+    spp: Optional[int] = None,
+    size: Optional[Tuple[int, int]] = None,
+    seed: Optional[int] = None,
+    max_depth: Optional[int] = None,
+    integrator: Optional[str] = None,
+    russian_roulette: Optional[bool] = None,
+    device: str = "cpu",
+    bvh: str = "binned-sah",
+    width: int = 8,
+    threads: Optional[int] = None,
+    progress: Optional[Callable[[int, int], None]] = None,
+) -> np.ndarray:
+    """Renders a scene (built-in name, scene file or mesh) to a linear float32 image of
+    shape (height, width, 3), exactly as ``canopy render`` does (the same pixels as its
+    EXR output). Settings left as None come from the scene. ``size`` is (width, height).
+    ``progress(done, total)`` is called after each sample per pixel; Ctrl-C raises
+    KeyboardInterrupt between samples. ``device="gpu"`` is not available yet.
+    """
+    if size is not None:
+        size = (int(size[0]), int(size[1]))
+    return _canopy.render(
+        str(scene),
+        spp=spp,
+        size=size,
+        seed=seed,
+        max_depth=max_depth,
+        integrator=integrator,
+        russian_roulette=russian_roulette,
+        device=device,
+        bvh=bvh,
+        width=int(width),
+        threads=threads,
+        progress=progress,
+    )
+
+
+def read_image(path) -> np.ndarray:
+    """An image file as float32 (height, width, 3): EXR linear values, PNG 8-bit values
+    / 255 as stored (sRGB-encoded)."""
+    return _canopy.read_image(str(path))

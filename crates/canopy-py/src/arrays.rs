@@ -1,0 +1,108 @@
+//! Checks of numpy inputs, each error naming the argument, the row and what was expected.
+
+use numpy::{PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyUntypedArrayMethods};
+use pyo3::exceptions::PyValueError;
+use pyo3::PyResult;
+
+fn error<T>(message: String) -> PyResult<T> {
+    Err(PyValueError::new_err(message))
+}
+
+/// The rows of an `(n, 3)` float32 array as `[x, y, z]`, every number finite.
+pub fn points<'a>(name: &str, array: &'a PyReadonlyArray2<'_, f32>) -> PyResult<&'a [[f32; 3]]> {
+    let shape = array.shape();
+    if shape[1] != 3 {
+        return error(format!(
+            "{name} must have shape (n, 3), not ({}, {})",
+            shape[0], shape[1]
+        ));
+    }
+    let flat = array
+        .as_slice()
+        .map_err(|_| PyValueError::new_err(format!("{name} must be C-contiguous")))?;
+    if let Some(i) = flat.iter().position(|v| !v.is_finite()) {
+        return error(format!(
+            "{name}[{}] = {:?} is not finite",
+            i / 3,
+            &flat[i / 3 * 3..i / 3 * 3 + 3]
+        ));
+    }
+    Ok(rows(flat))
+}
+
+/// The rows of an `(n, 3)` int64 array of indices, each in `0..count`.
+pub fn faces<'a>(array: &'a PyReadonlyArray2<'_, i64>, count: usize) -> PyResult<&'a [[i64; 3]]> {
+    let shape = array.shape();
+    if shape[1] != 3 {
+        return error(format!(
+            "faces must have shape (n, 3) of vertex indices, not ({}, {})",
+            shape[0], shape[1]
+        ));
+    }
+    let flat = array
+        .as_slice()
+        .map_err(|_| PyValueError::new_err("faces must be C-contiguous"))?;
+    if let Some(i) = flat.iter().position(|&v| v < 0 || v as u64 >= count as u64) {
+        return error(format!(
+            "faces[{}] refers to vertex {}, but there are {count} vertices (0..={})",
+            i / 3,
+            flat[i],
+            count as i64 - 1
+        ));
+    }
+    Ok(rows(flat))
+}
+
+/// The boxes of an `(n, 2, 3)` float32 array (min corner, max corner), finite, min <= max.
+pub fn boxes<'a>(array: &'a PyReadonlyArray3<'_, f32>) -> PyResult<&'a [[f32; 6]]> {
+    let shape = array.shape();
+    if shape[1] != 2 || shape[2] != 3 {
+        return error(format!(
+            "boxes must have shape (n, 2, 3) (min and max corners), not ({}, {}, {})",
+            shape[0], shape[1], shape[2]
+        ));
+    }
+    let flat = array
+        .as_slice()
+        .map_err(|_| PyValueError::new_err("boxes must be C-contiguous"))?;
+    let boxes: &[[f32; 6]] = rows(flat);
+    for (i, b) in boxes.iter().enumerate() {
+        if b.iter().any(|v| !v.is_finite()) || (0..3).any(|a| b[a] > b[a + 3]) {
+            return error(format!(
+                "boxes[{i}] = {b:?} must be finite with min <= max on every axis"
+            ));
+        }
+    }
+    Ok(boxes)
+}
+
+/// A per-ray `(n,)` float32 array, finite or +inf, not NaN.
+pub fn per_ray<'a>(
+    name: &str,
+    array: &'a PyReadonlyArray1<'_, f32>,
+    n: usize,
+) -> PyResult<&'a [f32]> {
+    let values = array
+        .as_slice()
+        .map_err(|_| PyValueError::new_err(format!("{name} must be C-contiguous")))?;
+    if values.len() != n {
+        return error(format!(
+            "{name} must be a number or have one value per ray ({n}), not {}",
+            values.len()
+        ));
+    }
+    if let Some(i) = values.iter().position(|v| v.is_nan() || *v < 0.0) {
+        return error(format!(
+            "{name}[{i}] = {} must be >= 0 and not NaN",
+            values[i]
+        ));
+    }
+    Ok(values)
+}
+
+/// Rows of `N` values of a flat array whose last dimensions hold `N` (checked above).
+fn rows<T, const N: usize>(flat: &[T]) -> &[[T; N]] {
+    let (rows, rest) = flat.as_chunks::<N>();
+    debug_assert!(rest.is_empty());
+    rows
+}

@@ -1,0 +1,29 @@
+//! `canopy._canopy`, the native half of the Python package `canopy` (the Python half, in
+//! `python/canopy`, converts arguments and documents them). Every call that does real
+//! work releases the GIL and runs on a rayon pool of the requested size.
+
+mod arrays;
+mod bvh;
+mod pools;
+mod render;
+
+use pyo3::prelude::*;
+
+/// The names of the BVH builders, in the order `canopy bvh` lists them.
+#[pyfunction]
+fn builders() -> Vec<&'static str> {
+    canopy_bvh::Builder::ALL.iter().map(|b| b.name()).collect()
+}
+
+#[pymodule]
+fn _canopy(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<bvh::Bvh>()?;
+    m.add_class::<render::SceneInfo>()?;
+    m.add_function(wrap_pyfunction!(builders, m)?)?;
+    m.add_function(wrap_pyfunction!(render::render, m)?)?;
+    m.add_function(wrap_pyfunction!(render::load_scene, m)?)?;
+    m.add_function(wrap_pyfunction!(render::read_image, m)?)?;
+    m.add_function(wrap_pyfunction!(render::load_mesh, m)?)?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    Ok(())
+}

@@ -1,0 +1,239 @@
+//! `canopy.render`, `canopy.load_scene` and `canopy.read_image`.
+
+use crate::pools;
+use canopy_bvh::{BuildParams, BvhWidth};
+use canopy_render::material::Material;
+use canopy_render::mesh::{parse_mesh, MeshFormat};
+use canopy_render::{load_scene as load, render_samples, Accel, AccelKind, Accumulator, Scene};
+use numpy::ndarray::Array2;
+use numpy::{IntoPyArray, PyArray2, PyArray3, ToPyArray};
+use pyo3::exceptions::{PyNotImplementedError, PyOSError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+fn scene_error(e: canopy_render::SceneError) -> PyErr {
+    match e {
+        canopy_render::SceneError::Read { .. } => PyOSError::new_err(e.to_string()),
+        _ => PyValueError::new_err(e.to_string()),
+    }
+}
+
+/// A loaded scene, described (`canopy.load_scene`).
+#[pyclass(frozen, module = "canopy._canopy")]
+pub struct SceneInfo {
+    scene: Scene,
+}
+
+#[pymethods]
+impl SceneInfo {
+    #[getter]
+    fn name(&self) -> &str {
+        &self.scene.name
+    }
+
+    #[getter]
+    fn description(&self) -> &str {
+        &self.scene.description
+    }
+
+    /// The render settings: width, height, spp, max_depth, seed, integrator,
+    /// russian_roulette.
+    #[getter]
+    fn settings<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let s = self.scene.settings;
+        let d = PyDict::new(py);
+        d.set_item("width", s.width)?;
+        d.set_item("height", s.height)?;
+        d.set_item("spp", s.spp)?;
+        d.set_item("max_depth", s.max_depth)?;
+        d.set_item("seed", s.seed)?;
+        d.set_item("integrator", s.integrator.name())?;
+        d.set_item("russian_roulette", s.russian_roulette)?;
+        Ok(d)
+    }
+
+    /// Counts of primitives by shape, materials and emissive materials.
+    #[getter]
+    fn counts<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let c = self.scene.shape_counts();
+        let d = PyDict::new(py);
+        d.set_item("primitives", self.scene.primitives.len())?;
+        d.set_item("spheres", c.spheres)?;
+        d.set_item("triangles", c.triangles)?;
+        d.set_item("cuboids", c.cuboids)?;
+        d.set_item("materials", self.scene.materials.len())?;
+        let emissive = self
+            .scene
+            .materials
+            .iter()
+            .filter(|m| matches!(m, Material::Emissive { .. }))
+            .count();
+        d.set_item("emissive_materials", emissive)?;
+        Ok(d)
+    }
+
+    /// Bounds of every primitive: ((min x, y, z), (max x, y, z)).
+    #[getter]
+    fn bounds(&self) -> ([f32; 3], [f32; 3]) {
+        let b = self
+            .scene
+            .primitive_bounds()
+            .into_iter()
+            .fold(canopy_bvh::Aabb::EMPTY, canopy_bvh::Aabb::union);
+        (b.min.to_array(), b.max.to_array())
+    }
+
+    /// What is legal but probably unintended.
+    #[getter]
+    fn warnings(&self) -> Vec<String> {
+        self.scene.warnings()
+    }
+
+    fn __repr__(&self) -> String {
+        let s = self.scene.settings;
+        format!(
+            "SceneInfo(name={:?}, {} primitives, {}x{}, {} spp)",
+            self.scene.name,
+            self.scene.primitives.len(),
+            s.width,
+            s.height,
+            s.spp
+        )
+    }
+}
+
+#[pyfunction]
+pub fn load_scene(py: Python<'_>, scene: &str) -> PyResult<SceneInfo> {
+    let scene = py.detach(|| load(scene)).map_err(scene_error)?;
+    Ok(SceneInfo { scene })
+}
+
+/// Renders a scene to a linear float32 image of shape (height, width, 3). Samples are
+/// added one per pixel per pass; between passes `progress(done, total)` is called and
+/// Ctrl-C is honoured (KeyboardInterrupt).
+#[pyfunction]
+#[pyo3(signature = (scene, spp=None, size=None, seed=None, max_depth=None, integrator=None,
+    russian_roulette=None, device="cpu", bvh="binned-sah", width=8, threads=None, progress=None))]
+#[allow(clippy::too_many_arguments)]
+pub fn render<'py>(
+    py: Python<'py>,
+    scene: &str,
+    spp: Option<u32>,
+    size: Option<(u32, u32)>,
+    seed: Option<u64>,
+    max_depth: Option<u32>,
+    integrator: Option<&str>,
+    russian_roulette: Option<bool>,
+    device: &str,
+    bvh: &str,
+    width: u32,
+    threads: Option<usize>,
+    progress: Option<Bound<'py, PyAny>>,
+) -> PyResult<Bound<'py, PyArray3<f32>>> {
+    match device {
+        "cpu" => {}
+        "gpu" => {
+            return Err(PyNotImplementedError::new_err(
+                "device=\"gpu\": canopy has no GPU renderer yet; use device=\"cpu\"",
+            ))
+        }
+        other => {
+            return Err(PyValueError::new_err(format!(
+                "device must be \"cpu\" or \"gpu\", not {other:?}"
+            )))
+        }
+    }
+    let mut scene = py.detach(|| load(scene)).map_err(scene_error)?;
+    let s = &mut scene.settings;
+    if let Some((w, h)) = size {
+        (s.width, s.height) = (w, h);
+    }
+    s.spp = spp.unwrap_or(s.spp);
+    s.seed = seed.unwrap_or(s.seed);
+    s.max_depth = max_depth.unwrap_or(s.max_depth);
+    if let Some(name) = integrator {
+        s.integrator = name.parse().map_err(PyValueError::new_err)?;
+    }
+    s.russian_roulette = russian_roulette.unwrap_or(s.russian_roulette);
+    s.check().map_err(PyValueError::new_err)?;
+    let kind: AccelKind = bvh
+        .parse()
+        .map_err(|e: canopy_bvh::UnknownBuilder| PyValueError::new_err(e.to_string()))?;
+    let layout: BvhWidth = width.to_string().parse().map_err(PyValueError::new_err)?;
+    let accel = py.detach(|| {
+        pools::install(threads, || {
+            Accel::build(kind, layout, &scene.primitives, &BuildParams::default())
+        })
+    })?;
+    let settings = scene.settings;
+    let mut accumulator = Accumulator::new(settings.width, settings.height);
+    while accumulator.samples < settings.spp {
+        py.detach(|| {
+            pools::install(threads, || {
+                render_samples(&scene, &accel, &mut accumulator, 1, &|| {})
+            })
+        })?;
+        py.check_signals()?;
+        if let Some(callback) = &progress {
+            callback.call1((accumulator.samples, settings.spp))?;
+        }
+    }
+    let film = accumulator.film();
+    let pixels: Vec<f32> = film.pixels.iter().flat_map(|p| p.to_array()).collect();
+    let image = numpy::ndarray::Array3::from_shape_vec(
+        (film.height as usize, film.width as usize, 3),
+        pixels,
+    )
+    .expect("height x width x 3 values");
+    Ok(image.to_pyarray(py))
+}
+
+/// The vertices (V, 3) float32 and triangles (F, 3) int64 of an OBJ or PLY file,
+/// polygons fan-triangulated, as canopy's scenes load them.
+#[pyfunction]
+#[allow(clippy::type_complexity)]
+pub fn load_mesh<'py>(
+    py: Python<'py>,
+    path: std::path::PathBuf,
+) -> PyResult<(Bound<'py, PyArray2<f32>>, Bound<'py, PyArray2<i64>>)> {
+    let file = path.display().to_string();
+    let format =
+        MeshFormat::from_path(&file).map_err(|e| PyValueError::new_err(format!("{file}: {e}")))?;
+    let limit = canopy_render::files::available_memory().unwrap_or(u64::MAX) / 8;
+    let mesh = py.detach(|| {
+        let bytes = canopy_render::files::read_regular_file(&path, limit)
+            .map_err(|e| PyOSError::new_err(format!("{file}: {e}")))?;
+        parse_mesh(&bytes, format).map_err(|e| PyValueError::new_err(format!("{file}: {e}")))
+    })?;
+    let vertices: Vec<f32> = mesh.positions.iter().flat_map(|p| p.to_array()).collect();
+    let faces: Vec<i64> = mesh
+        .triangles
+        .iter()
+        .flatten()
+        .map(|&i| i64::from(i))
+        .collect();
+    Ok((
+        rows_of_three(vertices).into_pyarray(py),
+        rows_of_three(faces).into_pyarray(py),
+    ))
+}
+
+fn rows_of_three<T>(values: Vec<T>) -> Array2<T> {
+    Array2::from_shape_vec((values.len() / 3, 3), values).expect("rows of 3")
+}
+
+/// Reads a PNG (8-bit values / 255, as stored) or EXR (linear float) image as a float32
+/// array of shape (height, width, 3).
+#[pyfunction]
+pub fn read_image<'py>(
+    py: Python<'py>,
+    path: std::path::PathBuf,
+) -> PyResult<Bound<'py, PyArray3<f32>>> {
+    let image = image::open(&path)
+        .map_err(|e| PyOSError::new_err(format!("{}: {e}", path.display())))?
+        .into_rgb32f();
+    let (w, h) = (image.width() as usize, image.height() as usize);
+    let array = numpy::ndarray::Array3::from_shape_vec((h, w, 3), image.into_raw())
+        .expect("height x width x 3 values");
+    Ok(array.to_pyarray(py))
+}

@@ -1,0 +1,32 @@
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[3]
+MESHES = ROOT / "scenes" / "meshes"
+
+
+@pytest.fixture(scope="session")
+def canopy_bin() -> Path:
+    """The `canopy` binary of the same checkout (built by the test script)."""
+    path = Path(os.environ.get("CANOPY_BIN", ROOT / "target" / "release" / "canopy"))
+    assert path.exists(), f"{path} is missing: run the tests through scripts/test.sh"
+    return path
+
+
+def random_soup(n: int, seed: int):
+    """n random triangles in the unit cube, as vertices and faces."""
+    rng = np.random.default_rng(seed)
+    centres = rng.random((n, 1, 3))
+    vertices = (centres + 0.15 * (rng.random((n, 3, 3)) - 0.5)).reshape(-1, 3).astype(np.float32)
+    return vertices, np.arange(3 * n).reshape(n, 3)
+
+
+def random_rays(n: int, seed: int):
+    """Rays from around the unit cube towards random points inside it."""
+    rng = np.random.default_rng(seed)
+    origins = rng.random((n, 3)) * 3 - 1
+    targets = rng.random((n, 3))
+    return origins.astype(np.float32), (targets - origins).astype(np.float32)

@@ -1,0 +1,240 @@
+"""The BVH API: the same answers as canopy's Rust brute force and an independent numpy
+reference, for every builder and width; bad input raises; the GIL is released."""
+
+import threading
+import time
+
+import numpy as np
+import pytest
+
+import canopy
+from conftest import MESHES, random_rays, random_soup
+
+
+def moller_trumbore(vertices, faces, origins, directions):
+    """Closest hit distance and triangle per ray, in float64 (a plain loop over triangles)."""
+    v = vertices.astype(np.float64)[faces]
+    o, d = origins.astype(np.float64), directions.astype(np.float64)
+    e1, e2 = v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]
+    best_t = np.full(len(o), np.inf)
+    best_prim = np.full(len(o), -1)
+    for i in range(len(faces)):
+        p = np.cross(d, e2[i])
+        det = p @ e1[i]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            inv = 1.0 / det
+            s = o - v[i, 0]
+            u = np.sum(s * p, axis=1) * inv
+            q = np.cross(s, e1[i])
+            w = np.sum(d * q, axis=1) * inv
+            t = (q @ e2[i]) * inv
+        ok = (np.abs(det) > 1e-12) & (u >= 0) & (w >= 0) & (u + w <= 1) & (t >= 0) & (t < best_t)
+        best_t[ok], best_prim[ok] = t[ok], i
+    return best_t, best_prim
+
+
+def test_version_builders_and_repr():
+    assert canopy.__version__.count(".") == 2
+    names = canopy.builders()
+    assert {"binned-sah", "sweep-sah", "lbvh", "ploc", "agglomerative"} <= set(names)
+    v, f = random_soup(10, 0)
+    assert "10 primitives" in repr(canopy.Bvh(v, f))
+
+
+@pytest.mark.parametrize("builder", canopy.builders())
+@pytest.mark.parametrize("width", [2, 4, 8])
+def test_every_builder_and_width_gives_the_brute_force_answer(builder, width):
+    vertices, faces = random_soup(300, 1)
+    origins, directions = random_rays(2000, 2)
+    reference = canopy.Bvh(vertices, faces, builder="none").intersect(origins, directions)
+    bvh = canopy.Bvh(vertices, faces, builder=builder, width=width)
+    bvh.validate()
+    hits = bvh.intersect(origins, directions)
+    # Bit for bit: the same primitive, distance and barycentrics.
+    np.testing.assert_array_equal(hits.prim, reference.prim)
+    np.testing.assert_array_equal(hits.t, reference.t)
+    np.testing.assert_array_equal(hits.uv, reference.uv)
+    np.testing.assert_array_equal(bvh.occluded(origins, directions), reference.prim >= 0)
+    stats = bvh.stats()
+    assert stats["builder"] == builder and stats["width"] == width
+    assert stats["primitives"] == 300 and stats["sah_cost"] > 0 and stats["build_ms"] >= 0
+
+
+def test_hits_agree_with_an_independent_float64_reference():
+    vertices, faces = canopy.load_mesh(MESHES / "teapot.ply")
+    lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+    rng = np.random.default_rng(3)
+    targets = lo + rng.random((3000, 3)) * (hi - lo)
+    origins = np.tile((lo + hi) / 2 + np.array([0, 0.5, 2.0]) * (hi - lo), (3000, 1))
+    directions = targets - origins
+    hits = canopy.Bvh(vertices, faces).intersect(origins, directions)
+    t, prim = moller_trumbore(vertices, faces, origins, directions)
+    agree = hits.prim == prim
+    assert agree.mean() > 0.995, agree.mean()  # edge rays may resolve either way
+    assert np.all((hits.prim >= 0) == (prim >= 0)) or np.mean((hits.prim >= 0) != (prim >= 0)) < 0.002
+    both = agree & (prim >= 0)
+    np.testing.assert_allclose(hits.t[both], t[both], rtol=1e-5)
+    # Barycentrics locate the hit point.
+    v = vertices[faces[hits.prim[both]]].astype(np.float64)
+    uv = hits.uv[both].astype(np.float64)
+    points = v[:, 0] * (1 - uv[:, :1] - uv[:, 1:]) + v[:, 1] * uv[:, :1] + v[:, 2] * uv[:, 1:]
+    expected = origins[both] + directions[both] * t[both, None]
+    np.testing.assert_allclose(points, expected, atol=1e-4 * float(np.max(hi - lo)))
+
+
+def test_tnear_and_tfar_limit_each_ray():
+    vertices = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], dtype=np.float32)
+    bvh = canopy.Bvh(vertices, [[0, 1, 2]])
+    o = np.array([[0.2, 0.2, 1.0]] * 4)
+    d = np.array([[0, 0, -1.0]] * 4)
+    hits = bvh.intersect(o, d, tnear=[0, 0, 1.5, 0.5], tfar=[np.inf, 0.5, np.inf, 1.0])
+    np.testing.assert_array_equal(hits.prim, [0, -1, -1, 0])
+    np.testing.assert_array_equal(hits.t, [1, np.inf, np.inf, 1])
+    np.testing.assert_array_equal(bvh.occluded(o, d, tfar=0.99), [False] * 4)
+    np.testing.assert_array_equal(bvh.occluded(o, d, tfar=1.0), [True] * 4)
+
+
+def test_boxes_are_hit_where_rays_enter_them():
+    boxes = np.array([[[0, 0, 0], [1, 1, 1]], [[2, 0, 0], [3, 1, 1]]], dtype=np.float32)
+    bvh = canopy.Bvh.from_boxes(boxes, builder="sweep-sah", width=4)
+    hits = bvh.intersect([[-1, 0.5, 0.5], [2.5, 0.5, -2], [5, 5, 5]], [[1, 0, 0], [0, 0, 1], [1, 0, 0]])
+    np.testing.assert_array_equal(hits.prim, [0, 1, -1])
+    np.testing.assert_array_equal(hits.t, [1, 2, np.inf])
+    bvh.validate()
+
+
+def test_inputs_of_other_dtypes_and_layouts_are_converted():
+    vertices, faces = random_soup(50, 4)
+    origins, directions = random_rays(500, 5)
+    expected = canopy.Bvh(vertices, faces).intersect(origins, directions)
+    bvh = canopy.Bvh(vertices.astype(np.float64).tolist(), faces.astype(np.int32), builder="binned-sah")
+    got = bvh.intersect(np.asfortranarray(origins.astype(np.float64)), directions[::1].copy(order="F"))
+    np.testing.assert_array_equal(got.prim, expected.prim)
+    # Strided views work too.
+    wide = np.zeros((500, 6), dtype=np.float32)
+    wide[:, ::2] = origins
+    np.testing.assert_array_equal(bvh.intersect(wide[:, ::2], directions).prim, expected.prim)
+
+
+def test_empty_batches_give_empty_answers():
+    vertices, faces = random_soup(5, 6)
+    bvh = canopy.Bvh(vertices, faces)
+    hits = bvh.intersect(np.zeros((0, 3)), np.zeros((0, 3)))
+    assert hits.t.shape == (0,) and hits.prim.shape == (0,) and hits.uv.shape == (0, 2)
+    assert bvh.occluded(np.zeros((0, 3)), np.zeros((0, 3))).shape == (0,)
+
+
+GOOD_V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], dtype=np.float32)
+
+
+@pytest.mark.parametrize(
+    "make, error, words",
+    [
+        (lambda: canopy.Bvh(GOOD_V, [[0, 1, 3]]), ValueError, "faces[0] refers to vertex 3"),
+        (lambda: canopy.Bvh(GOOD_V, [[0, 1, -1]]), ValueError, "faces[0] refers to vertex -1"),
+        (lambda: canopy.Bvh(GOOD_V, [[0, 1, 2**62]]), ValueError, "faces[0] refers to vertex"),
+        (lambda: canopy.Bvh(GOOD_V, np.array([[0, 1, 2**63 + 5]], dtype=np.uint64)), ValueError, "beyond any vertex count"),
+        (lambda: canopy.Bvh(GOOD_V, [[0, 1, 1.5]]), TypeError, "integer indices"),
+        (lambda: canopy.Bvh(GOOD_V, [[0, 1]]), ValueError, "faces must have shape (n, 3)"),
+        (lambda: canopy.Bvh(GOOD_V[:, :2], [[0, 1, 2]]), ValueError, "vertices must have shape (n, 3)"),
+        (lambda: canopy.Bvh(GOOD_V.ravel(), [[0, 1, 2]]), ValueError, "vertices must have shape (V, 3)"),
+        (lambda: canopy.Bvh([[0, 0, np.nan], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]]), ValueError, "vertices[0]"),
+        (lambda: canopy.Bvh([[0, 0, np.inf], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]]), ValueError, "not finite"),
+        (lambda: canopy.Bvh(np.zeros((0, 3)), np.zeros((0, 3), dtype=int)), ValueError, "at least one primitive"),
+        (lambda: canopy.Bvh([["a", "b", "c"]], [[0, 0, 0]]), TypeError, "vertices must be numeric"),
+        (lambda: canopy.Bvh([[0, 0], [1, 0, 0]], [[0, 1, 2]]), TypeError, "vertices"),
+        (lambda: canopy.Bvh(GOOD_V, [[0, 1, 2]], builder="octree"), ValueError, "unknown"),
+        (lambda: canopy.Bvh(GOOD_V, [[0, 1, 2]], builder=3), TypeError, "builder must be a name"),
+        (lambda: canopy.Bvh(GOOD_V, [[0, 1, 2]], width=3), ValueError, "2, 4 or 8"),
+        (lambda: canopy.Bvh(GOOD_V, [[0, 1, 2]], max_leaf_size=0), ValueError, "max_leaf_size"),
+        (lambda: canopy.Bvh(GOOD_V, [[0, 1, 2]], sah_traversal=-1.0), ValueError, "SAH cost"),
+        (lambda: canopy.Bvh(GOOD_V, [[0, 1, 2]], threads=0), ValueError, "threads must be in 1..=1024"),
+        (lambda: canopy.Bvh.from_boxes([[[1, 0, 0], [0, 1, 1]]]), ValueError, "min <= max"),
+        (lambda: canopy.Bvh.from_boxes([[0, 0, 0]]), ValueError, "(N, 2, 3)"),
+    ],
+)
+def test_bad_input_raises_a_clear_exception(make, error, words):
+    with pytest.raises(error) as e:
+        make()
+    assert words in str(e.value), str(e.value)
+
+
+@pytest.mark.parametrize(
+    "origins, directions, kwargs, words",
+    [
+        ([[0, 0, 1]], [[0, 0, -1], [0, 0, -1]], {}, "same number of rows"),
+        ([[0, 0, np.nan]], [[0, 0, -1]], {}, "origins[0]"),
+        ([[0, 0, 1]], [[0, np.inf, -1]], {}, "directions[0]"),
+        ([[0, 0, 1]], [[0, 0, -1]], {"tnear": np.nan}, "tnear[0]"),
+        ([[0, 0, 1]], [[0, 0, -1]], {"tfar": -1}, "tfar[0]"),
+        ([[0, 0, 1]], [[0, 0, -1]], {"tfar": [1, 2]}, "tfar must be a number or have shape (1,)"),
+        ([0, 0, 1], [[0, 0, -1]], {}, "origins must have shape (n, 3)"),
+    ],
+)
+def test_bad_rays_raise_value_errors(origins, directions, kwargs, words):
+    bvh = canopy.Bvh(GOOD_V, [[0, 1, 2]])
+    for query in (bvh.intersect, bvh.occluded):
+        with pytest.raises(ValueError) as e:
+            query(origins, directions, **kwargs)
+        assert words in str(e.value), str(e.value)
+
+
+def big_scene():
+    vertices, faces = canopy.load_mesh(MESHES / "bunny.ply")
+    lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+    rng = np.random.default_rng(7)
+    n = 400_000
+    origins = (lo + rng.random((n, 3)) * (hi - lo)).astype(np.float32)
+    directions = rng.normal(size=(n, 3)).astype(np.float32)
+    return canopy.Bvh(vertices, faces), origins, directions
+
+
+def test_queries_release_the_gil():
+    """While one thread traces, another keeps running Python code: it leaves time stamps
+    in the middle of the call, which it could not if the call held the GIL."""
+    bvh, origins, directions = big_scene()
+    stamps = []
+    done = threading.Event()
+
+    def tick():
+        while not done.is_set():
+            for _ in range(1000):
+                pass
+            stamps.append(time.perf_counter())
+
+    ticker = threading.Thread(target=tick)
+    ticker.start()
+    time.sleep(0.02)
+    start = time.perf_counter()
+    bvh.intersect(origins, directions, threads=1)
+    end = time.perf_counter()
+    done.set()
+    ticker.join()
+    margin = 0.2 * (end - start)
+    middle = [s for s in stamps if start + margin < s < end - margin]
+    assert len(middle) > 10, (len(middle), end - start)
+
+
+def test_two_python_threads_trace_concurrently_faster_than_one_after_another():
+    bvh, origins, directions = big_scene()
+
+    def trace():
+        bvh.intersect(origins, directions, threads=1)
+
+    trace()  # warm up
+    best_ratio = np.inf
+    for _ in range(3):
+        start = time.perf_counter()
+        trace()
+        trace()
+        serial = time.perf_counter() - start
+        threads = [threading.Thread(target=trace) for _ in range(2)]
+        start = time.perf_counter()
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+        concurrent = time.perf_counter() - start
+        best_ratio = min(best_ratio, concurrent / serial)
+    # Serialised by the GIL the ratio would be about 1; on two cores about 0.5.
+    assert best_ratio < 0.85, best_ratio

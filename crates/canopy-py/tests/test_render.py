@@ -1,0 +1,97 @@
+"""The renderer from Python: the CLI's pixels exactly, progress, errors."""
+
+import subprocess
+
+import numpy as np
+import pytest
+
+import canopy
+
+
+def test_render_matches_the_cli_exr_bit_for_bit(canopy_bin, tmp_path):
+    exr = tmp_path / "cornell.exr"
+    subprocess.run(
+        [canopy_bin, "render", "cornell", "--size", "24x16", "--spp", "3", "--seed", "5", "-o", exr],
+        check=True,
+        capture_output=True,
+    )
+    from_cli = canopy.read_image(exr)
+    image = canopy.render("cornell", size=(24, 16), spp=3, seed=5)
+    assert image.shape == (16, 24, 3) and image.dtype == np.float32
+    np.testing.assert_array_equal(image, from_cli)
+    assert image.max() > 0
+
+
+def test_render_options_and_progress():
+    calls = []
+    image = canopy.render(
+        "paper-1",
+        size=(12, 10),
+        spp=4,
+        max_depth=3,
+        integrator="bsdf",
+        threads=1,
+        progress=lambda done, total: calls.append((done, total)),
+    )
+    assert image.shape == (10, 12, 3)
+    assert calls == [(1, 4), (2, 4), (3, 4), (4, 4)]
+    # Same seed and settings on more threads: the same pixels.
+    again = canopy.render("paper-1", size=(12, 10), spp=4, max_depth=3, integrator="bsdf", threads=2)
+    np.testing.assert_array_equal(image, again)
+
+
+def test_a_failing_progress_callback_stops_the_render():
+    def fail(done, total):
+        raise RuntimeError("stop here")
+
+    with pytest.raises(RuntimeError, match="stop here"):
+        canopy.render("cornell", size=(8, 8), spp=5, progress=fail)
+
+
+@pytest.mark.parametrize(
+    "kwargs, error, words",
+    [
+        ({"scene": "no-such-scene"}, ValueError, "no-such-scene"),
+        ({"scene": "cornell", "device": "gpu"}, NotImplementedError, "no GPU renderer yet"),
+        ({"scene": "cornell", "device": "tpu"}, ValueError, "device must be"),
+        ({"scene": "cornell", "integrator": "photons"}, ValueError, "unknown integrator"),
+        ({"scene": "cornell", "spp": 0}, ValueError, "spp 0"),
+        ({"scene": "cornell", "size": (0, 5)}, ValueError, "empty"),
+        ({"scene": "cornell", "bvh": "octree"}, ValueError, "unknown"),
+    ],
+)
+def test_bad_render_arguments_raise(kwargs, error, words):
+    with pytest.raises(error) as e:
+        canopy.render(**kwargs)
+    assert words in str(e.value), str(e.value)
+
+
+def test_a_broken_scene_file_names_its_line(tmp_path):
+    scene = tmp_path / "bad.toml"
+    scene.write_text('[camera]\nlook_from = [0, 0, 5]\nlook_at = [0, 0, 0]\n[[spheres]]\ncenter = [0, 0, 0]\nradus = 1\n')
+    with pytest.raises(ValueError) as e:
+        canopy.render(str(scene), size=(4, 4), spp=1)
+    assert "bad.toml:6" in str(e.value) and "radus" in str(e.value)
+
+
+def test_load_scene_describes_it():
+    info = canopy.load_scene("cornell")
+    assert info.name == "cornell"
+    assert info.counts["cuboids"] == 11 and info.counts["emissive_materials"] == 1
+    assert info.settings["integrator"] == "path" and info.settings["width"] == 400
+    lo, hi = info.bounds
+    assert lo[0] <= 0 and hi[0] >= 555
+    assert info.warnings == []
+
+
+def test_load_mesh_reads_obj_and_ply_alike():
+    from conftest import MESHES
+
+    v_obj, f_obj = canopy.load_mesh(MESHES / "teapot.obj")
+    v_ply, f_ply = canopy.load_mesh(MESHES / "teapot.ply")
+    assert f_obj.shape == f_ply.shape == (992, 3)
+    assert v_obj.dtype == np.float32 and f_obj.dtype == np.int64
+    with pytest.raises(ValueError, match="expected .obj or .ply"):
+        canopy.load_mesh("mesh.stl")
+    with pytest.raises(OSError):
+        canopy.load_mesh(MESHES / "missing.ply")

@@ -1,0 +1,19 @@
+#!/usr/bin/env bash
+# The test command: Rust tests, then the Python bindings built into a venv of their own
+# (target/py-venv) and tested with pytest. Needs Python 3.9+ with venv; installs maturin,
+# numpy, pytest, trimesh, rtree and matplotlib into the venv from PyPI.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+cargo test --workspace --release
+
+venv=target/py-venv
+if [ ! -x "$venv/bin/python" ]; then
+    python3 -m venv "$venv"
+fi
+"$venv/bin/python" -m pip install --quiet --disable-pip-version-check \
+    "maturin>=1.9,<2" numpy pytest trimesh rtree matplotlib
+rm -rf target/wheels
+"$venv/bin/maturin" build --release --quiet -m crates/canopy-py/Cargo.toml -o target/wheels
+"$venv/bin/python" -m pip install --quiet --disable-pip-version-check --force-reinstall --no-deps target/wheels/canopy-*.whl
+CANOPY_BIN="$PWD/target/release/canopy" "$venv/bin/python" -m pytest -q crates/canopy-py/tests
