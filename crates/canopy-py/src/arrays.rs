@@ -19,7 +19,7 @@ pub fn points<'a>(name: &str, array: &'a PyReadonlyArray2<'_, f32>) -> PyResult<
     }
     let flat = array
         .as_slice()
-        .map_err(|_| PyValueError::new_err(format!("{name} must be C-contiguous")))?;
+        .map_err(|_| PyValueError::new_err(format!("{name} must be C-contiguous and aligned")))?;
     if let Some(i) = flat.iter().position(|v| !v.is_finite()) {
         return error(format!(
             "{name}[{}] = {:?} is not finite",
@@ -41,7 +41,7 @@ pub fn faces<'a>(array: &'a PyReadonlyArray2<'_, i64>, count: usize) -> PyResult
     }
     let flat = array
         .as_slice()
-        .map_err(|_| PyValueError::new_err("faces must be C-contiguous"))?;
+        .map_err(|_| PyValueError::new_err("faces must be C-contiguous and aligned"))?;
     if let Some(i) = flat.iter().position(|&v| v < 0 || v as u64 >= count as u64) {
         return error(format!(
             "faces[{}] refers to vertex {}, but there are {count} vertices (0..={})",
@@ -64,7 +64,7 @@ pub fn boxes<'a>(array: &'a PyReadonlyArray3<'_, f32>) -> PyResult<&'a [[f32; 6]
     }
     let flat = array
         .as_slice()
-        .map_err(|_| PyValueError::new_err("boxes must be C-contiguous"))?;
+        .map_err(|_| PyValueError::new_err("boxes must be C-contiguous and aligned"))?;
     let boxes: &[[f32; 6]] = rows(flat);
     for (i, b) in boxes.iter().enumerate() {
         if b.iter().any(|v| !v.is_finite()) || (0..3).any(|a| b[a] > b[a + 3]) {
@@ -84,7 +84,7 @@ pub fn per_ray<'a>(
 ) -> PyResult<&'a [f32]> {
     let values = array
         .as_slice()
-        .map_err(|_| PyValueError::new_err(format!("{name} must be C-contiguous")))?;
+        .map_err(|_| PyValueError::new_err(format!("{name} must be C-contiguous and aligned")))?;
     if values.len() != n {
         return error(format!(
             "{name} must be a number or have one value per ray ({n}), not {}",

@@ -8,7 +8,9 @@ use canopy_render::geometry::{Cuboid, Shape, Triangle};
 use canopy_render::scene::Primitive;
 use canopy_render::{Accel, AccelKind};
 use glam::Vec3;
-use numpy::{PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3};
+use numpy::{
+    PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3,
+};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -106,13 +108,77 @@ impl Bvh {
     }
 }
 
-/// The rays of a batch, checked.
-fn rays(
-    origins: &PyReadonlyArray2<'_, f32>,
-    directions: &PyReadonlyArray2<'_, f32>,
-    tnear: &PyReadonlyArray1<'_, f32>,
-    tfar: &PyReadonlyArray1<'_, f32>,
-) -> PyResult<Vec<Ray>> {
+/// `tnear` or `tfar`: one value for every ray, or one each.
+#[derive(Clone, Copy)]
+enum PerRay<'a> {
+    All(f32),
+    Each(&'a [f32]),
+}
+
+impl PerRay<'_> {
+    #[inline]
+    fn get(self, i: usize) -> f32 {
+        match self {
+            PerRay::All(v) => v,
+            PerRay::Each(values) => values[i],
+        }
+    }
+}
+
+/// A batch of rays as the caller's arrays, checked; rays are made from them on the fly,
+/// in parallel.
+#[derive(Clone, Copy)]
+struct Batch<'a> {
+    origins: &'a [[f32; 3]],
+    directions: &'a [[f32; 3]],
+    tnear: PerRay<'a>,
+    tfar: PerRay<'a>,
+}
+
+impl Batch<'_> {
+    fn len(&self) -> usize {
+        self.origins.len()
+    }
+
+    #[inline]
+    fn ray(&self, i: usize) -> Ray {
+        Ray::new(
+            Vec3::from(self.origins[i]),
+            Vec3::from(self.directions[i]),
+            self.tnear.get(i),
+            self.tfar.get(i),
+        )
+    }
+}
+
+fn per_ray<'a, 'py>(
+    name: &str,
+    value: &'a Bound<'py, PyAny>,
+    array: &'a mut Option<PyReadonlyArray1<'py, f32>>,
+    n: usize,
+) -> PyResult<PerRay<'a>> {
+    if let Ok(v) = value.extract::<f32>() {
+        if v.is_nan() || v < 0.0 {
+            return Err(PyValueError::new_err(format!(
+                "{name} = {v} must be >= 0 and not NaN"
+            )));
+        }
+        return Ok(PerRay::All(v));
+    }
+    *array = Some(value.extract()?);
+    let values = arrays::per_ray(name, array.as_ref().expect("just set"), n)?;
+    Ok(PerRay::Each(values))
+}
+
+/// The checked batch of a query's arguments (`near` and `far` hold per-ray arrays).
+fn batch<'a, 'py>(
+    origins: &'a PyReadonlyArray2<'py, f32>,
+    directions: &'a PyReadonlyArray2<'py, f32>,
+    tnear: &'a Bound<'py, PyAny>,
+    near: &'a mut Option<PyReadonlyArray1<'py, f32>>,
+    tfar: &'a Bound<'py, PyAny>,
+    far: &'a mut Option<PyReadonlyArray1<'py, f32>>,
+) -> PyResult<Batch<'a>> {
     let o = arrays::points("origins", origins)?;
     let d = arrays::points("directions", directions)?;
     if o.len() != d.len() {
@@ -122,11 +188,12 @@ fn rays(
             d.len()
         )));
     }
-    let near = arrays::per_ray("tnear", tnear, o.len())?;
-    let far = arrays::per_ray("tfar", tfar, o.len())?;
-    Ok((0..o.len())
-        .map(|i| Ray::new(Vec3::from(o[i]), Vec3::from(d[i]), near[i], far[i]))
-        .collect())
+    Ok(Batch {
+        origins: o,
+        directions: d,
+        tnear: per_ray("tnear", tnear, near, o.len())?,
+        tfar: per_ray("tfar", tfar, far, o.len())?,
+    })
 }
 
 #[pymethods]
@@ -236,6 +303,12 @@ impl Bvh {
         };
         let s = tree.stats(&self.params.sah);
         d.set_item("width", self.width.children())?;
+        // Wide trees test their nodes with the best SIMD kernel the CPU has.
+        let isa = match self.width {
+            BvhWidth::Two => "scalar",
+            _ => canopy_bvh::Isa::best().name(),
+        };
+        d.set_item("isa", isa)?;
         d.set_item("sah_cost", s.sah_cost)?;
         d.set_item("nodes", s.nodes)?;
         d.set_item("leaves", s.leaves)?;
@@ -263,43 +336,57 @@ impl Bvh {
         py: Python<'py>,
         origins: PyReadonlyArray2<'py, f32>,
         directions: PyReadonlyArray2<'py, f32>,
-        tnear: PyReadonlyArray1<'py, f32>,
-        tfar: PyReadonlyArray1<'py, f32>,
+        tnear: Bound<'py, PyAny>,
+        tfar: Bound<'py, PyAny>,
         threads: Option<usize>,
     ) -> PyResult<(
         Bound<'py, PyArray1<f32>>,
         Bound<'py, PyArray1<i64>>,
         Bound<'py, PyArray2<f32>>,
     )> {
-        let rays = rays(&origins, &directions, &tnear, &tfar)?;
-        let n = rays.len();
-        let mut t = vec![f32::INFINITY; n];
-        let mut prim = vec![-1i64; n];
-        let mut uv = vec![[0.0f32; 2]; n];
+        let (mut near, mut far) = (None, None);
+        let batch = batch(&origins, &directions, &tnear, &mut near, &tfar, &mut far)?;
+        let n = batch.len();
+        let t_out = PyArray1::<f32>::zeros(py, n, false);
+        let prim_out = PyArray1::<i64>::zeros(py, n, false);
+        let uv_out = PyArray2::<f32>::zeros(py, [n, 2], false);
+        // SAFETY: the arrays were just made here and nothing else refers to them yet.
+        let (t, prim, uv) = unsafe {
+            (
+                t_out.as_slice_mut().expect("contiguous"),
+                prim_out.as_slice_mut().expect("contiguous"),
+                uv_out.as_slice_mut().expect("contiguous"),
+            )
+        };
         py.detach(|| {
             pools::install(threads, || {
                 t.par_chunks_mut(CHUNK)
                     .zip(prim.par_chunks_mut(CHUNK))
-                    .zip(uv.par_chunks_mut(CHUNK))
-                    .zip(rays.par_chunks(CHUNK))
-                    .for_each(|(((t, prim), uv), rays)| {
-                        for (i, ray) in rays.iter().enumerate() {
-                            if let Some(hit) = self.accel.intersect(&self.primitives, ray) {
-                                t[i] = hit.t;
-                                prim[i] = hit.prim as i64;
-                                uv[i] = [hit.u, hit.v];
+                    .zip(uv.par_chunks_mut(2 * CHUNK))
+                    .enumerate()
+                    .for_each(|(chunk, ((t, prim), uv))| {
+                        let first = chunk * CHUNK;
+                        for i in 0..t.len() {
+                            match self
+                                .accel
+                                .intersect(&self.primitives, &batch.ray(first + i))
+                            {
+                                Some(hit) => {
+                                    t[i] = hit.t;
+                                    prim[i] = hit.prim as i64;
+                                    uv[2 * i] = hit.u;
+                                    uv[2 * i + 1] = hit.v;
+                                }
+                                None => {
+                                    t[i] = f32::INFINITY;
+                                    prim[i] = -1;
+                                }
                             }
                         }
                     })
             })
         })?;
-        let uv = numpy::ndarray::Array2::from_shape_vec((n, 2), uv.into_flattened())
-            .expect("n rows of 2");
-        Ok((
-            PyArray1::from_vec(py, t),
-            PyArray1::from_vec(py, prim),
-            PyArray2::from_owned_array(py, uv),
-        ))
+        Ok((t_out, prim_out, uv_out))
     }
 
     /// Whether anything lies on each ray within [tnear, tfar].
@@ -309,25 +396,29 @@ impl Bvh {
         py: Python<'py>,
         origins: PyReadonlyArray2<'py, f32>,
         directions: PyReadonlyArray2<'py, f32>,
-        tnear: PyReadonlyArray1<'py, f32>,
-        tfar: PyReadonlyArray1<'py, f32>,
+        tnear: Bound<'py, PyAny>,
+        tfar: Bound<'py, PyAny>,
         threads: Option<usize>,
     ) -> PyResult<Bound<'py, PyArray1<bool>>> {
-        let rays = rays(&origins, &directions, &tnear, &tfar)?;
-        let mut blocked = vec![false; rays.len()];
+        let (mut near, mut far) = (None, None);
+        let batch = batch(&origins, &directions, &tnear, &mut near, &tfar, &mut far)?;
+        let out = PyArray1::<bool>::zeros(py, batch.len(), false);
+        // SAFETY: the array was just made here and nothing else refers to it yet.
+        let blocked = unsafe { out.as_slice_mut().expect("contiguous") };
         py.detach(|| {
             pools::install(threads, || {
                 blocked
                     .par_chunks_mut(CHUNK)
-                    .zip(rays.par_chunks(CHUNK))
-                    .for_each(|(out, rays)| {
-                        for (o, ray) in out.iter_mut().zip(rays) {
-                            *o = self.accel.occluded(&self.primitives, ray);
+                    .enumerate()
+                    .for_each(|(chunk, out)| {
+                        for (i, o) in out.iter_mut().enumerate() {
+                            let ray = batch.ray(chunk * CHUNK + i);
+                            *o = self.accel.occluded(&self.primitives, &ray);
                         }
                     })
             })
         })?;
-        Ok(PyArray1::from_vec(py, blocked))
+        Ok(out)
     }
 
     fn __repr__(&self) -> String {

@@ -110,6 +110,13 @@ def test_inputs_of_other_dtypes_and_layouts_are_converted():
     bvh = canopy.Bvh(vertices.astype(np.float64).tolist(), faces.astype(np.int32), builder="binned-sah")
     got = bvh.intersect(np.asfortranarray(origins.astype(np.float64)), directions[::1].copy(order="F"))
     np.testing.assert_array_equal(got.prim, expected.prim)
+    # Read-only, unaligned buffers (a mesh read straight from a file's bytes) too.
+    raw = bytes(1) + vertices.tobytes()
+    unaligned = np.frombuffer(raw, np.float32, vertices.size, 1).reshape(-1, 3)
+    assert not unaligned.flags.aligned
+    np.testing.assert_array_equal(
+        canopy.Bvh(unaligned, faces).intersect(origins, directions).prim, expected.prim
+    )
     # Strided views work too.
     wide = np.zeros((500, 6), dtype=np.float32)
     wide[:, ::2] = origins
@@ -165,8 +172,9 @@ def test_bad_input_raises_a_clear_exception(make, error, words):
         ([[0, 0, 1]], [[0, 0, -1], [0, 0, -1]], {}, "same number of rows"),
         ([[0, 0, np.nan]], [[0, 0, -1]], {}, "origins[0]"),
         ([[0, 0, 1]], [[0, np.inf, -1]], {}, "directions[0]"),
-        ([[0, 0, 1]], [[0, 0, -1]], {"tnear": np.nan}, "tnear[0]"),
-        ([[0, 0, 1]], [[0, 0, -1]], {"tfar": -1}, "tfar[0]"),
+        ([[0, 0, 1]], [[0, 0, -1]], {"tnear": np.nan}, "tnear = NaN must be >= 0"),
+        ([[0, 0, 1]], [[0, 0, -1]], {"tfar": -1}, "tfar = -1 must be >= 0"),
+        ([[0, 0, 1]], [[0, 0, -1]], {"tfar": [np.nan]}, "tfar[0] = NaN must be >= 0"),
         ([[0, 0, 1]], [[0, 0, -1]], {"tfar": [1, 2]}, "tfar must be a number or have shape (1,)"),
         ([0, 0, 1], [[0, 0, -1]], {}, "origins must have shape (n, 3)"),
     ],

@@ -129,17 +129,6 @@ impl Accel {
         ray: &Ray,
         counter: &mut C,
     ) -> Option<Hit> {
-        // The shear depends on the direction only, so it stays valid as t_max shrinks.
-        let sheared = if self.has_triangles {
-            ShearedRay::new(ray)
-        } else {
-            ShearedRay::UNUSED
-        };
-        let test = |prim: u32, ray: &Ray| {
-            primitives[prim as usize]
-                .shape
-                .intersect_sheared(ray, &sheared)
-        };
         // Trees with triangle packs test triangles themselves; the closure sees the rest.
         let test_other =
             |prim: u32, ray: &Ray| primitives[prim as usize].shape.intersect_non_triangle(ray);
@@ -148,12 +137,21 @@ impl Accel {
             Some(tree) if tree.has_triangle_packs() || !self.has_triangles => {
                 tree.intersect_counted(ray, test_other, counter)
             }
-            Some(tree) => tree.intersect_counted(ray, test, counter),
+            Some(tree) => {
+                // The shear depends on the direction only: it stays valid as t_max shrinks.
+                let sheared = ShearedRay::new(ray);
+                let test = |prim: u32, ray: &Ray| {
+                    primitives[prim as usize]
+                        .shape
+                        .intersect_sheared(ray, &sheared)
+                };
+                tree.intersect_counted(ray, test, counter)
+            }
             None => {
                 for _ in primitives {
                     counter.test_primitive();
                 }
-                brute_force(primitives, ray, &sheared)
+                brute_force(primitives, ray, &self.shear(ray))
             }
         }
     }
@@ -164,17 +162,6 @@ impl Accel {
     /// shadow-ray query.
     #[inline]
     pub fn occluded(&self, primitives: &[Primitive], ray: &Ray) -> bool {
-        let sheared = if self.has_triangles {
-            ShearedRay::new(ray)
-        } else {
-            ShearedRay::UNUSED
-        };
-        let test = |prim: u32, ray: &Ray| {
-            primitives[prim as usize]
-                .shape
-                .intersect_sheared(ray, &sheared)
-                .is_some()
-        };
         let test_other = |prim: u32, ray: &Ray| {
             primitives[prim as usize]
                 .shape
@@ -185,10 +172,34 @@ impl Accel {
             Some(tree) if tree.has_triangle_packs() || !self.has_triangles => {
                 tree.occluded(ray, test_other)
             }
-            Some(tree) => tree.occluded(ray, test),
-            None => primitives
-                .iter()
-                .any(|p| p.shape.intersect_sheared(ray, &sheared).is_some()),
+            Some(tree) => {
+                let sheared = ShearedRay::new(ray);
+                let test = |prim: u32, ray: &Ray| {
+                    primitives[prim as usize]
+                        .shape
+                        .intersect_sheared(ray, &sheared)
+                        .is_some()
+                };
+                tree.occluded(ray, test)
+            }
+            None => {
+                let sheared = self.shear(ray);
+                primitives
+                    .iter()
+                    .any(|p| p.shape.intersect_sheared(ray, &sheared).is_some())
+            }
+        }
+    }
+}
+
+impl Accel {
+    /// The ray prepared for triangle tests, when there are triangles to test.
+    #[inline]
+    fn shear(&self, ray: &Ray) -> ShearedRay {
+        if self.has_triangles {
+            ShearedRay::new(ray)
+        } else {
+            ShearedRay::UNUSED
         }
     }
 }

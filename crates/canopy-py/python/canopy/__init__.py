@@ -75,16 +75,18 @@ def _array(value, name: str, dtype, ndim: int, shape_text: str) -> np.ndarray:
             raise ValueError(f"{name} holds index {array.max()}, beyond any vertex count")
     if array.ndim != ndim:
         raise ValueError(f"{name} must have shape {shape_text}, not {array.shape}")
-    return np.ascontiguousarray(array, dtype=dtype)
+    # A copy only when needed: other dtypes, strided views, unaligned buffers.
+    return np.require(array, dtype=dtype, requirements=["C_CONTIGUOUS", "ALIGNED"])
 
 
-def _per_ray(value, name: str, n: int) -> np.ndarray:
+def _per_ray(value, name: str, n: int):
+    """A number for every ray (passed as it is), or a (n,) float32 array."""
     array = np.asarray(value, dtype=np.float32)
     if array.ndim == 0:
-        return np.full(n, array, dtype=np.float32)
+        return float(array)
     if array.shape != (n,):
         raise ValueError(f"{name} must be a number or have shape ({n},), not {array.shape}")
-    return np.ascontiguousarray(array)
+    return np.require(array, requirements=["C_CONTIGUOUS", "ALIGNED"])
 
 
 def _options(builder, width, max_leaf_size, sah_traversal, sah_intersection, ploc_radius, threads):

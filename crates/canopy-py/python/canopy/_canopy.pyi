@@ -1,4 +1,6 @@
 # Type stubs of the native module; the documented API is in __init__.py.
+from __future__ import annotations
+
 from typing import Callable, Optional, Tuple
 
 import numpy as np
@@ -74,15 +76,15 @@ class Bvh:
         self,
         origins: np.ndarray,
         directions: np.ndarray,
-        tnear: np.ndarray,
-        tfar: np.ndarray,
+        tnear: float | np.ndarray,
+        tfar: float | np.ndarray,
         threads: Optional[int] = ...,
     ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]: ...
     def occluded(
         self,
         origins: np.ndarray,
         directions: np.ndarray,
-        tnear: np.ndarray,
-        tfar: np.ndarray,
+        tnear: float | np.ndarray,
+        tfar: float | np.ndarray,
         threads: Optional[int] = ...,
     ) -> np.ndarray: ...
