@@ -141,6 +141,25 @@ def canopy_run(bvh, o, d, query, threads):
     return time.perf_counter() - start, out
 
 
+def build_times(verts, faces, builder, runs):
+    """Best build times in ms on the CPUs this process may use: Embree's BVH build (the
+    commit that the first query triggers; embreex's slow vertex upload excluded) and
+    canopy's (build, collapse to 8-wide, triangle packing: `stats()["build_ms"]`)."""
+    o = np.zeros((1, 3), np.float32)
+    d = np.ones((1, 3), np.float32)
+    indices = faces.astype(np.int32)
+    embree = canopy_ms = float("inf")
+    for _ in range(runs):
+        scene = rtcs.EmbreeScene()
+        TriangleMesh(scene, verts, indices)
+        start = time.perf_counter()
+        scene.run(o, d)
+        embree = min(embree, (time.perf_counter() - start) * 1e3)
+        bvh = canopy.Bvh(verts, faces, builder=builder, width=8, threads=len(os.sched_getaffinity(0)))
+        canopy_ms = min(canopy_ms, bvh.stats()["build_ms"])
+    return embree, canopy_ms
+
+
 def compare(query, emb, can):
     """Rays whose answers disagree: hit/miss must match exactly; distances within 1e-4
     relative (a different primitive at the same distance is a tie on a shared edge)."""
@@ -161,7 +180,20 @@ def main():
     ap.add_argument("--incoherent", type=int, default=1_000_000)
     ap.add_argument("--runs", type=int, default=5)
     ap.add_argument("--builder", default="binned-sah", help="canopy's builder (see canopy.builders())")
+    ap.add_argument("--build-only", action="store_true",
+                    help="only compare build times, on the CPUs this process may use "
+                         "(embree_compare.sh runs it under `taskset` for 1 and 2 cores: "
+                         "embreex has no thread setting)")
     args = ap.parse_args()
+    if args.build_only:
+        threads = len(os.sched_getaffinity(0))
+        for mesh in args.meshes:
+            verts, faces = read_ply(mesh)
+            name = os.path.splitext(os.path.basename(mesh))[0] + f"-{len(faces) // 1000}k"
+            embree, ours = build_times(verts, faces, args.builder, args.runs)
+            print(f"build {name} {threads} threads: canopy {args.builder} {ours:.1f} ms, "
+                  f"Embree {embree:.1f} ms, canopy/Embree time {ours / embree:.2f}")
+        return
     rng = np.random.default_rng(7)
 
     # embreex's own per-ray cost: a scene with one triangle far from every ray.

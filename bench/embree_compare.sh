@@ -11,4 +11,7 @@ bench/.venv/bin/pip install --quiet --disable-pip-version-check embreex numpy "m
 rm -rf target/bench-wheels
 bench/.venv/bin/maturin build --release --quiet -m crates/canopy-py/Cargo.toml -o target/bench-wheels
 bench/.venv/bin/pip install --quiet --disable-pip-version-check --force-reinstall --no-deps target/bench-wheels/canopy-*.whl
+# Build times on one core and on two (Embree sizes its thread pool by the CPU affinity).
+taskset -c 0 bench/.venv/bin/python bench/embree_compare.py --build-only "$@"
+taskset -c 0,1 bench/.venv/bin/python bench/embree_compare.py --build-only "$@"
 exec bench/.venv/bin/python bench/embree_compare.py "$@"

@@ -1,86 +1,228 @@
 //! Top-down binned SAH builder (Wald, "On fast construction of SAH-based bounding volume
 //! hierarchies", IEEE Symposium on Interactive Ray Tracing 2007).
 //!
-//! Each node bins its primitives' centroids into `params.bins` equal slots along each
-//! axis, evaluates the SAH at every slot boundary and splits at the cheapest one, or
-//! makes a leaf when that is cheaper and allowed.
+//! Each node bins its primitives' centroids into equal slots along each axis, evaluates
+//! the SAH at every slot boundary and splits at the cheapest one, or makes a leaf when
+//! that is cheaper and allowed. Large nodes use `params.bins` slots, small ones fewer
+//! (4 + n/20, as Embree does): the per-node cost of clearing and sweeping bins, not the
+//! primitives, dominates near the leaves.
 
-use super::top_down::{self, Splitter};
+use super::top_down::{self, Cut, Splitter};
 use crate::{Aabb, BuildParams, Bvh2};
-use glam::Vec3;
+use glam::{Vec3, Vec3A};
+use rayon::prelude::*;
 
 /// Most split candidates per axis (the arrays live on the stack, cleared per node).
 pub(crate) const MAX_BINS: usize = 32;
 
+/// Bin arrays of this size serve nodes that need at most this many bins.
+const SMALL_BINS: usize = 8;
+
+/// Nodes with at least this many primitives are binned in parallel, in chunks of this
+/// size (the top of the tree, where there is no subtree parallelism yet).
+const PARALLEL_BINNING: usize = 1 << 14;
+
+/// A box in SIMD lanes (the fourth unused): a union is two instructions. Min and max are
+/// exact, so bins give the same bounds, areas and splits as `Aabb`s would.
+#[derive(Clone, Copy)]
+struct Box4 {
+    min: Vec3A,
+    max: Vec3A,
+}
+
+impl Box4 {
+    const EMPTY: Box4 = Box4 {
+        min: Vec3A::splat(f32::INFINITY),
+        max: Vec3A::splat(f32::NEG_INFINITY),
+    };
+
+    #[inline(always)]
+    fn union(self, other: Box4) -> Box4 {
+        Box4 {
+            min: self.min.min(other.min),
+            max: self.max.max(other.max),
+        }
+    }
+
+    #[inline(always)]
+    fn grow(self, p: Vec3A) -> Box4 {
+        Box4 {
+            min: self.min.min(p),
+            max: self.max.max(p),
+        }
+    }
+
+    fn aabb(self) -> Aabb {
+        Aabb::new(self.min.into(), self.max.into())
+    }
+}
+
 #[derive(Clone, Copy)]
 struct Bin {
-    bounds: Aabb,
+    bounds: Box4,
     count: u32,
 }
 
 const EMPTY_BIN: Bin = Bin {
-    bounds: Aabb::EMPTY,
+    bounds: Box4::EMPTY,
     count: 0,
 };
 
-/// The cheapest split found for a node: the axis, the first bin of the right side, and
-/// the binning that defines bins (centroid `lo` on the axis and bins per unit length).
+/// The bins of all three axes, `B` slots each.
+type AxisBins<const B: usize> = [[Bin; B]; 3];
+
+/// The cheapest split found for a node: the axis, the first bin of the right side, the
+/// binning that defines bins (their number, centroid `lo` on the axis and bins per unit
+/// length), and the two sides' bounds.
 struct Split {
     axis: usize,
     bin: usize,
+    /// Slots per axis the node was binned into.
+    bins: usize,
     lo: f32,
     scale: f32,
     cost: f32,
+    left: Aabb,
+    right: Aabb,
 }
 
 pub(crate) fn build(boxes: &[Aabb], params: &BuildParams) -> Bvh2 {
     let splitter = BinnedSah {
-        boxes,
-        centroids: boxes.iter().map(Aabb::center).collect(),
+        boxes: boxes
+            .iter()
+            .map(|b| Box4 {
+                min: b.min.into(),
+                max: b.max.into(),
+            })
+            .collect(),
+        centroids: boxes.iter().map(|b| b.center().into()).collect(),
         params,
     };
     top_down::build(boxes, params, &splitter)
 }
 
 struct BinnedSah<'a> {
-    boxes: &'a [Aabb],
-    centroids: Vec<Vec3>,
+    boxes: Vec<Box4>,
+    centroids: Vec<Vec3A>,
     params: &'a BuildParams,
 }
 
 impl Splitter for BinnedSah<'_> {
-    fn split(&self, prims: &mut [u32], bounds: Aabb, must_split: bool) -> Option<usize> {
+    fn split(&self, prims: &mut [u32], bounds: Aabb, must_split: bool) -> Option<Cut> {
         let leaf_cost = self.params.leaf_tests(prims.len()) * self.params.sah.intersection;
         let split = self.find_split(prims, bounds)?;
-        (split.cost < leaf_cost || must_split).then(|| self.partition(prims, &split))
+        (split.cost < leaf_cost || must_split).then(|| Cut {
+            mid: self.partition(prims, &split),
+            bounds: Some((split.left, split.right)),
+        })
     }
 }
 
 impl BinnedSah<'_> {
-    /// Bin index of a centroid coordinate.
-    #[inline]
-    fn bin_of(&self, c: f32, lo: f32, scale: f32) -> usize {
-        (((c - lo) * scale) as usize).min(self.params.bins as usize - 1)
+    /// Bounds of the centroids of `prims`, in parallel for large nodes.
+    fn centroid_bounds(&self, prims: &[u32]) -> Box4 {
+        let fold = |chunk: &[u32]| {
+            chunk
+                .iter()
+                .fold(Box4::EMPTY, |b, &p| b.grow(self.centroids[p as usize]))
+        };
+        if prims.len() >= 2 * PARALLEL_BINNING {
+            prims
+                .par_chunks(PARALLEL_BINNING)
+                .map(fold)
+                .reduce(|| Box4::EMPTY, Box4::union)
+        } else {
+            fold(prims)
+        }
     }
 
-    /// The cheapest SAH split over all axes, or `None` when all centroids coincide.
-    fn find_split(&self, prims: &[u32], bounds: Aabb) -> Option<Split> {
-        let bins = self.params.bins as usize;
-        let centroid_bounds = Aabb::from_points(prims.iter().map(|&p| self.centroids[p as usize]));
-        let extent = centroid_bounds.extent();
-        let lo = centroid_bounds.min;
-        let scale = Vec3::select(extent.cmpgt(Vec3::ZERO), bins as f32 / extent, Vec3::ZERO);
-        // Bin all three axes in one pass over the primitives.
-        let mut axis_bins = [[EMPTY_BIN; MAX_BINS]; 3];
+    /// Slots per axis for a node of `n` primitives.
+    fn bins_for(&self, n: usize) -> usize {
+        (self.params.bins as usize).min(4 + n / 20)
+    }
+
+    /// Bins `prims` on all three axes at once into `bins` slots of `out`, which are
+    /// `lo + i / scale` wide.
+    fn bin<const B: usize>(
+        &self,
+        prims: &[u32],
+        lo: Vec3A,
+        scale: Vec3A,
+        bins: usize,
+        out: &mut AxisBins<B>,
+    ) {
+        let last = glam::UVec3::splat(bins as u32 - 1);
         for &p in prims {
-            let c = self.centroids[p as usize];
             let b = self.boxes[p as usize];
-            for (axis, bins_of_axis) in axis_bins.iter_mut().enumerate() {
-                let bin = &mut bins_of_axis[self.bin_of(c[axis], lo[axis], scale[axis])];
+            // (c - lo) >= 0, so the float-to-int conversion truncates as `as usize` does.
+            let index = ((self.centroids[p as usize] - lo) * scale)
+                .as_uvec3()
+                .min(last);
+            for (axis, axis_bins) in out.iter_mut().enumerate() {
+                let bin = &mut axis_bins[index[axis] as usize];
                 bin.bounds = bin.bounds.union(b);
                 bin.count += 1;
             }
         }
+    }
+
+    /// [`Self::bin`], over chunks in parallel for large nodes, merged exactly (min, max
+    /// and counts).
+    fn bin_all<const B: usize>(
+        &self,
+        prims: &[u32],
+        lo: Vec3A,
+        scale: Vec3A,
+        bins: usize,
+        out: &mut AxisBins<B>,
+    ) {
+        if prims.len() < 2 * PARALLEL_BINNING {
+            return self.bin(prims, lo, scale, bins, out);
+        }
+        *out = prims
+            .par_chunks(PARALLEL_BINNING)
+            .map(|chunk| {
+                let mut bins_of_chunk = [[EMPTY_BIN; B]; 3];
+                self.bin(chunk, lo, scale, bins, &mut bins_of_chunk);
+                bins_of_chunk
+            })
+            .reduce(
+                || [[EMPTY_BIN; B]; 3],
+                |mut a, b| {
+                    for (axis_a, axis_b) in a.iter_mut().zip(&b) {
+                        for (x, y) in axis_a.iter_mut().zip(axis_b) {
+                            x.bounds = x.bounds.union(y.bounds);
+                            x.count += y.count;
+                        }
+                    }
+                    a
+                },
+            );
+    }
+
+    /// The cheapest SAH split over all axes, or `None` when all centroids coincide.
+    fn find_split(&self, prims: &[u32], bounds: Aabb) -> Option<Split> {
+        let bins = self.bins_for(prims.len());
+        if bins <= SMALL_BINS {
+            self.find_split_in::<SMALL_BINS>(prims, bounds, bins)
+        } else {
+            self.find_split_in::<MAX_BINS>(prims, bounds, bins)
+        }
+    }
+
+    /// [`Self::find_split`] with `bins` slots per axis in arrays of `B`.
+    fn find_split_in<const B: usize>(
+        &self,
+        prims: &[u32],
+        bounds: Aabb,
+        bins: usize,
+    ) -> Option<Split> {
+        let centroid_bounds = self.centroid_bounds(prims);
+        let extent = Vec3::from(centroid_bounds.max - centroid_bounds.min);
+        let lo = Vec3::from(centroid_bounds.min);
+        let scale = Vec3::select(extent.cmpgt(Vec3::ZERO), bins as f32 / extent, Vec3::ZERO);
+        let mut axis_bins = [[EMPTY_BIN; B]; 3];
+        self.bin_all(prims, lo.into(), scale.into(), bins, &mut axis_bins);
         let inv_area = 1.0 / bounds.surface_area().max(f32::MIN_POSITIVE);
         let sah = &self.params.sah;
         let mut best: Option<Split> = None;
@@ -89,35 +231,40 @@ impl BinnedSah<'_> {
                 continue;
             }
             // Sweep from the right to record the right side of every boundary...
-            let mut right_area = [0f32; MAX_BINS];
-            let mut right_count = [0u32; MAX_BINS];
-            let (mut acc, mut n) = (Aabb::EMPTY, 0);
+            let mut right_bounds = [Box4::EMPTY; B];
+            let mut right_count = [0u32; B];
+            let (mut acc, mut n) = (Box4::EMPTY, 0);
             for b in (1..bins).rev() {
                 acc = acc.union(bin_array[b].bounds);
                 n += bin_array[b].count;
-                right_area[b] = acc.surface_area();
+                right_bounds[b] = acc;
                 right_count[b] = n;
             }
             // ...then from the left, pricing each boundary.
-            let (mut acc, mut n) = (Aabb::EMPTY, 0);
+            let (mut acc, mut n) = (Box4::EMPTY, 0);
             for b in 1..bins {
                 acc = acc.union(bin_array[b - 1].bounds);
                 n += bin_array[b - 1].count;
                 if n == 0 || right_count[b] == 0 {
                     continue;
                 }
+                let (left, right) = (acc.aabb(), right_bounds[b].aabb());
                 let cost = sah.traversal
                     + sah.intersection
                         * inv_area
-                        * (acc.surface_area() * self.params.leaf_tests(n as usize)
-                            + right_area[b] * self.params.leaf_tests(right_count[b] as usize));
+                        * (left.surface_area() * self.params.leaf_tests(n as usize)
+                            + right.surface_area()
+                                * self.params.leaf_tests(right_count[b] as usize));
                 if best.as_ref().is_none_or(|s| cost < s.cost) {
                     best = Some(Split {
                         axis,
                         bin: b,
+                        bins,
                         lo: lo[axis],
                         scale: scale[axis],
                         cost,
+                        left,
+                        right,
                     });
                 }
             }
@@ -130,7 +277,9 @@ impl BinnedSah<'_> {
         let mut mid = 0;
         for i in 0..prims.len() {
             let c = self.centroids[prims[i] as usize][split.axis];
-            if self.bin_of(c, split.lo, split.scale) < split.bin {
+            // The bin index as binning computed it (the same float operations).
+            let bin = (((c - split.lo) * split.scale) as usize).min(split.bins - 1);
+            if bin < split.bin {
                 prims.swap(i, mid);
                 mid += 1;
             }

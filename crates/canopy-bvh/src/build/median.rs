@@ -4,15 +4,15 @@
 //! the centroid's Morton code.
 
 use super::morton::{morton_codes, morton_order};
-use super::top_down::{self, Splitter};
+use super::top_down::{self, Cut, Splitter};
 use crate::{Aabb, BuildParams, Bvh2};
 
 /// Halves every node that holds more primitives than a leaf may.
 struct MedianSplit;
 
 impl Splitter for MedianSplit {
-    fn split(&self, prims: &mut [u32], _bounds: Aabb, must_split: bool) -> Option<usize> {
-        must_split.then_some(prims.len() / 2)
+    fn split(&self, prims: &mut [u32], _bounds: Aabb, must_split: bool) -> Option<Cut> {
+        must_split.then_some(Cut::at(prims.len() / 2))
     }
 }
 

@@ -2,7 +2,7 @@
 //! prices every split position between neighbours (MacDonald and Booth 1990; Wald et al.
 //! 2007). The slowest top-down builder and the quality reference for the others.
 
-use super::top_down::{self, Splitter};
+use super::top_down::{self, Cut, Splitter};
 use crate::{Aabb, BuildParams, Bvh2};
 use glam::Vec3;
 
@@ -22,7 +22,7 @@ struct SweepSah<'a> {
 }
 
 impl Splitter for SweepSah<'_> {
-    fn split(&self, prims: &mut [u32], bounds: Aabb, must_split: bool) -> Option<usize> {
+    fn split(&self, prims: &mut [u32], bounds: Aabb, must_split: bool) -> Option<Cut> {
         let n = prims.len();
         if n < 2 {
             return None;
@@ -69,7 +69,7 @@ impl Splitter for SweepSah<'_> {
         let leaf_cost = self.params.leaf_tests(n) * sah.intersection;
         (cost < leaf_cost || must_split).then(|| {
             prims.copy_from_slice(&sorted);
-            mid
+            Cut::at(mid)
         })
     }
 }

@@ -10,12 +10,28 @@ use crate::{Aabb, BuildParams, Bvh2, Bvh2Node};
 /// Below this many primitives on either side, a subtree is built on one thread.
 const PARALLEL_THRESHOLD: usize = 4096;
 
-/// Cuts a node: reorders `prims` so that the left child's come first and returns how many
+/// Cuts a node: reorders `prims` so that the left child's come first and says how many
 /// there are, or `None` to make a leaf. `must_split` is set when the node holds more
 /// primitives than a leaf may; the driver then splits at the middle if the splitter
 /// declines or returns an empty side.
 pub(crate) trait Splitter: Sync {
-    fn split(&self, prims: &mut [u32], bounds: Aabb, must_split: bool) -> Option<usize>;
+    fn split(&self, prims: &mut [u32], bounds: Aabb, must_split: bool) -> Option<Cut>;
+}
+
+/// Where a node is cut.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Cut {
+    /// Primitives of the left child (they come first).
+    pub mid: usize,
+    /// The children's bounds when the splitter has them (binning does), which saves the
+    /// driver a pass over the primitives.
+    pub bounds: Option<(Aabb, Aabb)>,
+}
+
+impl Cut {
+    pub fn at(mid: usize) -> Self {
+        Self { mid, bounds: None }
+    }
 }
 
 pub(crate) fn build(boxes: &[Aabb], params: &BuildParams, splitter: &impl Splitter) -> Bvh2 {
@@ -37,7 +53,7 @@ pub(crate) fn build_with_order(
         max_leaf: params.max_leaf_size as usize,
         splitter,
     };
-    let nodes = driver.subtree(&mut prim_indices, 0);
+    let nodes = driver.subtree(&mut prim_indices, 0, None);
     Bvh2 {
         nodes,
         prim_indices,
@@ -58,26 +74,37 @@ impl<S: Splitter> Driver<'_, S> {
     }
 
     /// Where to cut `prims`, or `None` for a leaf.
-    fn cut(&self, prims: &mut [u32], bounds: Aabb) -> Option<usize> {
+    fn cut(&self, prims: &mut [u32], bounds: Aabb) -> Option<Cut> {
         let count = prims.len();
         let must_split = count > self.max_leaf;
         match self.splitter.split(prims, bounds, must_split) {
-            Some(mid) if mid > 0 && mid < count => Some(mid),
-            _ if must_split => Some(count / 2),
+            Some(cut) if cut.mid > 0 && cut.mid < count => Some(cut),
+            _ if must_split => Some(Cut::at(count / 2)),
             _ => None,
         }
     }
 
+    /// The children's bounds of `cut`: the splitter's, or computed.
+    fn child_bounds(&self, prims: &[u32], cut: &Cut) -> (Aabb, Aabb) {
+        cut.bounds.unwrap_or_else(|| {
+            let (left, right) = prims.split_at(cut.mid);
+            (self.bounds(left), self.bounds(right))
+        })
+    }
+
     /// Nodes of the subtree over `prims` (which start at `first` in the final index
-    /// array), root first.
-    fn subtree(&self, prims: &mut [u32], first: usize) -> Vec<Bvh2Node> {
-        let bounds = self.bounds(prims);
+    /// array), root first. `known` is the subtree's bounds when the caller has them.
+    fn subtree(&self, prims: &mut [u32], first: usize, known: Option<Aabb>) -> Vec<Bvh2Node> {
+        let bounds = known.unwrap_or_else(|| self.bounds(prims));
         match self.cut(prims, bounds) {
-            Some(mid) if mid >= PARALLEL_THRESHOLD && prims.len() - mid >= PARALLEL_THRESHOLD => {
-                let (left_prims, right_prims) = prims.split_at_mut(mid);
+            Some(cut)
+                if cut.mid >= PARALLEL_THRESHOLD && prims.len() - cut.mid >= PARALLEL_THRESHOLD =>
+            {
+                let (left_bounds, right_bounds) = self.child_bounds(prims, &cut);
+                let (left_prims, right_prims) = prims.split_at_mut(cut.mid);
                 let (left, right) = rayon::join(
-                    || self.subtree(left_prims, first),
-                    || self.subtree(right_prims, first + mid),
+                    || self.subtree(left_prims, first, Some(left_bounds)),
+                    || self.subtree(right_prims, first + cut.mid, Some(right_bounds)),
                 );
                 splice(bounds, left, right)
             }
@@ -91,21 +118,25 @@ impl<S: Splitter> Driver<'_, S> {
         prims: &mut [u32],
         first: usize,
         bounds: Aabb,
-        root_cut: Option<usize>,
+        root_cut: Option<Cut>,
     ) -> Vec<Bvh2Node> {
         let mut nodes = Vec::with_capacity(2 * prims.len() / self.max_leaf.max(1) + 1);
         nodes.push(Bvh2Node::leaf(bounds, first as u32, prims.len() as u32));
         // (node, start, end, bounds, cut) with start/end relative to `prims`.
         let mut work = vec![(0usize, 0usize, prims.len(), bounds, root_cut)];
         while let Some((node, start, end, bounds, cut)) = work.pop() {
-            let Some(mid) = cut else {
+            let Some(cut) = cut else {
                 nodes[node] = Bvh2Node::leaf(bounds, (first + start) as u32, (end - start) as u32);
                 continue;
             };
             let left = nodes.len();
             nodes[node] = Bvh2Node::interior(bounds, left as u32);
-            for (child, (s, e)) in [(left, (start, start + mid)), (left + 1, (start + mid, end))] {
-                let child_bounds = self.bounds(&prims[s..e]);
+            let mid = start + cut.mid;
+            let (left_bounds, right_bounds) = self.child_bounds(&prims[start..end], &cut);
+            for (child, (s, e), child_bounds) in [
+                (left, (start, mid), left_bounds),
+                (left + 1, (mid, end), right_bounds),
+            ] {
                 let child_cut = self.cut(&mut prims[s..e], child_bounds);
                 nodes.push(Bvh2Node::leaf(
                     child_bounds,
