@@ -23,6 +23,7 @@
 mod aabb;
 pub mod build;
 mod bvh2;
+pub mod epo;
 mod isa;
 mod layout;
 mod ray;
@@ -37,6 +38,7 @@ pub use build::{
     build, try_build, BuildParams, Builder, ParamsError, Preset, SahCosts, UnknownBuilder,
 };
 pub use bvh2::{Bvh2, Bvh2Node, BvhError};
+pub use epo::{epo, triangle_area_in_box};
 pub use isa::{Isa, IsaError};
 pub use layout::{BvhWidth, Tree};
 pub use ray::{Hit, PrimHit, Ray};

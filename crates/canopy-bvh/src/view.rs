@@ -28,7 +28,7 @@ pub enum ChildKind {
 }
 
 /// A layout as a walk over boxes, children and leaf ranges.
-pub trait TreeView {
+pub trait TreeView: Sync {
     /// Storage entries (the layout's nodes, [`TreeStats::nodes`]), each of which must be
     /// reached exactly once from the root.
     fn slot_count(&self) -> usize;

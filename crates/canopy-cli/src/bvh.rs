@@ -26,6 +26,11 @@ pub struct BvhArgs {
     /// Print JSON instead of a table.
     #[arg(long)]
     json: bool,
+    /// Also compute EPO (effective parallel overlap, Aila et al. 2013), which prices the
+    /// overlap of boxes that SAH ignores; needs triangles and cuboids only (no spheres).
+    /// About one box query per node: seconds on large meshes.
+    #[arg(long)]
+    epo: bool,
     #[command(flatten)]
     build: BuildArgs,
 }
@@ -44,6 +49,9 @@ struct Row {
     max_depth: usize,
     /// SAH cost with the root's surface area normalised to 1.
     sah_cost: f32,
+    /// EPO with the scene's surface area normalised to 1 (with `--epo`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    epo: Option<f32>,
     memory_bytes: usize,
 }
 
@@ -68,12 +76,28 @@ pub fn run(args: &BvhArgs) -> anyhow::Result<()> {
     let builders = parse_builders(&args.bvh)?;
     let params = args.build.params();
     let scene = canopy_render::load_scene(&args.input)?;
+    if args.epo && scene.shape_counts().spheres > 0 {
+        anyhow::bail!(
+            "--epo: {} has spheres, whose area inside a box canopy does not compute; EPO needs triangles and cuboids only",
+            args.input
+        );
+    }
     let boxes = scene.primitive_bounds();
     let mut rows = Vec::new();
     for &builder in &builders {
         args.build.check_memory(builder, boxes.len())?;
         for &width in &args.width {
-            rows.push(measure(builder, width, &boxes, &params, args.runs));
+            let (mut row, tree) = measure(builder, width, &boxes, &params, args.runs);
+            if args.epo {
+                let area = |prim: u32, region: &Aabb| {
+                    scene.primitives[prim as usize]
+                        .shape
+                        .area_in_box(region)
+                        .unwrap_or(0.0)
+                };
+                row.epo = Some(canopy_bvh::epo(tree.view(), &params.sah, area));
+            }
+            rows.push(row);
         }
     }
     let report = Report {
@@ -96,7 +120,7 @@ fn measure(
     boxes: &[Aabb],
     params: &BuildParams,
     runs: u32,
-) -> Row {
+) -> (Row, Tree) {
     // Timed: the build and the collapse to the requested width.
     let build_once = || Tree::new(build(builder, boxes, params), width);
     let mut times = Vec::new();
@@ -108,8 +132,9 @@ fn measure(
         last = Some(built);
     }
     times.sort_by(f64::total_cmp);
-    let stats = last.expect("at least one run").stats(&params.sah);
-    Row {
+    let tree = last.expect("at least one run");
+    let stats = tree.stats(&params.sah);
+    let row = Row {
         builder: builder.name(),
         width: width.children(),
         build_ms: times[times.len() / 2],
@@ -119,8 +144,10 @@ fn measure(
         max_leaf_size: stats.max_leaf_size,
         max_depth: stats.max_depth,
         sah_cost: stats.sah_cost,
+        epo: None,
         memory_bytes: stats.memory_bytes,
-    }
+    };
+    (row, tree)
 }
 
 fn print_table(report: &Report) {
@@ -131,7 +158,7 @@ fn print_table(report: &Report) {
         report.threads
     );
     outln!(
-        "{:<14} {:>5} {:>10} {:>8} {:>8} {:>6} {:>5} {:>6} {:>9} {:>10}",
+        "{:<14} {:>5} {:>10} {:>8} {:>8} {:>6} {:>5} {:>6} {:>9} {:>9} {:>10}",
         "builder",
         "width",
         "build ms",
@@ -141,11 +168,13 @@ fn print_table(report: &Report) {
         "max",
         "depth",
         "SAH",
+        "EPO",
         "memory"
     );
     for r in &report.rows {
+        let epo = r.epo.map_or("-".to_string(), |e| format!("{e:.2}"));
         outln!(
-            "{:<14} {:>5} {:>10.2} {:>8} {:>8} {:>6.2} {:>5} {:>6} {:>9.2} {:>10}",
+            "{:<14} {:>5} {:>10.2} {:>8} {:>8} {:>6.2} {:>5} {:>6} {:>9.2} {:>9} {:>10}",
             r.builder,
             r.width,
             r.build_ms,
@@ -155,6 +184,7 @@ fn print_table(report: &Report) {
             r.max_leaf_size,
             r.max_depth,
             r.sah_cost,
+            epo,
             human_bytes(r.memory_bytes as u64)
         );
     }

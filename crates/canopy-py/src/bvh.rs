@@ -319,6 +319,22 @@ impl Bvh {
         Ok(d)
     }
 
+    /// EPO (effective parallel overlap) of the tree, with the scene's area normalised to
+    /// 1; 0 for brute force.
+    fn epo(&self, py: Python<'_>) -> f32 {
+        let Some(tree) = self.accel.tree() else {
+            return 0.0;
+        };
+        py.detach(|| {
+            canopy_bvh::epo(tree.view(), &self.params.sah, |prim, region| {
+                self.primitives[prim as usize]
+                    .shape
+                    .area_in_box(region)
+                    .unwrap_or(0.0)
+            })
+        })
+    }
+
     fn validate(&self) -> PyResult<()> {
         match self.accel.tree() {
             Some(tree) => tree

@@ -82,6 +82,19 @@ def test_hits_agree_with_an_independent_float64_reference():
     np.testing.assert_allclose(points, expected, atol=1e-4 * float(np.max(hi - lo)))
 
 
+def test_epo_prices_overlap_that_sah_ignores():
+    vertices, faces = canopy.load_mesh(MESHES / "bunny.ply")
+    good = canopy.Bvh(vertices, faces, builder="sweep-sah", width=2)
+    sorted_x = canopy.Bvh(vertices, faces, builder="sort-x", width=2)
+    assert 0 < good.epo() < sorted_x.epo()
+    # Wide layouts with triangles packed in their leaves (padded packs) have an EPO too.
+    wide = canopy.Bvh(vertices, faces, builder="sweep-sah", width=8)
+    assert 0 < wide.epo() < good.epo()
+    assert canopy.Bvh(vertices, faces, builder="none").epo() == 0.0
+    boxes = np.array([[[0, 0, 0], [1, 1, 1]], [[0.5, 0, 0], [1.5, 1, 1]]], dtype=np.float32)
+    assert canopy.Bvh.from_boxes(boxes, width=2, max_leaf_size=1).epo() > 0
+
+
 def test_tnear_and_tfar_limit_each_ray():
     vertices = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], dtype=np.float32)
     bvh = canopy.Bvh(vertices, [[0, 1, 2]])

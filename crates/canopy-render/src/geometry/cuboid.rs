@@ -36,6 +36,50 @@ impl Cuboid {
         }))
     }
 
+    /// The triangles of its faces, in the world: two per face with area (a flat box's
+    /// rectangle counts once, as in [`Cuboid::area`]).
+    pub fn face_triangles(&self) -> Vec<[Vec3; 3]> {
+        let (lo, hi) = (self.local.min, self.local.max);
+        let corner = |x: bool, y: bool, z: bool| {
+            self.transform_point(Vec3::new(
+                if x { hi.x } else { lo.x },
+                if y { hi.y } else { lo.y },
+                if z { hi.z } else { lo.z },
+            ))
+        };
+        let mut triangles = Vec::with_capacity(12);
+        let extent = self.local.extent();
+        for axis in 0..3 {
+            if extent[(axis + 1) % 3] * extent[(axis + 2) % 3] == 0.0 {
+                continue; // a face without area
+            }
+            let sides: &[bool] = if lo[axis] == hi[axis] {
+                &[false]
+            } else {
+                &[false, true]
+            };
+            for &side in sides {
+                // The face's four corners, going round it.
+                let at = |u: bool, v: bool| {
+                    let mut c = [false; 3];
+                    c[axis] = side;
+                    c[(axis + 1) % 3] = u;
+                    c[(axis + 2) % 3] = v;
+                    corner(c[0], c[1], c[2])
+                };
+                let (a, b, c, d) = (
+                    at(false, false),
+                    at(true, false),
+                    at(true, true),
+                    at(false, true),
+                );
+                triangles.push([a, b, c]);
+                triangles.push([a, c, d]);
+            }
+        }
+        triangles
+    }
+
     /// The ray in the box's frame (rotation keeps lengths, so `t` is unchanged).
     #[inline]
     fn local_ray(&self, ray: &Ray) -> Ray {
@@ -236,6 +280,23 @@ mod tests {
         assert!((t - (5.0 - 2f32.sqrt())).abs() < 1e-5, "t = {t}");
         let b = c.bounds();
         assert!((b.min.x - (5.0 - 2f32.sqrt())).abs() < 1e-5);
+    }
+
+    #[test]
+    fn face_triangles_cover_the_surface() {
+        let c = Cuboid {
+            local: Aabb::new(Vec3::ZERO, Vec3::new(1.0, 2.0, 3.0)),
+            rotation: Mat3::from_rotation_z(0.3),
+            translation: Vec3::ONE,
+        };
+        let area: f32 = c
+            .face_triangles()
+            .iter()
+            .map(|t| 0.5 * (t[1] - t[0]).cross(t[2] - t[0]).length())
+            .sum();
+        assert!((area - c.area()).abs() < 1e-4, "{area} vs {}", c.area());
+        let flat = Cuboid::axis_aligned(Vec3::ZERO, Vec3::new(2.0, 0.0, 3.0));
+        assert_eq!(flat.face_triangles().len(), 2);
     }
 
     #[test]

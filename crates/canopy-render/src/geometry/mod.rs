@@ -148,6 +148,22 @@ impl Shape {
         }
     }
 
+    /// Surface area inside `region` (for EPO, [`canopy_bvh::epo`]): exact for triangles
+    /// and cuboids (their faces clipped to the box); `None` for spheres, whose clipped
+    /// area has no closed form here.
+    pub fn area_in_box(&self, region: &Aabb) -> Option<f32> {
+        match self {
+            Shape::Triangle(t) => Some(canopy_bvh::triangle_area_in_box(&t.v, region)),
+            Shape::Cuboid(c) => Some(
+                c.face_triangles()
+                    .iter()
+                    .map(|t| canopy_bvh::triangle_area_in_box(t, region))
+                    .sum(),
+            ),
+            Shape::Sphere(_) => None,
+        }
+    }
+
     /// The vertices of a triangle; `None` for other shapes.
     #[inline]
     pub fn triangle_vertices(&self) -> Option<[Vec3; 3]> {
