@@ -1,7 +1,9 @@
 //! Every builder must answer closest-hit and any-hit queries exactly as a loop over all
 //! primitives does. Primitives here are boxes, tested with the same slab test.
 
-use canopy_bvh::{build, Aabb, BuildParams, Builder, Bvh4, Bvh8, Hit, Isa, Ray};
+use canopy_bvh::{
+    build, optimize, Aabb, BuildParams, Builder, Bvh4, Bvh8, Hit, Isa, OptimizeBudget, Ray,
+};
 use glam::Vec3;
 use proptest::prelude::*;
 
@@ -54,20 +56,31 @@ fn check_against_brute_force(boxes: &[Aabb], rays: &[Ray], params: &BuildParams)
                 assert_eq!(bvh8.occluded(ray, any), hit, "{builder} x8 {isa}: {ray:?}");
             }
         }
-        // The binary tree (the wide ones are checked per kernel above).
+        // The binary tree (the wide ones are checked per kernel above), and the same tree
+        // after a pass of the optimiser.
+        let (optimized, report) = optimize(&bvh, &params.sah, OptimizeBudget::Passes(1));
+        optimized
+            .validate(boxes)
+            .unwrap_or_else(|e| panic!("{builder} optimised: {e}"));
+        assert!(
+            report.sah_after <= report.sah_before * (1.0 + 1e-5),
+            "{builder}: {report:?}"
+        );
         for ray in rays {
             let expected = brute_force_closest(boxes, ray);
-            assert_eq!(
-                bvh.intersect(ray, closest),
-                expected,
-                "{builder} x2: closest hit for {ray:?}"
-            );
-            let hit = expected.is_some();
-            assert_eq!(
-                bvh.occluded(ray, any),
-                hit,
-                "{builder} x2: any hit for {ray:?}"
-            );
+            for (tree, what) in [(&bvh, "x2"), (&optimized, "x2 optimised")] {
+                assert_eq!(
+                    tree.intersect(ray, closest),
+                    expected,
+                    "{builder} {what}: closest hit for {ray:?}"
+                );
+                let hit = expected.is_some();
+                assert_eq!(
+                    tree.occluded(ray, any),
+                    hit,
+                    "{builder} {what}: any hit for {ray:?}"
+                );
+            }
         }
     }
 }
@@ -226,6 +239,10 @@ fn every_builder_makes_valid_trees_on_degenerate_patterns_of_every_size() {
                     Bvh8::from_bvh2(&bvh)
                         .validate(&boxes)
                         .unwrap_or_else(|e| panic!("{builder} x8 on {name} x{n}: {e}"));
+                    let (optimized, _) = optimize(&bvh, &params.sah, OptimizeBudget::Passes(2));
+                    optimized
+                        .validate(&boxes)
+                        .unwrap_or_else(|e| panic!("{builder} optimised on {name} x{n}: {e}"));
                 }
             }
         }

@@ -31,6 +31,11 @@ pub struct BvhArgs {
     /// About one box query per node: seconds on large meshes.
     #[arg(long)]
     epo: bool,
+    /// Optimise each tree after building by reinsertion (Bittner et al. 2013): a number of
+    /// passes (`3`) or a time budget (`500ms`, `2s`); the table then shows the optimised
+    /// tree, its SAH before and the time taken.
+    #[arg(long, value_parser = parse_budget)]
+    optimize: Option<canopy_bvh::OptimizeBudget>,
     #[command(flatten)]
     build: BuildArgs,
 }
@@ -49,6 +54,11 @@ struct Row {
     max_depth: usize,
     /// SAH cost with the root's surface area normalised to 1.
     sah_cost: f32,
+    /// With `--optimize`: SAH as built, and the optimiser's milliseconds.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    sah_before_optimize: Option<f32>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    optimize_ms: Option<f64>,
     /// EPO with the scene's surface area normalised to 1 (with `--epo`).
     #[serde(skip_serializing_if = "Option::is_none")]
     epo: Option<f32>,
@@ -87,7 +97,8 @@ pub fn run(args: &BvhArgs) -> anyhow::Result<()> {
     for &builder in &builders {
         args.build.check_memory(builder, boxes.len())?;
         for &width in &args.width {
-            let (mut row, tree) = measure(builder, width, &boxes, &params, args.runs);
+            let (mut row, tree) =
+                measure(builder, width, &boxes, &params, args.runs, args.optimize);
             if args.epo {
                 let area = |prim: u32, region: &Aabb| {
                     scene.primitives[prim as usize]
@@ -120,9 +131,23 @@ fn measure(
     boxes: &[Aabb],
     params: &BuildParams,
     runs: u32,
+    optimize: Option<canopy_bvh::OptimizeBudget>,
 ) -> (Row, Tree) {
     // Timed: the build and the collapse to the requested width.
-    let build_once = || Tree::new(build(builder, boxes, params), width);
+    let mut optimized = None;
+    let mut build_once = || {
+        let bvh = build(builder, boxes, params);
+        let bvh = match optimize {
+            Some(budget) => {
+                let start = Instant::now();
+                let (bvh, report) = canopy_bvh::optimize(&bvh, &params.sah, budget);
+                optimized = Some((report, start.elapsed().as_secs_f64() * 1e3));
+                bvh
+            }
+            None => bvh,
+        };
+        Tree::new(bvh, width)
+    };
     let mut times = Vec::new();
     let mut last = None;
     for _ in 0..runs {
@@ -144,10 +169,36 @@ fn measure(
         max_leaf_size: stats.max_leaf_size,
         max_depth: stats.max_depth,
         sah_cost: stats.sah_cost,
+        sah_before_optimize: optimized.map(|(r, _)| r.sah_before),
+        optimize_ms: optimized.map(|(_, ms)| ms),
         epo: None,
         memory_bytes: stats.memory_bytes,
     };
     (row, tree)
+}
+
+/// `--optimize`: passes (`3`) or a time (`500ms`, `2s`).
+fn parse_budget(s: &str) -> Result<canopy_bvh::OptimizeBudget, String> {
+    if let Ok(passes) = s.parse::<u32>() {
+        return match passes {
+            1..=1000 => Ok(canopy_bvh::OptimizeBudget::Passes(passes)),
+            _ => Err(format!("{passes} passes is not in 1..=1000")),
+        };
+    }
+    let seconds = if let Some(ms) = s.strip_suffix("ms") {
+        ms.parse::<f64>().map(|v| v / 1e3)
+    } else if let Some(sec) = s.strip_suffix('s') {
+        sec.parse::<f64>()
+    } else {
+        return Err(format!("`{s}`: expected passes (3) or a time (500ms, 2s)"));
+    }
+    .map_err(|_| format!("`{s}`: expected passes (3) or a time (500ms, 2s)"))?;
+    if !(seconds > 0.0 && seconds <= 3600.0) {
+        return Err(format!("`{s}`: the time must be in (0, 1h]"));
+    }
+    Ok(canopy_bvh::OptimizeBudget::Time(
+        std::time::Duration::from_secs_f64(seconds),
+    ))
 }
 
 fn print_table(report: &Report) {
@@ -172,6 +223,14 @@ fn print_table(report: &Report) {
         "memory"
     );
     for r in &report.rows {
+        if let (Some(before), Some(ms)) = (r.sah_before_optimize, r.optimize_ms) {
+            outln!(
+                "{:<14} {:>5} optimised in {ms:.1} ms: SAH {before:.2} -> {:.2}",
+                r.builder,
+                r.width,
+                r.sah_cost
+            );
+        }
         let epo = r.epo.map_or("-".to_string(), |e| format!("{e:.2}"));
         outln!(
             "{:<14} {:>5} {:>10.2} {:>8} {:>8} {:>6.2} {:>5} {:>6} {:>9.2} {:>9} {:>10}",

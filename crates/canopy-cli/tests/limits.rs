@@ -43,7 +43,7 @@ const BUILD: [Limits; 4] = [
 ];
 
 fn check(command: &Command, limits: &[Limits]) {
-    let dir = scratch(&format!("limits-{}", command.base[0]));
+    let dir = scratch(&format!("limits-{}-{}", command.base[0], command.base[1]));
     std::fs::write(dir.join("file"), "a file, not a directory").unwrap();
     for &(option, zero_ok, max, past) in limits {
         let cases = [
@@ -126,9 +126,29 @@ fn render_options_at_their_limits() {
 
 #[test]
 fn bvh_options_at_their_limits() {
-    let mut limits = vec![("--runs", false, "1000", "1001")];
+    let mut limits = vec![
+        ("--runs", false, "1000", "1001"),
+        ("--optimize", false, "1000", "1001"),
+    ];
     limits.extend(BUILD);
     check(&BVH, &limits);
+}
+
+#[test]
+fn bench_lights_options_at_their_limits() {
+    let lights = Command {
+        base: &["bench", "lights", "--out", "file/out.md"],
+        in_range_status: 1,
+    };
+    check(
+        &lights,
+        &[
+            ("--size", false, "65536x4096", "65537x1"),
+            ("--seconds", true, "8760h", "8761h"),
+            ("--reference-spp", false, "16777216", "16777217"),
+            ("--threads", false, "1024", "1025"),
+        ],
+    );
 }
 
 #[test]

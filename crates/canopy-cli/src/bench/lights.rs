@@ -52,6 +52,10 @@ struct Row {
 }
 
 pub fn run(args: &LightsArgs) -> anyhow::Result<()> {
+    // Refuse an output that cannot be written before minutes of rendering.
+    if let Some(out) = &args.out {
+        crate::safety::check_writable_dir(out, "table")?;
+    }
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(args.threads.unwrap_or(0) as usize)
         .build()
