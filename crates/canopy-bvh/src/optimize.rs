@@ -19,7 +19,8 @@ use std::time::{Duration, Instant};
 pub enum OptimizeBudget {
     /// At most this many passes over all nodes (stops early when a pass gains < 0.1%).
     Passes(u32),
-    /// Passes until this much time has gone (checked between nodes).
+    /// Passes until this much time has gone (checked between nodes), or until a pass
+    /// gains < 0.1%.
     Time(Duration),
 }
 
@@ -90,7 +91,7 @@ pub fn optimize(bvh: &Bvh2, costs: &SahCosts, budget: OptimizeBudget) -> (Bvh2, 
         let new_area = tree.internal_area();
         let gained = (area - new_area) / area.max(f64::MIN_POSITIVE);
         area = new_area;
-        if deadline.is_none() && gained < 1e-3 {
+        if gained < 1e-3 {
             break;
         }
     }

@@ -34,7 +34,7 @@ pub struct BvhArgs {
     /// Optimise each tree after building by reinsertion (Bittner et al. 2013): a number of
     /// passes (`3`) or a time budget (`500ms`, `2s`); the table then shows the optimised
     /// tree, its SAH before and the time taken.
-    #[arg(long, value_parser = parse_budget)]
+    #[arg(long, value_parser = limits::optimize_budget)]
     optimize: Option<canopy_bvh::OptimizeBudget>,
     #[command(flatten)]
     build: BuildArgs,
@@ -175,30 +175,6 @@ fn measure(
         memory_bytes: stats.memory_bytes,
     };
     (row, tree)
-}
-
-/// `--optimize`: passes (`3`) or a time (`500ms`, `2s`).
-fn parse_budget(s: &str) -> Result<canopy_bvh::OptimizeBudget, String> {
-    if let Ok(passes) = s.parse::<u32>() {
-        return match passes {
-            1..=1000 => Ok(canopy_bvh::OptimizeBudget::Passes(passes)),
-            _ => Err(format!("{passes} passes is not in 1..=1000")),
-        };
-    }
-    let seconds = if let Some(ms) = s.strip_suffix("ms") {
-        ms.parse::<f64>().map(|v| v / 1e3)
-    } else if let Some(sec) = s.strip_suffix('s') {
-        sec.parse::<f64>()
-    } else {
-        return Err(format!("`{s}`: expected passes (3) or a time (500ms, 2s)"));
-    }
-    .map_err(|_| format!("`{s}`: expected passes (3) or a time (500ms, 2s)"))?;
-    if !(seconds > 0.0 && seconds <= 3600.0) {
-        return Err(format!("`{s}`: the time must be in (0, 1h]"));
-    }
-    Ok(canopy_bvh::OptimizeBudget::Time(
-        std::time::Duration::from_secs_f64(seconds),
-    ))
 }
 
 fn print_table(report: &Report) {

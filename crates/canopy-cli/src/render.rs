@@ -66,6 +66,10 @@ pub struct RenderArgs {
     width: BvhWidth,
     #[command(flatten)]
     build: BuildArgs,
+    /// Improve the BVH by reinsertion before rendering: passes (`3`) or a time (`500ms`,
+    /// `2s`); see `canopy bvh --optimize`.
+    #[arg(long, value_parser = limits::optimize_budget)]
+    optimize: Option<canopy_bvh::OptimizeBudget>,
     /// Draw the BVH's boxes over the image as wireframes, coloured by tree level.
     #[arg(long)]
     show_bvh: bool,
@@ -242,7 +246,15 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     if let AccelKind::Bvh(builder) = args.bvh {
         args.build.check_memory(builder, scene.primitives.len())?;
     }
-    let accel = pool.install(|| Accel::build(args.bvh, args.width, &scene.primitives, &params));
+    let accel = pool.install(|| {
+        Accel::build_optimized(
+            args.bvh,
+            args.width,
+            &scene.primitives,
+            &params,
+            args.optimize,
+        )
+    });
     if args.show_bvh && accel.tree().is_none() {
         bail!("--show-bvh needs a BVH; choose a builder with --bvh");
     }

@@ -36,6 +36,7 @@ pub struct Bvh {
 /// The build options every constructor takes.
 struct Options {
     kind: AccelKind,
+    optimize: Option<canopy_bvh::OptimizeBudget>,
     width: BvhWidth,
     params: BuildParams,
     threads: Option<usize>,
@@ -49,6 +50,7 @@ fn options(
     sah_traversal: Option<f32>,
     sah_intersection: Option<f32>,
     ploc_radius: Option<u32>,
+    optimize: Option<f64>,
     threads: Option<usize>,
 ) -> PyResult<Options> {
     let kind: AccelKind = builder
@@ -68,8 +70,20 @@ fn options(
     params
         .check()
         .map_err(|e| PyValueError::new_err(e.to_string()))?;
+    let optimize = match optimize {
+        None => None,
+        Some(s) if s > 0.0 && s <= 3600.0 => Some(canopy_bvh::OptimizeBudget::Time(
+            std::time::Duration::from_secs_f64(s),
+        )),
+        Some(s) => {
+            return Err(PyValueError::new_err(format!(
+                "optimize must be a time in seconds in (0, 3600], not {s}"
+            )))
+        }
+    };
     Ok(Options {
         kind,
+        optimize,
         width,
         params,
         threads,
@@ -83,11 +97,11 @@ impl Bvh {
                 "a BVH needs at least one primitive (the input is empty)",
             ));
         }
-        let (kind, width, params) = (o.kind, o.width, o.params);
+        let (kind, width, params, optimize) = (o.kind, o.width, o.params, o.optimize);
         py.detach(|| {
             pools::install(o.threads, || {
                 let start = Instant::now();
-                let accel = Accel::build(kind, width, &primitives, &params);
+                let accel = Accel::build_optimized(kind, width, &primitives, &params, optimize);
                 let build_ms = start.elapsed().as_secs_f64() * 1e3;
                 let boxes = primitives.iter().map(|p| p.shape.bounds()).collect();
                 Bvh {
@@ -201,7 +215,7 @@ impl Bvh {
     /// See `canopy.Bvh` in the Python package for the documentation.
     #[new]
     #[pyo3(signature = (vertices, faces, builder="binned-sah", width=8, max_leaf_size=None,
-        sah_traversal=None, sah_intersection=None, ploc_radius=None, threads=None))]
+        sah_traversal=None, sah_intersection=None, ploc_radius=None, optimize=None, threads=None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -213,6 +227,7 @@ impl Bvh {
         sah_traversal: Option<f32>,
         sah_intersection: Option<f32>,
         ploc_radius: Option<u32>,
+        optimize: Option<f64>,
         threads: Option<usize>,
     ) -> PyResult<Self> {
         let o = options(
@@ -222,6 +237,7 @@ impl Bvh {
             sah_traversal,
             sah_intersection,
             ploc_radius,
+            optimize,
             threads,
         )?;
         let v = arrays::points("vertices", &vertices)?;
@@ -243,7 +259,7 @@ impl Bvh {
     /// See `canopy.Bvh.from_boxes` in the Python package.
     #[staticmethod]
     #[pyo3(signature = (boxes, builder="binned-sah", width=8, max_leaf_size=None,
-        sah_traversal=None, sah_intersection=None, ploc_radius=None, threads=None))]
+        sah_traversal=None, sah_intersection=None, ploc_radius=None, optimize=None, threads=None))]
     #[allow(clippy::too_many_arguments)]
     fn from_boxes(
         py: Python<'_>,
@@ -254,6 +270,7 @@ impl Bvh {
         sah_traversal: Option<f32>,
         sah_intersection: Option<f32>,
         ploc_radius: Option<u32>,
+        optimize: Option<f64>,
         threads: Option<usize>,
     ) -> PyResult<Self> {
         let o = options(
@@ -263,6 +280,7 @@ impl Bvh {
             sah_traversal,
             sah_intersection,
             ploc_radius,
+            optimize,
             threads,
         )?;
         let primitives = arrays::boxes(&boxes)?

@@ -95,6 +95,20 @@ def test_epo_prices_overlap_that_sah_ignores():
     assert canopy.Bvh.from_boxes(boxes, width=2, max_leaf_size=1).epo() > 0
 
 
+def test_optimized_trees_give_the_same_hits_with_a_lower_sah():
+    vertices, faces = random_soup(2000, 11)
+    origins, directions = random_rays(3000, 12)
+    plain = canopy.Bvh(vertices, faces, builder="lbvh", width=2)
+    better = canopy.Bvh(vertices, faces, builder="lbvh", width=2, optimize=0.2)
+    better.validate()
+    assert better.stats()["sah_cost"] < plain.stats()["sah_cost"]
+    a, b = plain.intersect(origins, directions), better.intersect(origins, directions)
+    np.testing.assert_array_equal(a.prim, b.prim)
+    np.testing.assert_array_equal(a.t, b.t)
+    with pytest.raises(ValueError, match="optimize must be a time"):
+        canopy.Bvh(vertices, faces, optimize=-1)
+
+
 def test_tnear_and_tfar_limit_each_ray():
     vertices = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], dtype=np.float32)
     bvh = canopy.Bvh(vertices, [[0, 1, 2]])

@@ -4,8 +4,8 @@
 use crate::geometry::{Shape, ShearedRay};
 use crate::scene::Primitive;
 use canopy_bvh::{
-    build, BuildParams, Builder, BvhWidth, Hit, Ray, TraversalCounter, TraversalStats, Tree,
-    PACK_LANES,
+    build, BuildParams, Builder, BvhWidth, Hit, OptimizeBudget, Ray, TraversalCounter,
+    TraversalStats, Tree, PACK_LANES,
 };
 use std::fmt;
 use std::str::FromStr;
@@ -72,6 +72,18 @@ impl Accel {
         primitives: &[Primitive],
         params: &BuildParams,
     ) -> Self {
+        Self::build_optimized(kind, width, primitives, params, None)
+    }
+
+    /// [`Accel::build`], the binary tree improved by reinsertion within `optimize`
+    /// ([`canopy_bvh::optimize`]) before it is collapsed; the time is in `build_time`.
+    pub fn build_optimized(
+        kind: AccelKind,
+        width: BvhWidth,
+        primitives: &[Primitive],
+        params: &BuildParams,
+        optimize: Option<OptimizeBudget>,
+    ) -> Self {
         let start = Instant::now();
         let AccelKind::Bvh(builder) = kind else {
             return Self {
@@ -92,7 +104,10 @@ impl Accel {
             },
             ..*params
         };
-        let bvh = build(builder, &boxes, &params);
+        let mut bvh = build(builder, &boxes, &params);
+        if let Some(budget) = optimize {
+            bvh = canopy_bvh::optimize(&bvh, &params.sah, budget).0;
+        }
         let mut tree = Tree::new(bvh, width);
         tree.pack_triangles(|p| primitives[p as usize].shape.triangle_vertices());
         Self {

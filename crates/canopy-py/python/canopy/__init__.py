@@ -89,7 +89,7 @@ def _per_ray(value, name: str, n: int):
     return np.require(array, requirements=["C_CONTIGUOUS", "ALIGNED"])
 
 
-def _options(builder, width, max_leaf_size, sah_traversal, sah_intersection, ploc_radius, threads):
+def _options(builder, width, max_leaf_size, sah_traversal, sah_intersection, ploc_radius, optimize, threads):
     if not isinstance(builder, str):
         raise TypeError(f"builder must be a name (see canopy.builders()), not {builder!r}")
     return dict(
@@ -99,6 +99,7 @@ def _options(builder, width, max_leaf_size, sah_traversal, sah_intersection, plo
         sah_traversal=sah_traversal,
         sah_intersection=sah_intersection,
         ploc_radius=ploc_radius,
+        optimize=None if optimize is None else float(optimize),
         threads=threads,
     )
 
@@ -114,7 +115,8 @@ class Bvh:
     report's ``agglomerative``, ``ploc`` ...; or ``none``, a plain loop over every
     primitive, the reference every tree is tested against); ``width`` is the layout: 2 (binary), 4 or 8
     (SIMD wide nodes with triangles packed in the leaves; the fastest). The other options
-    are the builders' (``max_leaf_size``, the SAH costs, ``ploc_radius``).
+    are the builders' (``max_leaf_size``, the SAH costs, ``ploc_radius``); ``optimize=s``
+    improves the tree by reinsertion for ``s`` seconds before it is laid out.
     """
 
     def __init__(
@@ -128,6 +130,7 @@ class Bvh:
         sah_traversal: Optional[float] = None,
         sah_intersection: Optional[float] = None,
         ploc_radius: Optional[int] = None,
+        optimize: Optional[float] = None,
         threads: Optional[int] = None,
     ):
         vertices = _array(vertices, "vertices", np.float32, 2, "(V, 3)")
@@ -135,7 +138,7 @@ class Bvh:
         self._native = _canopy.Bvh(
             vertices,
             faces,
-            **_options(builder, width, max_leaf_size, sah_traversal, sah_intersection, ploc_radius, threads),
+            **_options(builder, width, max_leaf_size, sah_traversal, sah_intersection, ploc_radius, optimize, threads),
         )
 
     @classmethod
@@ -149,6 +152,7 @@ class Bvh:
         sah_traversal: Optional[float] = None,
         sah_intersection: Optional[float] = None,
         ploc_radius: Optional[int] = None,
+        optimize: Optional[float] = None,
         threads: Optional[int] = None,
     ) -> "Bvh":
         """A BVH over axis-aligned boxes, (N, 2, 3): a ray hits a box where it enters it
@@ -157,7 +161,7 @@ class Bvh:
         self = cls.__new__(cls)
         self._native = _canopy.Bvh.from_boxes(
             boxes,
-            **_options(builder, width, max_leaf_size, sah_traversal, sah_intersection, ploc_radius, threads),
+            **_options(builder, width, max_leaf_size, sah_traversal, sah_intersection, ploc_radius, optimize, threads),
         )
         return self
 

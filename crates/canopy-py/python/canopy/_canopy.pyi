@@ -51,6 +51,7 @@ class Bvh:
         sah_traversal: Optional[float] = ...,
         sah_intersection: Optional[float] = ...,
         ploc_radius: Optional[int] = ...,
+        optimize: Optional[float] = ...,
         threads: Optional[int] = ...,
     ) -> None: ...
     @staticmethod
@@ -62,6 +63,7 @@ class Bvh:
         sah_traversal: Optional[float] = ...,
         sah_intersection: Optional[float] = ...,
         ploc_radius: Optional[int] = ...,
+        optimize: Optional[float] = ...,
         threads: Optional[int] = ...,
     ) -> Bvh: ...
     @property
