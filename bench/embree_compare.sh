@@ -4,13 +4,7 @@
 # bench/embree_compare.py. Arguments are passed on (e.g. --meshes a.ply b.ply --runs 3).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-if [ ! -x bench/.venv/bin/python ]; then
-  python3 -m venv bench/.venv
-fi
-bench/.venv/bin/pip install --quiet --disable-pip-version-check embreex numpy "maturin>=1.9,<2"
-rm -rf target/bench-wheels
-bench/.venv/bin/maturin build --release --quiet -m crates/canopy-py/Cargo.toml -o target/bench-wheels
-bench/.venv/bin/pip install --quiet --disable-pip-version-check --force-reinstall --no-deps target/bench-wheels/canopy-*.whl
+source bench/venv.sh embreex numpy
 # Build times on one core and on two (Embree sizes its thread pool by the CPU affinity).
 taskset -c 0 bench/.venv/bin/python bench/embree_compare.py --build-only "$@"
 taskset -c 0,1 bench/.venv/bin/python bench/embree_compare.py --build-only "$@"
