@@ -24,7 +24,6 @@ const CHUNK: usize = 1024;
 #[pyclass(frozen, module = "canopy._canopy")]
 pub struct Bvh {
     primitives: Vec<Primitive>,
-    boxes: Vec<Aabb>,
     accel: Accel,
     /// A builder, or `none` (brute force: the plain loop every tree is checked against).
     kind: AccelKind,
@@ -103,10 +102,8 @@ impl Bvh {
                 let start = Instant::now();
                 let accel = Accel::build_optimized(kind, width, &primitives, &params, optimize);
                 let build_ms = start.elapsed().as_secs_f64() * 1e3;
-                let boxes = primitives.iter().map(|p| p.shape.bounds()).collect();
                 Bvh {
                     primitives,
-                    boxes,
                     accel,
                     kind,
                     width,
@@ -356,7 +353,13 @@ impl Bvh {
     fn validate(&self) -> PyResult<()> {
         match self.accel.tree() {
             Some(tree) => tree
-                .validate(&self.boxes)
+                .validate(
+                    &self
+                        .primitives
+                        .iter()
+                        .map(|p| p.shape.bounds())
+                        .collect::<Vec<Aabb>>(),
+                )
                 .map_err(|e| PyValueError::new_err(format!("invalid BVH: {e}"))),
             None => Ok(()),
         }

@@ -170,9 +170,7 @@ impl Accel {
             }
         }
     }
-}
 
-impl Accel {
     /// Whether anything blocks `ray` within its range (any hit, not the closest): the
     /// shadow-ray query.
     #[inline]
@@ -205,9 +203,7 @@ impl Accel {
             }
         }
     }
-}
 
-impl Accel {
     /// The ray prepared for triangle tests, when there are triangles to test.
     #[inline]
     fn shear(&self, ray: &Ray) -> ShearedRay {

@@ -168,13 +168,7 @@ impl Cuboid {
         local_normal[axis] = if positive { 1.0 } else { -1.0 };
         let p = self.transform_point(local);
         let normal = self.rotation * local_normal;
-        let pdf = area_to_solid_angle(1.0 / self.area(), reference, p, normal)?;
-        Some(SurfaceSample {
-            p,
-            normal,
-            error: self.error(),
-            pdf,
-        })
+        SurfaceSample::by_area(self.area(), reference, p, normal, self.error())
     }
 
     pub fn pdf_toward(&self, reference: Vec3, p: Vec3, normal: Vec3) -> f32 {

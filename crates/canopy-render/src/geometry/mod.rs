@@ -41,6 +41,26 @@ pub struct SurfaceSample {
     pub pdf: f32,
 }
 
+impl SurfaceSample {
+    /// A point `p` (normal `normal`, rounding error `error`) drawn uniformly over a
+    /// surface of `area`, with its density at `reference`; `None` where that is unbounded.
+    pub(crate) fn by_area(
+        area: f32,
+        reference: Vec3,
+        p: Vec3,
+        normal: Vec3,
+        error: f32,
+    ) -> Option<Self> {
+        let pdf = area_to_solid_angle(1.0 / area, reference, p, normal)?;
+        Some(Self {
+            p,
+            normal,
+            error,
+            pdf,
+        })
+    }
+}
+
 /// Solid-angle density at `reference` of a point `p` (normal `normal`) drawn with density
 /// `area_pdf` per unit area; `None` where it is unbounded (seen edge-on or from on it).
 #[inline]

@@ -65,13 +65,7 @@ impl Sphere {
         let Some(cone) = Cone::of(self, reference) else {
             let normal = uniform_sphere(u);
             let p = self.center + self.radius * normal;
-            let pdf = area_to_solid_angle(1.0 / self.area(), reference, p, normal)?;
-            return Some(SurfaceSample {
-                p,
-                normal,
-                error: self.error(),
-                pdf,
-            });
+            return SurfaceSample::by_area(self.area(), reference, p, normal, self.error());
         };
         // The angle θ from the axis to the drawn direction, then the angle α at the
         // centre between the axis and the point where that direction meets the sphere.

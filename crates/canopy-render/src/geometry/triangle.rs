@@ -52,13 +52,7 @@ impl Triangle {
         let b = uniform_triangle(u);
         let p = b[0] * self.v[0] + b[1] * self.v[1] + b[2] * self.v[2];
         let normal = self.normal();
-        let pdf = area_to_solid_angle(1.0 / self.area(), reference, p, normal)?;
-        Some(SurfaceSample {
-            p,
-            normal,
-            error: self.error(),
-            pdf,
-        })
+        SurfaceSample::by_area(self.area(), reference, p, normal, self.error())
     }
 
     pub fn pdf_toward(&self, reference: Vec3, p: Vec3, normal: Vec3) -> f32 {
