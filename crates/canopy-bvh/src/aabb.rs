@@ -58,6 +58,17 @@ impl Aabb {
         )
     }
 
+    /// The box both hold, or [`Aabb::EMPTY`] when they do not meet.
+    #[inline]
+    pub fn intersection(self, other: Aabb) -> Self {
+        let b = Self::new(self.min.max(other.min), self.max.min(other.max));
+        if b.is_empty() {
+            Self::EMPTY
+        } else {
+            b
+        }
+    }
+
     #[inline]
     pub fn is_empty(&self) -> bool {
         self.min.cmpgt(self.max).any()

@@ -63,10 +63,26 @@ impl Bvh2Node {
 /// permutation of primitive indices that leaves point into.
 ///
 /// An empty input gives a tree with no nodes, which every query answers with a miss.
+///
+/// A tree built with spatial splits (`sbvh`) may reference a primitive from several
+/// leaves, each leaf box holding only the part of it that leaf owns: see
+/// [`Bvh2::has_spatial_splits`].
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Bvh2 {
     pub(crate) nodes: Vec<Bvh2Node>,
     pub(crate) prim_indices: Vec<u32>,
+    /// Leaves may hold clipped references (see [`Bvh2::has_spatial_splits`]).
+    pub(crate) spatial_splits: bool,
+}
+
+/// Why [`Bvh2::refit`] refused a tree.
+#[derive(Debug, Error, PartialEq)]
+pub enum RefitError {
+    #[error(
+        "cannot refit a tree with spatial splits: its leaves hold clipped parts of primitives, \
+         which whole-primitive boxes would loosen; rebuild it instead"
+    )]
+    SpatialSplits,
 }
 
 /// What [`Bvh2::validate`] found wrong with a tree.
@@ -95,6 +111,8 @@ pub enum BvhError {
     PrimitiveOutOfRange { prim: u32, len: usize },
     #[error("node {node}: box is not the tight union of its contents")]
     NotTight { node: usize },
+    #[error("node {node}: leaf box reaches outside its primitives' boxes")]
+    LeafOutsidePrimitives { node: usize },
     #[error("node {node}: child {child} is not inside its parent's box")]
     ChildOutsideParent { node: usize, child: usize },
 }
@@ -105,7 +123,16 @@ impl Bvh2 {
         Self {
             nodes,
             prim_indices,
+            spatial_splits: false,
         }
+    }
+
+    /// Whether leaves may hold clipped references: a primitive may appear in several
+    /// leaves, and a leaf box need only cover the part of each primitive it owns. Such a
+    /// tree is traced like any other, but [`Bvh2::refit`] refuses it and
+    /// [`Bvh2::validate`] checks the weaker invariants.
+    pub fn has_spatial_splits(&self) -> bool {
+        self.spatial_splits
     }
 
     pub fn nodes(&self) -> &[Bvh2Node] {
@@ -129,7 +156,11 @@ impl Bvh2 {
     }
 
     /// Recomputes every box bottom-up from the primitive boxes, keeping the topology.
-    pub fn refit(&mut self, boxes: &[Aabb]) {
+    /// Refuses a tree with spatial splits, whose leaf boxes are not primitive boxes.
+    pub fn refit(&mut self, boxes: &[Aabb]) -> Result<(), RefitError> {
+        if self.spatial_splits {
+            return Err(RefitError::SpatialSplits);
+        }
         // Children always have larger indices than their parent, so a reverse sweep
         // visits children first.
         for i in (0..self.nodes.len()).rev() {
@@ -145,11 +176,14 @@ impl Bvh2 {
             self.nodes[i].min = bounds.min;
             self.nodes[i].max = bounds.max;
         }
+        Ok(())
     }
 
     /// Checks the invariants every builder must keep: indices in range, every node reached
     /// exactly once, every primitive in exactly one leaf, every child inside its parent
-    /// and every box the tight union of its contents.
+    /// and every box the tight union of its contents. With spatial splits a primitive
+    /// may be in several leaves (at most once in each), and a leaf box need only lie
+    /// within its primitives' boxes.
     pub fn validate(&self, boxes: &[Aabb]) -> Result<(), BvhError> {
         crate::view::validate(self, boxes)
     }
@@ -206,6 +240,10 @@ impl TreeView for Bvh2 {
     fn memory_bytes(&self) -> usize {
         std::mem::size_of_val(self.nodes.as_slice())
             + std::mem::size_of_val(self.prim_indices.as_slice())
+    }
+
+    fn has_spatial_splits(&self) -> bool {
+        self.spatial_splits
     }
 }
 
@@ -267,7 +305,16 @@ mod tests {
         let mut t = two_leaf_tree();
         t.nodes[0].max = Vec3::splat(9.0);
         t.nodes[1].min = Vec3::splat(-9.0);
-        t.refit(&boxes());
+        t.refit(&boxes()).unwrap();
         assert_eq!(t, two_leaf_tree());
+    }
+
+    #[test]
+    fn refit_refuses_a_tree_with_spatial_splits() {
+        let mut t = two_leaf_tree();
+        t.spatial_splits = true;
+        let before = t.clone();
+        assert_eq!(t.refit(&boxes()), Err(RefitError::SpatialSplits));
+        assert_eq!(t, before);
     }
 }

@@ -36,9 +36,10 @@ mod wide;
 
 pub use aabb::Aabb;
 pub use build::{
-    build, try_build, BuildParams, Builder, ParamsError, Preset, SahCosts, UnknownBuilder,
+    build, build_with_clipper, split_box, split_triangle, try_build, BuildParams, Builder, Clipper,
+    ParamsError, Preset, SahCosts, SplitBoxes, UnknownBuilder,
 };
-pub use bvh2::{Bvh2, Bvh2Node, BvhError};
+pub use bvh2::{Bvh2, Bvh2Node, BvhError, RefitError};
 pub use epo::{epo, triangle_area_in_box};
 pub use isa::{Isa, IsaError};
 pub use layout::{BvhWidth, Tree};

@@ -278,7 +278,9 @@ impl Tree {
                 stack.push((left, node.links[0]));
             }
         }
-        Bvh2::from_parts(nodes, prims)
+        let mut bvh = Bvh2::from_parts(nodes, prims);
+        bvh.spatial_splits = old.has_spatial_splits();
+        bvh
     }
 }
 

@@ -7,6 +7,9 @@ pub struct TreeStats {
     pub nodes: usize,
     pub leaves: usize,
     pub max_leaf_size: usize,
+    /// Primitive references in leaves: the primitives, plus the duplicates spatial splits
+    /// made.
+    pub references: usize,
     /// Boxes from the root's to the deepest leaf's, both included.
     pub max_depth: usize,
     /// SAH cost with the root's surface area normalised to 1.
@@ -16,7 +19,7 @@ pub struct TreeStats {
 }
 
 impl TreeStats {
-    pub fn mean_leaf_size(&self, primitives: usize) -> f32 {
-        primitives as f32 / self.leaves.max(1) as f32
+    pub fn mean_leaf_size(&self) -> f32 {
+        self.references as f32 / self.leaves.max(1) as f32
     }
 }

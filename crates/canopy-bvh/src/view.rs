@@ -39,11 +39,18 @@ pub trait TreeView: Sync {
     fn prim_indices(&self) -> &[u32];
     /// Bytes the layout keeps: nodes, indices and any packed primitives.
     fn memory_bytes(&self) -> usize;
+    /// Whether leaves may hold clipped references (see [`crate::Bvh2::has_spatial_splits`]).
+    fn has_spatial_splits(&self) -> bool {
+        false
+    }
 }
 
 /// Checks the invariants every layout must keep: indices in range, every storage entry
 /// reached exactly once, every primitive in exactly one leaf, every child inside its
-/// parent's box and every box the tight union of its contents.
+/// parent's box and every box the tight union of its contents. With spatial splits, a
+/// primitive is in at least one leaf and at most once in each, and a leaf box lies within
+/// the union of its primitives' boxes (the parts it owns; that they cover each primitive
+/// is for queries against brute force to show).
 pub fn validate(view: &dyn TreeView, boxes: &[Aabb]) -> Result<(), BvhError> {
     let Some(root) = view.root() else {
         return match boxes.len() {
@@ -55,6 +62,7 @@ pub fn validate(view: &dyn TreeView, boxes: &[Aabb]) -> Result<(), BvhError> {
     let indices = view.prim_indices();
     let mut reached = vec![false; slots];
     let mut times_seen = vec![0usize; boxes.len()];
+    let clipped = view.has_spatial_splits();
     let mut children = Vec::new();
     // (the child, its parent's storage entry, for error messages)
     let mut stack = vec![(root, 0usize)];
@@ -89,7 +97,7 @@ pub fn validate(view: &dyn TreeView, boxes: &[Aabb]) -> Result<(), BvhError> {
                     len: indices.len(),
                 })?;
                 let mut bounds = Aabb::EMPTY;
-                for &prim in prims {
+                for (i, &prim) in prims.iter().enumerate() {
                     let seen =
                         times_seen
                             .get_mut(prim as usize)
@@ -99,6 +107,15 @@ pub fn validate(view: &dyn TreeView, boxes: &[Aabb]) -> Result<(), BvhError> {
                             })?;
                     *seen += 1;
                     bounds = bounds.union(boxes[prim as usize]);
+                    if clipped && prims[..i].contains(&prim) {
+                        return Err(BvhError::PrimitiveCount { prim, times: 2 });
+                    }
+                }
+                if clipped {
+                    if !bounds.contains(&child.bounds) {
+                        return Err(BvhError::LeafOutsidePrimitives { node: at });
+                    }
+                    continue;
                 }
                 bounds
             }
@@ -129,7 +146,8 @@ pub fn validate(view: &dyn TreeView, boxes: &[Aabb]) -> Result<(), BvhError> {
             len: slots,
         });
     }
-    if let Some((prim, &times)) = times_seen.iter().enumerate().find(|(_, &t)| t != 1) {
+    let wrong = |t: usize| t == 0 || (t > 1 && !clipped);
+    if let Some((prim, &times)) = times_seen.iter().enumerate().find(|(_, &t)| wrong(t)) {
         return Err(BvhError::PrimitiveCount {
             prim: prim as u32,
             times,
@@ -167,6 +185,7 @@ pub fn stats(view: &dyn TreeView, costs: &SahCosts) -> TreeStats {
         match child.kind {
             ChildKind::Leaf { count, .. } => {
                 stats.leaves += 1;
+                stats.references += count;
                 stats.max_leaf_size = stats.max_leaf_size.max(count);
                 cost += area * count as f64 * costs.intersection as f64;
             }

@@ -125,8 +125,9 @@ proptest! {
         rays in prop::collection::vec(random_ray(), 32),
         origins in prop::collection::vec(vec3(-15.0..15.0), 32),
         max_leaf_size in 1u32..8,
+        max_duplication in prop_oneof![Just(0.3f32), 0.0f32..3.0],
     ) {
-        let params = BuildParams { max_leaf_size, ..BuildParams::default() };
+        let params = BuildParams { max_leaf_size, max_duplication, ..BuildParams::default() };
         let mut all_rays = rays;
         all_rays.extend(rays_at(&boxes, &origins));
         check_against_brute_force(&boxes, &all_rays, &params);

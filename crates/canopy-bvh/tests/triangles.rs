@@ -4,8 +4,8 @@
 //! primitives (boxes, tested by the caller's closure), as a renderer's scenes do.
 
 use canopy_bvh::{
-    build, intersect_triangle, Aabb, BuildParams, Builder, Bvh4, Bvh8, BvhN, Hit, Isa, PrimHit,
-    Ray, ShearedRay,
+    build, build_with_clipper, intersect_triangle, split_box, split_triangle, Aabb, BuildParams,
+    Builder, Bvh4, Bvh8, BvhN, Hit, Isa, PrimHit, Ray, ShearedRay,
 };
 use glam::Vec3;
 use proptest::prelude::*;
@@ -106,8 +106,13 @@ queries!(Bvh4, Bvh8);
 
 fn check(prims: &[Prim], rays: &[Ray], params: &BuildParams) {
     let boxes: Vec<Aabb> = prims.iter().map(Prim::bounds).collect();
+    // Spatial splits clip triangles (and cut boxes as boxes).
+    let clip = |prim: u32, within: Aabb, axis: usize, position: f32| match &prims[prim as usize] {
+        Prim::Triangle(v) => split_triangle(*v, within, axis, position),
+        Prim::Box(_) => split_box(within, axis, position),
+    };
     for &builder in Builder::ALL {
-        let bvh = build(builder, &boxes, params);
+        let bvh = build_with_clipper(builder, &boxes, params, &clip);
         bvh.validate(&boxes)
             .unwrap_or_else(|e| panic!("{builder}: {e}"));
         check_tree(&format!("{builder} x4"), Bvh4::from_bvh2(&bvh), prims, rays);
@@ -177,8 +182,9 @@ proptest! {
         rays in prop::collection::vec(ray(), 24),
         origins in prop::collection::vec(vec3(-12.0..12.0), 24),
         max_leaf_size in 1u32..9,
+        max_duplication in prop_oneof![Just(0.3f32), 0.0f32..3.0],
     ) {
-        let params = BuildParams { max_leaf_size, ..BuildParams::default() };
+        let params = BuildParams { max_leaf_size, max_duplication, ..BuildParams::default() };
         let mut all = rays;
         all.extend(rays_at_features(&prims, &origins));
         check(&prims, &all, &params);
@@ -213,6 +219,48 @@ fn grid_rays_through_shared_vertices_hit_in_every_kernel() {
         );
     }
     check(&prims, &rays, &BuildParams::default());
+}
+
+/// Long slivers in every direction, where spatial splits pay: `sbvh` cuts many of them
+/// (the test demands it), and every clipped reference still answers as brute force does,
+/// for rays at vertices, edge midpoints and centroids and for axis-aligned rays.
+#[test]
+fn clipped_slivers_match_brute_force_in_every_kernel() {
+    let mut state = 777u32;
+    let mut next = move || {
+        state ^= state << 13;
+        state ^= state >> 17;
+        state ^= state << 5;
+        state as f32 / u32::MAX as f32
+    };
+    let mut point = || Vec3::new(next(), next(), next()) * 20.0 - Vec3::splat(10.0);
+    let prims: Vec<Prim> = (0..400)
+        .map(|_| {
+            let (a, b) = (point(), point());
+            let c = a + (b - a) * 0.01 + Vec3::new(0.2, -0.1, 0.15);
+            Prim::Triangle([a, b, c])
+        })
+        .collect();
+    let params = BuildParams {
+        max_duplication: 1.0,
+        ..BuildParams::default()
+    };
+    let boxes: Vec<Aabb> = prims.iter().map(Prim::bounds).collect();
+    let clip = |prim: u32, within: Aabb, axis: usize, position: f32| match &prims[prim as usize] {
+        Prim::Triangle(v) => split_triangle(*v, within, axis, position),
+        Prim::Box(_) => unreachable!(),
+    };
+    let sbvh = build_with_clipper(Builder::Sbvh, &boxes, &params, &clip);
+    assert!(sbvh.has_spatial_splits());
+    assert!(sbvh.prim_indices().len() > boxes.len() * 11 / 10);
+    let origins: Vec<Vec3> = (0..600).map(|_| point() * 1.2).collect();
+    let mut rays = rays_at_features(&prims, &origins);
+    for (i, o) in origins.iter().enumerate().take(300) {
+        let mut d = Vec3::ZERO;
+        d[i % 3] = if i % 2 == 0 { 1.0 } else { -1.0 };
+        rays.push(Ray::new(*o, d, 0.0, f32::INFINITY));
+    }
+    check(&prims, &rays, &params);
 }
 
 /// Parallel subtree splicing happens above a few thousand primitives: a validated build of

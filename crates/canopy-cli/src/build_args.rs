@@ -18,6 +18,10 @@ pub struct BuildArgs {
     /// Neighbours searched on each side by `ploc` (1 to 1024).
     #[arg(long, default_value_t = BuildParams::default().ploc_radius, value_parser = limits::ploc_radius())]
     pub ploc_radius: u32,
+    /// Most references `sbvh`'s spatial splits may add, as a fraction of the primitives
+    /// (0 to 16; 0.3 = up to 30% more, 0 = no spatial splits).
+    #[arg(long, default_value_t = BuildParams::default().max_duplication, value_parser = limits::max_duplication)]
+    pub max_duplication: f32,
 }
 
 impl BuildArgs {
@@ -30,6 +34,7 @@ impl BuildArgs {
                 intersection: self.sah_intersection,
             },
             ploc_radius: self.ploc_radius,
+            max_duplication: self.max_duplication,
             ..BuildParams::default()
         }
     }

@@ -4,7 +4,7 @@
 use crate::build_args::{builders_help, BuildArgs};
 use crate::limits;
 use crate::units::human_bytes;
-use canopy_bvh::{build, Aabb, BuildParams, Builder, Tree};
+use canopy_bvh::{build_with_clipper, Aabb, BuildParams, Builder, Clipper, Tree};
 use canopy_render::BvhWidth;
 use clap::Args;
 use serde::Serialize;
@@ -49,6 +49,8 @@ struct Row {
     build_ms: f64,
     nodes: usize,
     leaves: usize,
+    /// Primitive references in leaves (more than the primitives after spatial splits).
+    references: usize,
     mean_leaf_size: f32,
     max_leaf_size: usize,
     max_depth: usize,
@@ -97,8 +99,15 @@ pub fn run(args: &BvhArgs) -> anyhow::Result<()> {
     for &builder in &builders {
         args.build.check_memory(builder, boxes.len())?;
         for &width in &args.width {
-            let (mut row, tree) =
-                measure(builder, width, &boxes, &params, args.runs, args.optimize);
+            let clipper = canopy_render::clipper(&scene.primitives);
+            let (mut row, tree) = measure(
+                builder,
+                width,
+                (&boxes, &clipper),
+                &params,
+                args.runs,
+                args.optimize,
+            );
             if args.epo {
                 let area = |prim: u32, region: &Aabb| {
                     scene.primitives[prim as usize]
@@ -128,7 +137,7 @@ pub fn run(args: &BvhArgs) -> anyhow::Result<()> {
 fn measure(
     builder: Builder,
     width: BvhWidth,
-    boxes: &[Aabb],
+    (boxes, clipper): (&[Aabb], &dyn Clipper),
     params: &BuildParams,
     runs: u32,
     optimize: Option<canopy_bvh::OptimizeBudget>,
@@ -136,7 +145,7 @@ fn measure(
     // Timed: the build and the collapse to the requested width.
     let mut optimized = None;
     let mut build_once = || {
-        let bvh = build(builder, boxes, params);
+        let bvh = build_with_clipper(builder, boxes, params, clipper);
         let bvh = match optimize {
             Some(budget) => {
                 let start = Instant::now();
@@ -165,7 +174,8 @@ fn measure(
         build_ms: times[times.len() / 2],
         nodes: stats.nodes,
         leaves: stats.leaves,
-        mean_leaf_size: stats.mean_leaf_size(boxes.len()),
+        references: stats.references,
+        mean_leaf_size: stats.mean_leaf_size(),
         max_leaf_size: stats.max_leaf_size,
         max_depth: stats.max_depth,
         sah_cost: stats.sah_cost,
@@ -185,12 +195,13 @@ fn print_table(report: &Report) {
         report.threads
     );
     outln!(
-        "{:<14} {:>5} {:>10} {:>8} {:>8} {:>6} {:>5} {:>6} {:>9} {:>9} {:>10}",
+        "{:<14} {:>5} {:>10} {:>8} {:>8} {:>8} {:>6} {:>5} {:>6} {:>9} {:>9} {:>10}",
         "builder",
         "width",
         "build ms",
         "nodes",
         "leaves",
+        "refs",
         "leaf",
         "max",
         "depth",
@@ -209,12 +220,13 @@ fn print_table(report: &Report) {
         }
         let epo = r.epo.map_or("-".to_string(), |e| format!("{e:.2}"));
         outln!(
-            "{:<14} {:>5} {:>10.2} {:>8} {:>8} {:>6.2} {:>5} {:>6} {:>9.2} {:>9} {:>10}",
+            "{:<14} {:>5} {:>10.2} {:>8} {:>8} {:>8} {:>6.2} {:>5} {:>6} {:>9.2} {:>9} {:>10}",
             r.builder,
             r.width,
             r.build_ms,
             r.nodes,
             r.leaves,
+            r.references,
             r.mean_leaf_size,
             r.max_leaf_size,
             r.max_depth,

@@ -54,6 +54,17 @@ pub fn sah_cost(s: &str) -> Result<f32, String> {
     }
 }
 
+/// A duplication budget for spatial splits, as [`canopy_bvh::BuildParams::check`] allows.
+pub fn max_duplication(s: &str) -> Result<f32, String> {
+    let refused = || format!("`{s}` is not a number from 0 to 16");
+    let d = s.trim().parse::<f32>().map_err(|_| refused())?;
+    let params = canopy_bvh::BuildParams {
+        max_duplication: d,
+        ..Default::default()
+    };
+    params.check().map(|_| d).map_err(|_| refused())
+}
+
 /// Longest interval between checkpoint saves: a year.
 pub const MAX_INTERVAL: Duration = Duration::from_secs(365 * 24 * 3600);
 

@@ -35,8 +35,9 @@ const BENCH: Command = Command {
 /// (option, zero is allowed, largest allowed, one past it).
 type Limits = (&'static str, bool, &'static str, &'static str);
 
-const BUILD: [Limits; 4] = [
+const BUILD: [Limits; 5] = [
     ("--max-leaf-size", false, "256", "257"),
+    ("--max-duplication", true, "16", "16.5"),
     ("--sah-traversal", false, "1e6", "1.1e6"),
     ("--sah-intersection", false, "1e6", "1.1e6"),
     ("--ploc-radius", false, "1024", "1025"),

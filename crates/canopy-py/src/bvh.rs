@@ -49,6 +49,7 @@ fn options(
     sah_traversal: Option<f32>,
     sah_intersection: Option<f32>,
     ploc_radius: Option<u32>,
+    max_duplication: Option<f32>,
     optimize: Option<f64>,
     threads: Option<usize>,
 ) -> PyResult<Options> {
@@ -64,6 +65,7 @@ fn options(
             intersection: sah_intersection.unwrap_or(d.sah.intersection),
         },
         ploc_radius: ploc_radius.unwrap_or(d.ploc_radius),
+        max_duplication: max_duplication.unwrap_or(d.max_duplication),
         ..d
     };
     params
@@ -212,7 +214,8 @@ impl Bvh {
     /// See `canopy.Bvh` in the Python package for the documentation.
     #[new]
     #[pyo3(signature = (vertices, faces, builder="binned-sah", width=8, max_leaf_size=None,
-        sah_traversal=None, sah_intersection=None, ploc_radius=None, optimize=None, threads=None))]
+        sah_traversal=None, sah_intersection=None, ploc_radius=None, max_duplication=None,
+        optimize=None, threads=None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -224,6 +227,7 @@ impl Bvh {
         sah_traversal: Option<f32>,
         sah_intersection: Option<f32>,
         ploc_radius: Option<u32>,
+        max_duplication: Option<f32>,
         optimize: Option<f64>,
         threads: Option<usize>,
     ) -> PyResult<Self> {
@@ -234,6 +238,7 @@ impl Bvh {
             sah_traversal,
             sah_intersection,
             ploc_radius,
+            max_duplication,
             optimize,
             threads,
         )?;
@@ -256,7 +261,8 @@ impl Bvh {
     /// See `canopy.Bvh.from_boxes` in the Python package.
     #[staticmethod]
     #[pyo3(signature = (boxes, builder="binned-sah", width=8, max_leaf_size=None,
-        sah_traversal=None, sah_intersection=None, ploc_radius=None, optimize=None, threads=None))]
+        sah_traversal=None, sah_intersection=None, ploc_radius=None, max_duplication=None,
+        optimize=None, threads=None))]
     #[allow(clippy::too_many_arguments)]
     fn from_boxes(
         py: Python<'_>,
@@ -267,6 +273,7 @@ impl Bvh {
         sah_traversal: Option<f32>,
         sah_intersection: Option<f32>,
         ploc_radius: Option<u32>,
+        max_duplication: Option<f32>,
         optimize: Option<f64>,
         threads: Option<usize>,
     ) -> PyResult<Self> {
@@ -277,6 +284,7 @@ impl Bvh {
             sah_traversal,
             sah_intersection,
             ploc_radius,
+            max_duplication,
             optimize,
             threads,
         )?;
@@ -329,7 +337,8 @@ impl Bvh {
         d.set_item("leaves", s.leaves)?;
         d.set_item("max_depth", s.max_depth)?;
         d.set_item("max_leaf_size", s.max_leaf_size)?;
-        d.set_item("mean_leaf_size", s.mean_leaf_size(self.primitives.len()))?;
+        d.set_item("mean_leaf_size", s.mean_leaf_size())?;
+        d.set_item("references", s.references)?;
         d.set_item("memory_bytes", s.memory_bytes)?;
         Ok(d)
     }

@@ -109,6 +109,30 @@ def test_optimized_trees_give_the_same_hits_with_a_lower_sah():
         canopy.Bvh(vertices, faces, optimize=-1)
 
 
+def test_spatial_splits_duplicate_long_triangles_and_keep_the_answers():
+    # Long slivers in every direction: sbvh cuts them, and the hits stay exact.
+    rng = np.random.default_rng(21)
+    a, b = rng.random((400, 3)), rng.random((400, 3))
+    c = a + 0.01 * (b - a) + 0.02
+    vertices = np.stack([a, b, c], axis=1).reshape(-1, 3).astype(np.float32)
+    faces = np.arange(1200).reshape(400, 3)
+    origins, directions = random_rays(3000, 22)
+    reference = canopy.Bvh(vertices, faces, builder="none").intersect(origins, directions)
+    for width in [2, 8]:
+        sbvh = canopy.Bvh(vertices, faces, builder="sbvh", width=width, max_duplication=1.0)
+        sbvh.validate()
+        stats = sbvh.stats()
+        assert 400 < stats["references"] <= 800, stats
+        hits = sbvh.intersect(origins, directions)
+        np.testing.assert_array_equal(hits.prim, reference.prim)
+        np.testing.assert_array_equal(hits.t, reference.t)
+        np.testing.assert_array_equal(sbvh.occluded(origins, directions), reference.prim >= 0)
+    none = canopy.Bvh(vertices, faces, builder="sbvh", max_duplication=0.0).stats()
+    assert none["references"] == 400
+    with pytest.raises(ValueError, match="max_duplication"):
+        canopy.Bvh(vertices, faces, builder="sbvh", max_duplication=-0.5)
+
+
 def test_tnear_and_tfar_limit_each_ray():
     vertices = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], dtype=np.float32)
     bvh = canopy.Bvh(vertices, [[0, 1, 2]])

@@ -4,8 +4,8 @@
 use crate::geometry::{Shape, ShearedRay};
 use crate::scene::Primitive;
 use canopy_bvh::{
-    build, BuildParams, Builder, BvhWidth, Hit, OptimizeBudget, Ray, TraversalCounter,
-    TraversalStats, Tree, PACK_LANES,
+    build_with_clipper, split_box, split_triangle, Aabb, BuildParams, Builder, BvhWidth, Clipper,
+    Hit, OptimizeBudget, Ray, TraversalCounter, TraversalStats, Tree, PACK_LANES,
 };
 use std::fmt;
 use std::str::FromStr;
@@ -60,6 +60,19 @@ pub struct Accel {
     pub build_time: Duration,
 }
 
+/// Cuts primitives for builders with spatial splits (`sbvh`): triangles are clipped to
+/// the plane, other shapes are cut as their boxes (conservative for spheres and turned
+/// cuboids).
+pub fn clipper(primitives: &[Primitive]) -> impl Clipper + '_ {
+    move |prim: u32, within: Aabb, axis: usize, position: f32| match primitives[prim as usize]
+        .shape
+        .triangle_vertices()
+    {
+        Some(v) => split_triangle(v, within, axis, position),
+        None => split_box(within, axis, position),
+    }
+}
+
 impl Accel {
     /// Builds the structure for `primitives`. A wide tree over triangles only has its
     /// leaves priced in packs by the SAH builders ([`BuildParams::leaf_block`] set to
@@ -104,7 +117,7 @@ impl Accel {
             },
             ..*params
         };
-        let mut bvh = build(builder, &boxes, &params);
+        let mut bvh = build_with_clipper(builder, &boxes, &params, &clipper(primitives));
         if let Some(budget) = optimize {
             bvh = canopy_bvh::optimize(&bvh, &params.sah, budget).0;
         }

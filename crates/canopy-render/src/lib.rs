@@ -24,7 +24,7 @@ pub mod scene;
 pub mod scene_file;
 pub mod visualize;
 
-pub use accel::{Accel, AccelKind};
+pub use accel::{clipper, Accel, AccelKind};
 pub use background::{Background, EnvironmentMap};
 pub use builtin::{BuiltinScene, BUILTIN_SCENES};
 pub use canopy_bvh::BvhWidth;

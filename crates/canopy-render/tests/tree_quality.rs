@@ -42,3 +42,21 @@ fn presets_trade_build_time_for_tree_quality_in_order_on_the_bunny() {
         "SAH: fast-build {fast}, balanced {balanced}, best-trees {best}"
     );
 }
+
+#[test]
+fn spatial_splits_lower_the_sah_of_binned_sah_on_the_bunny() {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../scenes/meshes/bunny.ply");
+    let scene = load_scene(path).unwrap();
+    let boxes = scene.primitive_bounds();
+    let params = BuildParams::default();
+    let clipper = canopy_render::clipper(&scene.primitives);
+    let sbvh = canopy_bvh::build_with_clipper(Builder::Sbvh, &boxes, &params, &clipper);
+    sbvh.validate(&boxes).unwrap();
+    let binned = build(Builder::BinnedSah, &boxes, &params);
+    let (a, b) = (sbvh.stats(&params.sah), binned.stats(&params.sah));
+    // Measured: 25.09 against 25.44, with 2% more references.
+    assert!(
+        a.sah_cost < 0.995 * b.sah_cost && a.references <= boxes.len() * 13 / 10,
+        "sbvh {a:?}, binned-sah {b:?}"
+    );
+}

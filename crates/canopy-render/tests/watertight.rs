@@ -5,7 +5,7 @@
 //! The rays are hard enough to matter: treating an edge function of exactly zero as a
 //! miss (a common way to lose watertightness) lets about 10% of them through.
 
-use canopy_bvh::{BuildParams, Ray};
+use canopy_bvh::{BuildParams, Builder, Ray};
 use canopy_render::geometry::{Shape, Triangle};
 use canopy_render::scene::Primitive;
 use canopy_render::{Accel, AccelKind, BvhWidth};
@@ -232,6 +232,24 @@ fn rays_at_shared_edges_and_vertices_never_escape() {
                 &BuildParams::default(),
             ),
         ));
+    }
+    // Spatial splits clip triangles at planes through the mesh; the clipped boxes must
+    // not lose a sliver of any triangle. Leaves of one triangle make the builder cut
+    // neighbours apart, which takes spatial splits on these meshes.
+    let clipping = BuildParams {
+        max_duplication: 2.0,
+        max_leaf_size: 1,
+        ..BuildParams::default()
+    };
+    for width in BvhWidth::ALL {
+        let accel = Accel::build(AccelKind::Bvh(Builder::Sbvh), width, &primitives, &clipping);
+        let tree = accel.tree().unwrap();
+        let references = tree.stats(&clipping.sah).references;
+        assert!(
+            tree.view().has_spatial_splits() && references > primitives.len() * 3 / 2,
+            "{width}-wide sbvh: {references} references"
+        );
+        structures.push(("sbvh", accel));
     }
     for (name, accel) in &structures {
         let escaped = rays

@@ -7,6 +7,7 @@
 //! (4 + n/20, as Embree does): the per-node cost of clearing and sweeping bins, not the
 //! primitives, dominates near the leaves.
 
+use super::box4::Box4;
 use super::top_down::{self, Cut, Splitter};
 use crate::{Aabb, BuildParams, Bvh2};
 use glam::{Vec3, Vec3A};
@@ -21,41 +22,6 @@ const SMALL_BINS: usize = 8;
 /// Nodes with at least this many primitives are binned in parallel, in chunks of this
 /// size (the top of the tree, where there is no subtree parallelism yet).
 const PARALLEL_BINNING: usize = 1 << 14;
-
-/// A box in SIMD lanes (the fourth unused): a union is two instructions. Min and max are
-/// exact, so bins give the same bounds, areas and splits as `Aabb`s would.
-#[derive(Clone, Copy)]
-struct Box4 {
-    min: Vec3A,
-    max: Vec3A,
-}
-
-impl Box4 {
-    const EMPTY: Box4 = Box4 {
-        min: Vec3A::splat(f32::INFINITY),
-        max: Vec3A::splat(f32::NEG_INFINITY),
-    };
-
-    #[inline(always)]
-    fn union(self, other: Box4) -> Box4 {
-        Box4 {
-            min: self.min.min(other.min),
-            max: self.max.max(other.max),
-        }
-    }
-
-    #[inline(always)]
-    fn grow(self, p: Vec3A) -> Box4 {
-        Box4 {
-            min: self.min.min(p),
-            max: self.max.max(p),
-        }
-    }
-
-    fn aabb(self) -> Aabb {
-        Aabb::new(self.min.into(), self.max.into())
-    }
-}
 
 #[derive(Clone, Copy)]
 struct Bin {

@@ -93,9 +93,6 @@ impl MergeTree {
                 work.push((l, left));
             }
         }
-        Bvh2 {
-            nodes,
-            prim_indices,
-        }
+        Bvh2::from_parts(nodes, prim_indices)
     }
 }

@@ -3,15 +3,19 @@
 mod aac;
 mod agglomerative;
 mod binned_sah;
+mod box4;
+mod clip;
 mod lbvh;
 mod median;
 mod merge_tree;
 mod morton;
 mod ploc;
 mod presets;
+mod sbvh;
 mod sweep_sah;
 mod top_down;
 
+pub use clip::{split_box, split_triangle, Clipper, SplitBoxes};
 pub use presets::Preset;
 
 use crate::{Aabb, Bvh2};
@@ -37,6 +41,9 @@ pub enum Builder {
     BinnedSah,
     /// Top-down SAH sweeping every split position of all three sorted axes.
     SweepSah,
+    /// Binned SAH with spatial splits (Stich et al. 2009): primitives that straddle a
+    /// plane may be cut and referenced from both sides, within a duplication budget.
+    Sbvh,
     /// The report's bottom-up greedy clustering (Walter et al. 2008), exact, by the
     /// nearest-neighbour chain.
     Agglomerative,
@@ -55,6 +62,7 @@ impl Builder {
         Builder::Lbvh,
         Builder::BinnedSah,
         Builder::SweepSah,
+        Builder::Sbvh,
         Builder::Agglomerative,
         Builder::Aac,
         Builder::Ploc,
@@ -70,6 +78,7 @@ impl Builder {
             Builder::Lbvh => "lbvh",
             Builder::BinnedSah => "binned-sah",
             Builder::SweepSah => "sweep-sah",
+            Builder::Sbvh => "sbvh",
             Builder::Agglomerative => "agglomerative",
             Builder::Aac => "aac",
             Builder::Ploc => "ploc",
@@ -86,6 +95,7 @@ impl Builder {
             Builder::Lbvh => "Karras 2012 radix tree on 63-bit Morton codes (parallel)",
             Builder::BinnedSah => "top-down SAH, binned split candidates on all axes (parallel)",
             Builder::SweepSah => "top-down SAH, full sweep over all three sorted axes",
+            Builder::Sbvh => "binned SAH with spatial splits, triangles clipped (Stich 2009)",
             Builder::Agglomerative => {
                 "report's bottom-up: exact greedy SAH clustering (Walter 2008)"
             }
@@ -159,6 +169,9 @@ pub struct BuildParams {
     /// 1 prices each primitive; [`crate::PACK_LANES`] suits a wide tree whose triangles
     /// are packed (a pack of 4 costs about one triangle test), and gives fuller leaves.
     pub leaf_block: u32,
+    /// `sbvh`: the most references spatial splits may add, as a fraction of the
+    /// primitives (0.3: up to 30% more); 0 turns spatial splits off.
+    pub max_duplication: f32,
 }
 
 /// Why build parameters cannot be used as given.
@@ -174,6 +187,8 @@ pub enum ParamsError {
     SahCost { name: &'static str, value: f32 },
     #[error("ploc_radius must be at least 1")]
     PlocRadius,
+    #[error("max_duplication must be a finite number from 0 to 16, not {value}")]
+    Duplication { value: f32 },
 }
 
 impl BuildParams {
@@ -199,6 +214,11 @@ impl BuildParams {
         if self.ploc_radius == 0 {
             return Err(ParamsError::PlocRadius);
         }
+        if !(0.0..=MAX_DUPLICATION).contains(&self.max_duplication) {
+            return Err(ParamsError::Duplication {
+                value: self.max_duplication,
+            });
+        }
         Ok(())
     }
 
@@ -217,9 +237,13 @@ impl Default for BuildParams {
             bins: 16,
             ploc_radius: 16,
             leaf_block: 1,
+            max_duplication: 0.3,
         }
     }
 }
+
+/// The largest [`BuildParams::max_duplication`]: 16 extra references per primitive.
+const MAX_DUPLICATION: f32 = 16.0;
 
 /// [`build`], refusing parameters that [`BuildParams::check`] refuses instead of
 /// clamping them.
@@ -235,12 +259,30 @@ pub fn try_build(
 /// Builds a BVH over primitives given by their bounding boxes.
 ///
 /// Boxes must not contain NaN; an empty box is allowed and is never hit. Parameters out
-/// of range are clamped (a leaf size or block of 0 to 1, bins to 2..=32); use
-/// [`try_build`] or [`BuildParams::check`] to refuse them instead.
+/// of range are clamped (a leaf size or block of 0 to 1, bins to 2..=32, duplication to
+/// 0..=16); use [`try_build`] or [`BuildParams::check`] to refuse them instead.
+///
+/// `sbvh` cuts primitives as boxes here ([`SplitBoxes`]); give it the geometry with
+/// [`build_with_clipper`] to clip triangles.
 pub fn build(builder: Builder, boxes: &[Aabb], params: &BuildParams) -> Bvh2 {
+    build_with_clipper(builder, boxes, params, &SplitBoxes)
+}
+
+/// [`build`], with `clipper` cutting primitives for the builders with spatial splits
+/// (the others ignore it).
+pub fn build_with_clipper(
+    builder: Builder,
+    boxes: &[Aabb],
+    params: &BuildParams,
+    clipper: &dyn Clipper,
+) -> Bvh2 {
     let params = BuildParams {
         max_leaf_size: params.max_leaf_size.max(1),
         bins: params.bins.clamp(2, binned_sah::MAX_BINS as u32),
+        max_duplication: match params.max_duplication {
+            d if d.is_nan() => 0.0,
+            d => d.clamp(0.0, MAX_DUPLICATION),
+        },
         ..*params
     };
     let bvh = match builder {
@@ -249,6 +291,7 @@ pub fn build(builder: Builder, boxes: &[Aabb], params: &BuildParams) -> Bvh2 {
         Builder::Lbvh => lbvh::build(boxes, &params),
         Builder::BinnedSah => binned_sah::build(boxes, &params),
         Builder::SweepSah => sweep_sah::build(boxes, &params),
+        Builder::Sbvh => sbvh::build(boxes, &params, clipper),
         Builder::Agglomerative => agglomerative::build(boxes, &params),
         Builder::Aac => aac::build(boxes, &params),
         Builder::Ploc => ploc::build(boxes, &params),

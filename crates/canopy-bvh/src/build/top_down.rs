@@ -54,10 +54,7 @@ pub(crate) fn build_with_order(
         splitter,
     };
     let nodes = driver.subtree(&mut prim_indices, 0, None);
-    Bvh2 {
-        nodes,
-        prim_indices,
-    }
+    Bvh2::from_parts(nodes, prim_indices)
 }
 
 struct Driver<'a, S> {
@@ -106,7 +103,7 @@ impl<S: Splitter> Driver<'_, S> {
                     || self.subtree(left_prims, first, Some(left_bounds)),
                     || self.subtree(right_prims, first + cut.mid, Some(right_bounds)),
                 );
-                splice(bounds, left, right)
+                splice(bounds, left, right, 0)
             }
             cut => self.serial(prims, first, bounds, cut),
         }
@@ -151,23 +148,30 @@ impl<S: Splitter> Driver<'_, S> {
 }
 
 /// Joins two subtrees under a new root: `[root, left root, right root, left rest, right
-/// rest]`, renumbering child links.
-fn splice(bounds: Aabb, left: Vec<Bvh2Node>, right: Vec<Bvh2Node>) -> Vec<Bvh2Node> {
+/// rest]`, renumbering child links. The right subtree's leaves move `right_prims` places
+/// along the primitive indices (0 when they already point into the shared array).
+pub(crate) fn splice(
+    bounds: Aabb,
+    left: Vec<Bvh2Node>,
+    right: Vec<Bvh2Node>,
+    right_prims: u32,
+) -> Vec<Bvh2Node> {
     let left_rest = left.len() as u32 - 1;
     // Where node i of each subtree lands (its root goes to 1 or 2).
     let place_left = |i: u32| if i == 0 { 1 } else { 2 + i };
     let place_right = |i: u32| if i == 0 { 2 } else { 2 + left_rest + i };
     let mut nodes = vec![Bvh2Node::interior(bounds, 1); 3];
     nodes.resize(left.len() + right.len() + 1, nodes[0]);
-    for (tree, place) in [
-        (&left, &place_left as &dyn Fn(u32) -> u32),
-        (&right, &place_right),
+    for (tree, place, prim_shift) in [
+        (&left, &place_left as &dyn Fn(u32) -> u32, 0),
+        (&right, &place_right, right_prims),
     ] {
         for (i, node) in tree.iter().enumerate() {
             let mut node = *node;
-            if !node.is_leaf() {
-                node.first = place(node.first);
-            }
+            node.first = match node.is_leaf() {
+                true => node.first + prim_shift,
+                false => place(node.first),
+            };
             nodes[place(i as u32) as usize] = node;
         }
     }

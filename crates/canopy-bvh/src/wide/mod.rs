@@ -103,6 +103,8 @@ pub struct BvhN<const N: usize> {
     /// Empty, or `packs[k]` holds positions `4k..4k + 4` of `prim_indices`.
     packs: Vec<TrianglePack>,
     isa: Isa,
+    /// Taken from the binary tree (see [`Bvh2::has_spatial_splits`]).
+    spatial_splits: bool,
 }
 
 pub type Bvh4 = BvhN<4>;
@@ -115,6 +117,7 @@ impl<const N: usize> Default for BvhN<N> {
             prim_indices: Vec::new(),
             packs: Vec::new(),
             isa: Isa::best(),
+            spatial_splits: false,
         }
     }
 }
@@ -158,6 +161,7 @@ impl<const N: usize> BvhN<N> {
         let src = bvh.nodes();
         let mut wide = Self {
             prim_indices: bvh.prim_indices().to_vec(),
+            spatial_splits: bvh.has_spatial_splits(),
             ..Self::default()
         };
         let Some(root) = src.first() else {
@@ -319,6 +323,10 @@ impl<const N: usize> TreeView for BvhN<N> {
         std::mem::size_of_val(self.nodes.as_slice())
             + std::mem::size_of_val(self.prim_indices.as_slice())
             + std::mem::size_of_val(self.packs.as_slice())
+    }
+
+    fn has_spatial_splits(&self) -> bool {
+        self.spatial_splits
     }
 }
 

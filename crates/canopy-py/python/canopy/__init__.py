@@ -89,7 +89,8 @@ def _per_ray(value, name: str, n: int):
     return np.require(array, requirements=["C_CONTIGUOUS", "ALIGNED"])
 
 
-def _options(builder, width, max_leaf_size, sah_traversal, sah_intersection, ploc_radius, optimize, threads):
+def _options(builder, width, max_leaf_size, sah_traversal, sah_intersection, ploc_radius, max_duplication,
+             optimize, threads):
     if not isinstance(builder, str):
         raise TypeError(f"builder must be a name (see canopy.builders()), not {builder!r}")
     return dict(
@@ -99,6 +100,7 @@ def _options(builder, width, max_leaf_size, sah_traversal, sah_intersection, plo
         sah_traversal=sah_traversal,
         sah_intersection=sah_intersection,
         ploc_radius=ploc_radius,
+        max_duplication=max_duplication,
         optimize=None if optimize is None else float(optimize),
         threads=threads,
     )
@@ -112,10 +114,11 @@ class Bvh:
 
     ``builder`` names how the tree is built (``canopy.builders()``: ``binned-sah`` by
     default, ``sweep-sah`` for the best trees, ``lbvh`` for the fastest build, the
-    report's ``agglomerative``, ``ploc`` ...; or ``none``, a plain loop over every
+    report's ``agglomerative``, ``ploc``, ``sbvh`` with spatial splits ...; or ``none``, a plain loop over every
     primitive, the reference every tree is tested against); ``width`` is the layout: 2 (binary), 4 or 8
     (SIMD wide nodes with triangles packed in the leaves; the fastest). The other options
-    are the builders' (``max_leaf_size``, the SAH costs, ``ploc_radius``); ``optimize=s``
+    are the builders' (``max_leaf_size``, the SAH costs, ``ploc_radius``, and
+    ``max_duplication``, the fraction of extra references ``sbvh`` may make); ``optimize=s``
     improves the tree by reinsertion for ``s`` seconds before it is laid out.
     """
 
@@ -130,6 +133,7 @@ class Bvh:
         sah_traversal: Optional[float] = None,
         sah_intersection: Optional[float] = None,
         ploc_radius: Optional[int] = None,
+        max_duplication: Optional[float] = None,
         optimize: Optional[float] = None,
         threads: Optional[int] = None,
     ):
@@ -138,7 +142,10 @@ class Bvh:
         self._native = _canopy.Bvh(
             vertices,
             faces,
-            **_options(builder, width, max_leaf_size, sah_traversal, sah_intersection, ploc_radius, optimize, threads),
+            **_options(
+                builder, width, max_leaf_size, sah_traversal, sah_intersection, ploc_radius, max_duplication,
+                optimize, threads,
+            ),
         )
 
     @classmethod
@@ -152,6 +159,7 @@ class Bvh:
         sah_traversal: Optional[float] = None,
         sah_intersection: Optional[float] = None,
         ploc_radius: Optional[int] = None,
+        max_duplication: Optional[float] = None,
         optimize: Optional[float] = None,
         threads: Optional[int] = None,
     ) -> "Bvh":
@@ -161,7 +169,10 @@ class Bvh:
         self = cls.__new__(cls)
         self._native = _canopy.Bvh.from_boxes(
             boxes,
-            **_options(builder, width, max_leaf_size, sah_traversal, sah_intersection, ploc_radius, optimize, threads),
+            **_options(
+                builder, width, max_leaf_size, sah_traversal, sah_intersection, ploc_radius, max_duplication,
+                optimize, threads,
+            ),
         )
         return self
 

@@ -51,6 +51,7 @@ class Bvh:
         sah_traversal: Optional[float] = ...,
         sah_intersection: Optional[float] = ...,
         ploc_radius: Optional[int] = ...,
+        max_duplication: Optional[float] = ...,
         optimize: Optional[float] = ...,
         threads: Optional[int] = ...,
     ) -> None: ...
@@ -63,6 +64,7 @@ class Bvh:
         sah_traversal: Optional[float] = ...,
         sah_intersection: Optional[float] = ...,
         ploc_radius: Optional[int] = ...,
+        max_duplication: Optional[float] = ...,
         optimize: Optional[float] = ...,
         threads: Optional[int] = ...,
     ) -> Bvh: ...
