@@ -26,10 +26,17 @@ pub fn epo(
     let Some(root) = view.root() else {
         return 0.0;
     };
-    let total: f64 = view
+    // Each primitive once, though spatial splits may reference it from several leaves.
+    let mut prims: Vec<u32> = view
         .prim_indices()
+        .iter()
+        .copied()
+        .filter(|&p| p != NO_PRIM)
+        .collect();
+    prims.par_sort_unstable();
+    prims.dedup();
+    let total: f64 = prims
         .par_iter()
-        .filter(|&&p| p != NO_PRIM)
         .map(|&p| area_inside(p, &root.bounds) as f64)
         .sum();
     if total <= 0.0 {
@@ -82,12 +89,15 @@ fn foreign_area(
         }
         match other.kind {
             ChildKind::Leaf { first, count } => {
+                // A leaf owns the part of its primitives inside its box: all of them,
+                // unless spatial splits clipped them.
+                let owned = region.intersection(other.bounds);
                 // (Leaves of packed layouts pad their last pack with NO_PRIM.)
                 for &p in prims[first..first + count]
                     .iter()
                     .filter(|&&p| p != NO_PRIM)
                 {
-                    area += area_inside(p, &region) as f64;
+                    area += area_inside(p, &owned) as f64;
                 }
             }
             ChildKind::Inner(inner) => {
@@ -234,6 +244,45 @@ mod tests {
             (bad_epo - expected).abs() < 1e-3 * expected,
             "{bad_epo} vs {expected}"
         );
+    }
+
+    #[test]
+    fn clipped_references_count_only_the_part_their_leaf_owns() {
+        // Two long triangles crossing like an X, cut at x = 5 into two leaves that each
+        // reference both: each leaf's box holds the other leaf's pieces only on the
+        // plane they share, so nothing overlaps (counting whole triangles, each box
+        // would hold half of both).
+        let tris = vec![
+            [
+                Vec3::new(0.0, 0.0, 0.0),
+                Vec3::new(10.0, 10.0, 0.0),
+                Vec3::new(10.0, 10.2, 0.0),
+            ],
+            [
+                Vec3::new(0.0, 10.0, 0.0),
+                Vec3::new(10.0, 0.0, 0.0),
+                Vec3::new(10.0, 0.2, 0.0),
+            ],
+        ];
+        let boxes: Vec<Aabb> = tris.iter().map(|t| Aabb::from_points(*t)).collect();
+        let all = boxes[0].union(boxes[1]);
+        let (left, right) = crate::split_box(all, 0, 5.0);
+        let mut bvh = Bvh2::from_parts(
+            vec![
+                crate::Bvh2Node::interior(all, 1),
+                crate::Bvh2Node::leaf(left, 0, 2),
+                crate::Bvh2Node::leaf(right, 2, 2),
+            ],
+            vec![0, 1, 0, 1],
+        );
+        bvh.spatial_splits = true;
+        bvh.validate(&boxes).unwrap();
+        let clipped = epo_of(&bvh, &tris);
+        assert!(clipped.abs() < 1e-4, "{clipped}");
+        // The best tree without spatial splits, a triangle per leaf: each leaf's box
+        // holds nearly all of the other triangle.
+        let unclipped = epo_of(&two_leaves(&boxes, &[0], &[1]), &tris);
+        assert!(unclipped > 0.95, "{unclipped}");
     }
 
     /// A root over two leaves holding the given primitives.

@@ -7,9 +7,9 @@
 
 mod common;
 
-use canopy_bvh::{build, Aabb, BuildParams, Builder, Bvh4, Bvh8, Ray};
-use canopy_render::{load_scene, Scene};
-use common::{camera_rays, mesh_dir};
+use canopy_bvh::{build, Aabb, BuildParams, Builder, Bvh4, Bvh8, OptimizeBudget, Ray};
+use canopy_render::{load_scene, Accel, AccelKind, BvhWidth, Scene};
+use common::{camera_rays, incoherent_rays, mesh_dir};
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use std::time::Duration;
 
@@ -45,6 +45,7 @@ fn build_times(c: &mut Criterion) {
     let params = BuildParams::default();
     for (label, scene) in inputs() {
         let boxes: Vec<Aabb> = scene.primitive_bounds();
+        let clipper = canopy_render::clipper(&scene.primitives);
         let mut group = c.benchmark_group(format!("build/{label}"));
         group
             .sample_size(10)
@@ -52,7 +53,7 @@ fn build_times(c: &mut Criterion) {
         group.throughput(Throughput::Elements(boxes.len() as u64));
         for &builder in Builder::ALL {
             group.bench_with_input(BenchmarkId::from_parameter(builder), &boxes, |b, boxes| {
-                b.iter(|| build(builder, boxes, &params))
+                b.iter(|| canopy_bvh::build_with_clipper(builder, boxes, &params, &clipper))
             });
         }
         group.finish();
@@ -99,5 +100,61 @@ fn closest_hit(c: &mut Criterion) {
     }
 }
 
-criterion_group!(benches, build_times, closest_hit);
+/// The trees issue 13 compares: how long each takes to build, its SAH and EPO (printed
+/// once), and incoherent closest hits through it as the renderer lays it out (8-wide,
+/// triangles packed). Rays come from one reference tree, so every tree traces the same.
+fn tree_quality(c: &mut Criterion) {
+    let params = BuildParams::default();
+    let configs: [(&str, Builder, Option<OptimizeBudget>); 4] = [
+        ("binned-sah", Builder::BinnedSah, None),
+        ("sbvh", Builder::Sbvh, None),
+        (
+            "ploc+optimize",
+            Builder::Ploc,
+            Some(OptimizeBudget::Passes(4)),
+        ),
+        ("sweep-sah", Builder::SweepSah, None),
+    ];
+    for (label, scene) in inputs().into_iter().filter(|(l, _)| *l != "dragon-48k") {
+        let build_accel = |builder, optimize| {
+            let kind = AccelKind::Bvh(builder);
+            Accel::build_optimized(kind, BvhWidth::Eight, &scene.primitives, &params, optimize)
+        };
+        let reference = build_accel(Builder::BinnedSah, None);
+        let rays = incoherent_rays(&scene, &reference, 256);
+        let mut group = c.benchmark_group(format!("quality/{label}"));
+        group
+            .sample_size(10)
+            .warm_up_time(Duration::from_millis(500));
+        group.throughput(Throughput::Elements(rays.len() as u64));
+        for (name, builder, optimize) in configs {
+            let accel = build_accel(builder, optimize);
+            let tree = accel.tree().expect("a BVH");
+            let stats = tree.stats(&params.sah);
+            let area = |p: u32, region: &Aabb| {
+                scene.primitives[p as usize]
+                    .shape
+                    .area_in_box(region)
+                    .unwrap_or(0.0)
+            };
+            let epo = canopy_bvh::epo(tree.view(), &params.sah, area);
+            eprintln!(
+                "quality/{label}/{name}: build {:.1} ms, SAH {:.2}, EPO {epo:.2}, {} references",
+                accel.build_time.as_secs_f64() * 1e3,
+                stats.sah_cost,
+                stats.references
+            );
+            group.bench_function(name, |b| {
+                b.iter(|| {
+                    rays.iter()
+                        .filter(|r| accel.intersect(&scene.primitives, r).is_some())
+                        .count()
+                })
+            });
+        }
+        group.finish();
+    }
+}
+
+criterion_group!(benches, build_times, closest_hit, tree_quality);
 criterion_main!(benches);

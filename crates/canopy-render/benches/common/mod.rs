@@ -33,3 +33,23 @@ pub fn camera_rays(scene: &Scene, side: u32) -> Vec<Ray> {
         })
         .collect()
 }
+
+/// Incoherent rays: from the surface points that camera rays through a `side` x `side`
+/// grid hit (backed off a little along the camera ray), in uniform random directions.
+pub fn incoherent_rays(scene: &Scene, accel: &canopy_render::Accel, side: u32) -> Vec<Ray> {
+    let scale = scene
+        .primitive_bounds()
+        .iter()
+        .fold(canopy_bvh::Aabb::EMPTY, |a, &b| a.union(b))
+        .extent()
+        .max_element();
+    let mut rng = Rng::for_sample(1, 0, 0);
+    camera_rays(scene, side)
+        .iter()
+        .filter_map(|ray| {
+            let hit = accel.intersect(&scene.primitives, ray)?;
+            let origin = ray.origin + ray.dir * hit.t - ray.dir * (1e-4 * scale);
+            Some(Ray::new(origin, rng.unit_vector(), 0.0, f32::INFINITY))
+        })
+        .collect()
+}
