@@ -38,13 +38,11 @@ const EMPTY_BIN: Bin = Bin {
 type AxisBins<const B: usize> = [[Bin; B]; 3];
 
 /// The cheapest split found for a node: the axis, the first bin of the right side, the
-/// binning that defines bins (their number, centroid `lo` on the axis and bins per unit
-/// length), and the two sides' bounds.
+/// binning that defines bins (centroid `lo` on the axis and bins per unit length), and
+/// the two sides' bounds.
 struct Split {
     axis: usize,
     bin: usize,
-    /// Slots per axis the node was binned into.
-    bins: usize,
     lo: f32,
     scale: f32,
     cost: f32,
@@ -61,10 +59,20 @@ pub(crate) fn build(boxes: &[Aabb], params: &BuildParams) -> Bvh2 {
                 max: b.max.into(),
             })
             .collect(),
-        centroids: boxes.iter().map(|b| b.center().into()).collect(),
+        centroids: boxes.iter().map(centroid).collect(),
         params,
     };
     top_down::build(boxes, params, &splitter)
+}
+
+/// A box's centre; the origin for an empty box (whose centre is NaN), so that binning
+/// and partitioning, which compare centroids differently, always agree.
+fn centroid(b: &Aabb) -> Vec3A {
+    if b.is_empty() {
+        Vec3A::ZERO
+    } else {
+        b.center().into()
+    }
 }
 
 struct BinnedSah<'a> {
@@ -74,12 +82,23 @@ struct BinnedSah<'a> {
 }
 
 impl Splitter for BinnedSah<'_> {
-    fn split(&self, prims: &mut [u32], bounds: Aabb, must_split: bool) -> Option<Cut> {
+    fn split(
+        &self,
+        prims: &mut [u32],
+        bounds: Aabb,
+        centroids: Option<Aabb>,
+        must_split: bool,
+    ) -> Option<Cut> {
         let leaf_cost = self.params.leaf_tests(prims.len()) * self.params.sah.intersection;
-        let split = self.find_split(prims, bounds)?;
-        (split.cost < leaf_cost || must_split).then(|| Cut {
-            mid: self.partition(prims, &split),
-            bounds: Some((split.left, split.right)),
+        let centroids = centroids.map_or_else(|| self.centroid_bounds(prims), Box4::from);
+        let split = self.find_split(prims, bounds, centroids)?;
+        (split.cost < leaf_cost || must_split).then(|| {
+            let (mid, left, right) = self.partition(prims, &split);
+            Cut {
+                mid,
+                bounds: Some((split.left, split.right)),
+                centroids: Some((left.aabb(), right.aabb())),
+            }
         })
     }
 }
@@ -167,12 +186,12 @@ impl BinnedSah<'_> {
     }
 
     /// The cheapest SAH split over all axes, or `None` when all centroids coincide.
-    fn find_split(&self, prims: &[u32], bounds: Aabb) -> Option<Split> {
+    fn find_split(&self, prims: &[u32], bounds: Aabb, centroids: Box4) -> Option<Split> {
         let bins = self.bins_for(prims.len());
         if bins <= SMALL_BINS {
-            self.find_split_in::<SMALL_BINS>(prims, bounds, bins)
+            self.find_split_in::<SMALL_BINS>(prims, bounds, centroids, bins)
         } else {
-            self.find_split_in::<MAX_BINS>(prims, bounds, bins)
+            self.find_split_in::<MAX_BINS>(prims, bounds, centroids, bins)
         }
     }
 
@@ -181,9 +200,9 @@ impl BinnedSah<'_> {
         &self,
         prims: &[u32],
         bounds: Aabb,
+        centroid_bounds: Box4,
         bins: usize,
     ) -> Option<Split> {
-        let centroid_bounds = self.centroid_bounds(prims);
         let extent = Vec3::from(centroid_bounds.max - centroid_bounds.min);
         let lo = Vec3::from(centroid_bounds.min);
         let scale = Vec3::select(extent.cmpgt(Vec3::ZERO), bins as f32 / extent, Vec3::ZERO);
@@ -225,7 +244,6 @@ impl BinnedSah<'_> {
                     best = Some(Split {
                         axis,
                         bin: b,
-                        bins,
                         lo: lo[axis],
                         scale: scale[axis],
                         cost,
@@ -238,18 +256,43 @@ impl BinnedSah<'_> {
         best
     }
 
-    /// Moves primitives left of the split to the front; returns how many there are.
-    fn partition(&self, prims: &mut [u32], split: &Split) -> usize {
-        let mut mid = 0;
-        for i in 0..prims.len() {
-            let c = self.centroids[prims[i] as usize][split.axis];
-            // The bin index as binning computed it (the same float operations).
-            let bin = (((c - split.lo) * split.scale) as usize).min(split.bins - 1);
-            if bin < split.bin {
-                prims.swap(i, mid);
-                mid += 1;
+    /// Moves primitives left of the split to the front (swapping from both ends, so
+    /// each misplaced pair costs one swap); returns how many there are and the bounds of
+    /// each side's centroids.
+    fn partition(&self, prims: &mut [u32], split: &Split) -> (usize, Box4, Box4) {
+        let axis = split.axis;
+        // The bin index is trunc((c - lo) * scale) clamped to the last bin, and c >= lo,
+        // so it lies left of `split.bin` exactly when (c - lo) * scale < split.bin.
+        let threshold = split.bin as f32;
+        let goes_left = |c: Vec3A| (c[axis] - split.lo) * split.scale < threshold;
+        let (mut left, mut right) = (Box4::EMPTY, Box4::EMPTY);
+        let (mut i, mut j) = (0, prims.len());
+        loop {
+            while i < j {
+                let c = self.centroids[prims[i] as usize];
+                if !goes_left(c) {
+                    break;
+                }
+                left = left.grow(c);
+                i += 1;
             }
+            while i < j {
+                let c = self.centroids[prims[j - 1] as usize];
+                if goes_left(c) {
+                    break;
+                }
+                right = right.grow(c);
+                j -= 1;
+            }
+            if i >= j {
+                return (i, left, right);
+            }
+            // prims[i] belongs right and prims[j - 1] left: swap them into place.
+            prims.swap(i, j - 1);
+            left = left.grow(self.centroids[prims[i] as usize]);
+            right = right.grow(self.centroids[prims[j - 1] as usize]);
+            i += 1;
+            j -= 1;
         }
-        mid
     }
 }

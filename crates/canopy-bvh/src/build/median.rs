@@ -11,7 +11,13 @@ use crate::{Aabb, BuildParams, Bvh2};
 struct MedianSplit;
 
 impl Splitter for MedianSplit {
-    fn split(&self, prims: &mut [u32], _bounds: Aabb, must_split: bool) -> Option<Cut> {
+    fn split(
+        &self,
+        prims: &mut [u32],
+        _bounds: Aabb,
+        _centroids: Option<Aabb>,
+        must_split: bool,
+    ) -> Option<Cut> {
         must_split.then_some(Cut::at(prims.len() / 2))
     }
 }

@@ -22,7 +22,13 @@ struct SweepSah<'a> {
 }
 
 impl Splitter for SweepSah<'_> {
-    fn split(&self, prims: &mut [u32], bounds: Aabb, must_split: bool) -> Option<Cut> {
+    fn split(
+        &self,
+        prims: &mut [u32],
+        bounds: Aabb,
+        _centroids: Option<Aabb>,
+        must_split: bool,
+    ) -> Option<Cut> {
         let n = prims.len();
         if n < 2 {
             return None;

@@ -13,9 +13,16 @@ const PARALLEL_THRESHOLD: usize = 4096;
 /// Cuts a node: reorders `prims` so that the left child's come first and says how many
 /// there are, or `None` to make a leaf. `must_split` is set when the node holds more
 /// primitives than a leaf may; the driver then splits at the middle if the splitter
-/// declines or returns an empty side.
+/// declines or returns an empty side. `centroids` is the box of the primitives'
+/// centroids when the parent's cut reported it (saving the splitter a pass).
 pub(crate) trait Splitter: Sync {
-    fn split(&self, prims: &mut [u32], bounds: Aabb, must_split: bool) -> Option<Cut>;
+    fn split(
+        &self,
+        prims: &mut [u32],
+        bounds: Aabb,
+        centroids: Option<Aabb>,
+        must_split: bool,
+    ) -> Option<Cut>;
 }
 
 /// Where a node is cut.
@@ -26,12 +33,26 @@ pub(crate) struct Cut {
     /// The children's bounds when the splitter has them (binning does), which saves the
     /// driver a pass over the primitives.
     pub bounds: Option<(Aabb, Aabb)>,
+    /// The children's centroid bounds when the splitter has them (its partition does),
+    /// handed to the children's cuts.
+    pub centroids: Option<(Aabb, Aabb)>,
 }
 
 impl Cut {
     pub fn at(mid: usize) -> Self {
-        Self { mid, bounds: None }
+        Self {
+            mid,
+            bounds: None,
+            centroids: None,
+        }
     }
+}
+
+/// What is known of a node before it is cut: its bounds, and maybe its centroids' bounds.
+#[derive(Clone, Copy)]
+struct Known {
+    bounds: Aabb,
+    centroids: Option<Aabb>,
 }
 
 pub(crate) fn build(boxes: &[Aabb], params: &BuildParams, splitter: &impl Splitter) -> Bvh2 {
@@ -71,41 +92,62 @@ impl<S: Splitter> Driver<'_, S> {
     }
 
     /// Where to cut `prims`, or `None` for a leaf.
-    fn cut(&self, prims: &mut [u32], bounds: Aabb) -> Option<Cut> {
+    fn cut(&self, prims: &mut [u32], known: Known) -> Option<Cut> {
         let count = prims.len();
         let must_split = count > self.max_leaf;
-        match self.splitter.split(prims, bounds, must_split) {
+        match self
+            .splitter
+            .split(prims, known.bounds, known.centroids, must_split)
+        {
             Some(cut) if cut.mid > 0 && cut.mid < count => Some(cut),
             _ if must_split => Some(Cut::at(count / 2)),
             _ => None,
         }
     }
 
-    /// The children's bounds of `cut`: the splitter's, or computed.
-    fn child_bounds(&self, prims: &[u32], cut: &Cut) -> (Aabb, Aabb) {
-        cut.bounds.unwrap_or_else(|| {
+    /// What is known of the children of `cut`: the splitter's bounds or computed ones,
+    /// and the splitter's centroid bounds if it has them.
+    fn children(&self, prims: &[u32], cut: &Cut) -> (Known, Known) {
+        let (left, right) = cut.bounds.unwrap_or_else(|| {
             let (left, right) = prims.split_at(cut.mid);
             (self.bounds(left), self.bounds(right))
-        })
+        });
+        let (left_centroids, right_centroids) = match cut.centroids {
+            Some((l, r)) => (Some(l), Some(r)),
+            None => (None, None),
+        };
+        (
+            Known {
+                bounds: left,
+                centroids: left_centroids,
+            },
+            Known {
+                bounds: right,
+                centroids: right_centroids,
+            },
+        )
     }
 
     /// Nodes of the subtree over `prims` (which start at `first` in the final index
-    /// array), root first. `known` is the subtree's bounds when the caller has them.
-    fn subtree(&self, prims: &mut [u32], first: usize, known: Option<Aabb>) -> Vec<Bvh2Node> {
-        let bounds = known.unwrap_or_else(|| self.bounds(prims));
-        match self.cut(prims, bounds) {
+    /// array), root first. `known` is what the caller knows of the subtree's root.
+    fn subtree(&self, prims: &mut [u32], first: usize, known: Option<Known>) -> Vec<Bvh2Node> {
+        let known = known.unwrap_or_else(|| Known {
+            bounds: self.bounds(prims),
+            centroids: None,
+        });
+        match self.cut(prims, known) {
             Some(cut)
                 if cut.mid >= PARALLEL_THRESHOLD && prims.len() - cut.mid >= PARALLEL_THRESHOLD =>
             {
-                let (left_bounds, right_bounds) = self.child_bounds(prims, &cut);
+                let (left_known, right_known) = self.children(prims, &cut);
                 let (left_prims, right_prims) = prims.split_at_mut(cut.mid);
                 let (left, right) = rayon::join(
-                    || self.subtree(left_prims, first, Some(left_bounds)),
-                    || self.subtree(right_prims, first + cut.mid, Some(right_bounds)),
+                    || self.subtree(left_prims, first, Some(left_known)),
+                    || self.subtree(right_prims, first + cut.mid, Some(right_known)),
                 );
-                splice(bounds, left, right, 0)
+                splice(known.bounds, left, right, 0)
             }
-            cut => self.serial(prims, first, bounds, cut),
+            cut => self.serial(prims, first, known.bounds, cut),
         }
     }
 
@@ -129,18 +171,18 @@ impl<S: Splitter> Driver<'_, S> {
             let left = nodes.len();
             nodes[node] = Bvh2Node::interior(bounds, left as u32);
             let mid = start + cut.mid;
-            let (left_bounds, right_bounds) = self.child_bounds(&prims[start..end], &cut);
-            for (child, (s, e), child_bounds) in [
-                (left, (start, mid), left_bounds),
-                (left + 1, (mid, end), right_bounds),
+            let (left_known, right_known) = self.children(&prims[start..end], &cut);
+            for (child, (s, e), known) in [
+                (left, (start, mid), left_known),
+                (left + 1, (mid, end), right_known),
             ] {
-                let child_cut = self.cut(&mut prims[s..e], child_bounds);
+                let child_cut = self.cut(&mut prims[s..e], known);
                 nodes.push(Bvh2Node::leaf(
-                    child_bounds,
+                    known.bounds,
                     (first + s) as u32,
                     (e - s) as u32,
                 ));
-                work.push((child, s, e, child_bounds, child_cut));
+                work.push((child, s, e, known.bounds, child_cut));
             }
         }
         nodes
