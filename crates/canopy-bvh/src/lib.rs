@@ -24,6 +24,7 @@ mod aabb;
 pub mod build;
 mod bvh2;
 pub mod epo;
+mod gpu_layout;
 mod isa;
 mod layout;
 pub mod optimize;
@@ -41,6 +42,7 @@ pub use build::{
 };
 pub use bvh2::{Bvh2, Bvh2Node, BvhError, RefitError};
 pub use epo::{epo, triangle_area_in_box};
+pub use gpu_layout::{GpuBvh, GpuNode, GPU_EMPTY};
 pub use isa::{Isa, IsaError};
 pub use layout::{BvhWidth, Tree};
 pub use optimize::{optimize, OptimizeBudget, OptimizeReport};

@@ -45,6 +45,8 @@ enum Command {
     Check(check::CheckArgs),
     /// List the built-in scenes.
     Scenes,
+    /// List the GPU adapters wgpu finds (Vulkan, Metal, DX12; Mesa's lavapipe counts).
+    Devices,
 }
 
 /// Exit status of a run that failed (a usage error exits with 2, from the parser).
@@ -73,6 +75,7 @@ fn main() -> ExitCode {
         Command::Bench(args) => bench::run(&args),
         Command::Check(args) => check::run(&args),
         Command::Scenes => list_scenes(),
+        Command::Devices => list_devices(),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -85,6 +88,19 @@ fn main() -> ExitCode {
             ExitCode::from(EXIT_ERROR)
         }
     }
+}
+
+fn list_devices() -> anyhow::Result<()> {
+    let adapters = canopy_gpu::adapters();
+    if adapters.is_empty() {
+        anyhow::bail!(
+            "no GPU adapter found; install a Vulkan driver (on Debian: mesa-vulkan-drivers and libvulkan1 for the software one)"
+        );
+    }
+    for adapter in adapters {
+        outln!("{adapter}");
+    }
+    Ok(())
 }
 
 fn list_scenes() -> anyhow::Result<()> {

@@ -140,6 +140,25 @@ fn scenes_lists_every_builtin() {
 }
 
 #[test]
+fn devices_lists_adapters_or_says_there_are_none() {
+    let out = canopy(&["devices"], &std::env::temp_dir());
+    let (list, err) = (
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr),
+    );
+    assert!(!err.contains("panicked"), "{err}");
+    match out.status.code() {
+        // One line per adapter, with its backend.
+        Some(0) => assert!(
+            !list.trim().is_empty() && list.lines().all(|l| l.contains('(')),
+            "{list}"
+        ),
+        Some(1) => assert!(err.contains("no GPU adapter"), "{err}"),
+        other => panic!("exit {other:?}: {err}"),
+    }
+}
+
+#[test]
 fn unknown_key_is_reported_with_file_line_and_key() {
     let scene = format!("{CAMERA}[[spheres]]\ncenter = [0, 0, 0]\nradus = 1\n");
     assert_scene_fails("key", &scene, &["bad.toml:6:", "radus"]);

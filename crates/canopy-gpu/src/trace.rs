@@ -1,0 +1,182 @@
+//! The ray-tracing kernel: closest hits of a batch of rays.
+
+use crate::scene::{GpuRay, GpuScene};
+use crate::{Gpu, GpuError};
+use canopy_bvh::{Hit, Ray};
+use wgpu::util::DeviceExt;
+
+/// Rays per dispatch: 16384 workgroups of 64, well inside every adapter's limits.
+const RAYS_PER_DISPATCH: usize = 1 << 20;
+
+/// One result as the shader writes it: `t` (INF-like when missed), `prim`, `u`, `v`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+struct GpuHit {
+    t: f32,
+    prim: u32,
+    u: f32,
+    v: f32,
+}
+
+/// A scene uploaded to the GPU with the pipeline that traces it.
+pub struct Tracer<'g> {
+    gpu: &'g Gpu,
+    pipeline: wgpu::ComputePipeline,
+    nodes: wgpu::Buffer,
+    prim_indices: wgpu::Buffer,
+    primitives: wgpu::Buffer,
+    /// No primitives: every ray misses (the node buffer holds only padding).
+    empty: bool,
+}
+
+impl<'g> Tracer<'g> {
+    pub fn new(gpu: &'g Gpu, scene: &GpuScene) -> Result<Self, GpuError> {
+        let device = &gpu.device;
+        let storage = |label: &'static str, bytes: &[u8]| -> Result<wgpu::Buffer, GpuError> {
+            gpu.check_size(label, bytes.len() as u64)?;
+            // Empty buffers cannot be bound: give them one zeroed element's worth.
+            let padded;
+            let contents = if bytes.is_empty() {
+                padded = vec![0u8; 64];
+                &padded[..]
+            } else {
+                bytes
+            };
+            Ok(
+                device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some(label),
+                    contents,
+                    usage: wgpu::BufferUsages::STORAGE,
+                }),
+            )
+        };
+        let nodes = storage("BVH nodes", bytemuck::cast_slice(scene.bvh.nodes()))?;
+        let prim_indices = storage(
+            "primitive indices",
+            bytemuck::cast_slice(scene.bvh.prim_indices()),
+        )?;
+        let primitives = storage("primitives", bytemuck::cast_slice(&scene.primitives))?;
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("trace.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(include_str!("shaders/trace.wgsl").into()),
+        });
+        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("trace"),
+            layout: None,
+            module: &module,
+            entry_point: Some("trace"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        Ok(Self {
+            gpu,
+            pipeline,
+            nodes,
+            prim_indices,
+            primitives,
+            empty: scene.bvh.nodes().is_empty(),
+        })
+    }
+
+    /// The closest hit of each ray (ties to the lower primitive index), in dispatches
+    /// of at most a million rays.
+    pub fn closest(&self, rays: &[Ray]) -> Result<Vec<Option<Hit>>, GpuError> {
+        if self.empty {
+            return Ok(vec![None; rays.len()]);
+        }
+        let per_dispatch = RAYS_PER_DISPATCH
+            .min(self.gpu.limits().max_compute_workgroups_per_dimension as usize * 64);
+        let mut hits = Vec::with_capacity(rays.len());
+        for chunk in rays.chunks(per_dispatch) {
+            hits.extend(self.closest_chunk(chunk)?);
+        }
+        Ok(hits)
+    }
+
+    fn closest_chunk(&self, rays: &[Ray]) -> Result<Vec<Option<Hit>>, GpuError> {
+        let device = &self.gpu.device;
+        let gpu_rays: Vec<GpuRay> = rays.iter().map(GpuRay::from).collect();
+        let ray_bytes: &[u8] = bytemuck::cast_slice(&gpu_rays);
+        let hit_bytes = (rays.len() * std::mem::size_of::<GpuHit>()) as u64;
+        self.gpu.check_size("rays", ray_bytes.len() as u64)?;
+        self.gpu.check_size("hits", hit_bytes)?;
+        if rays.is_empty() {
+            return Ok(Vec::new());
+        }
+        let ray_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("rays"),
+            contents: ray_bytes,
+            usage: wgpu::BufferUsages::STORAGE,
+        });
+        let hit_buffer = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("hits"),
+            size: hit_bytes,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        let readback = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("hits readback"),
+            size: hit_bytes,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let params = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("params"),
+            contents: bytemuck::cast_slice(&[rays.len() as u32, 0, 0, 0]),
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
+        let layout = self.pipeline.get_bind_group_layout(0);
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("trace"),
+            layout: &layout,
+            entries: &[
+                (0, &self.nodes),
+                (1, &self.prim_indices),
+                (2, &self.primitives),
+                (3, &ray_buffer),
+                (4, &hit_buffer),
+                (5, &params),
+            ]
+            .map(|(binding, buffer)| wgpu::BindGroupEntry {
+                binding,
+                resource: buffer.as_entire_binding(),
+            }),
+        });
+        let mut encoder = device.create_command_encoder(&Default::default());
+        {
+            let mut pass = encoder.begin_compute_pass(&Default::default());
+            pass.set_pipeline(&self.pipeline);
+            pass.set_bind_group(0, &bind_group, &[]);
+            pass.dispatch_workgroups(rays.len().div_ceil(64) as u32, 1, 1);
+        }
+        encoder.copy_buffer_to_buffer(&hit_buffer, 0, &readback, 0, hit_bytes);
+        self.gpu.queue.submit([encoder.finish()]);
+        let slice = readback.slice(..);
+        let (sender, receiver) = std::sync::mpsc::channel();
+        slice.map_async(wgpu::MapMode::Read, move |r| {
+            let _ = sender.send(r);
+        });
+        device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map_err(|e| GpuError::Readback(e.to_string()))?;
+        receiver
+            .recv()
+            .map_err(|e| GpuError::Readback(e.to_string()))?
+            .map_err(|e| GpuError::Readback(e.to_string()))?;
+        let data = slice
+            .get_mapped_range()
+            .map_err(|e| GpuError::Readback(e.to_string()))?;
+        let hits: &[GpuHit] = bytemuck::cast_slice(&data);
+        Ok(hits
+            .iter()
+            .map(|h| {
+                (h.prim != canopy_bvh::NO_PRIM).then_some(Hit {
+                    t: h.t,
+                    prim: h.prim,
+                    u: h.u,
+                    v: h.v,
+                })
+            })
+            .collect())
+    }
+}

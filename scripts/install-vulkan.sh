@@ -1,0 +1,15 @@
+#!/usr/bin/env bash
+# Installs Mesa's software Vulkan driver (lavapipe) and the Vulkan loader from Debian's
+# packages when they are missing, so that canopy's GPU tests run on a machine without a
+# GPU. Needs root or sudo; does nothing when both are present.
+set -euo pipefail
+if ldconfig -p | grep -q 'libvulkan.so.1' && ls /usr/share/vulkan/icd.d/lvp_icd*.json >/dev/null 2>&1; then
+    exit 0
+fi
+sudo=""
+if [ "$(id -u)" != 0 ]; then
+    sudo=sudo
+fi
+export DEBIAN_FRONTEND=noninteractive
+$sudo apt-get update -qq
+$sudo apt-get install -y -qq mesa-vulkan-drivers libvulkan1 >/dev/null
