@@ -20,6 +20,8 @@ pub enum GpuError {
     TooDeep { depth: usize, max: usize },
     #[error("reading results back from the GPU failed: {0}")]
     Readback(String),
+    #[error("not supported on the GPU: {0}")]
+    Unsupported(String),
 }
 
 /// A GPU device and its queue.
@@ -70,6 +72,84 @@ impl Gpu {
     /// The adapter's name, backend and kind, in one line.
     pub fn describe(&self) -> String {
         describe(&self.info)
+    }
+
+    /// A storage buffer holding `bytes` (checked against the binding limits; an empty one
+    /// gets a zeroed element's worth, as bindings cannot be empty), usable also as `extra`.
+    pub(crate) fn storage(
+        &self,
+        label: &'static str,
+        bytes: &[u8],
+        extra: wgpu::BufferUsages,
+    ) -> Result<wgpu::Buffer, GpuError> {
+        use wgpu::util::DeviceExt;
+        self.check_size(label, bytes.len() as u64)?;
+        let padding = [0u8; 64];
+        let contents = if bytes.is_empty() {
+            &padding[..]
+        } else {
+            bytes
+        };
+        Ok(self
+            .device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents,
+                usage: wgpu::BufferUsages::STORAGE | extra,
+            }))
+    }
+
+    /// A compute pipeline from WGSL sources joined in order, entry point `entry`.
+    pub(crate) fn pipeline(&self, entry: &str, sources: &[&str]) -> wgpu::ComputePipeline {
+        let module = self
+            .device
+            .create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some(entry),
+                source: wgpu::ShaderSource::Wgsl(sources.join("\n").into()),
+            });
+        self.device
+            .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(entry),
+                layout: None,
+                module: &module,
+                entry_point: Some(entry),
+                compilation_options: Default::default(),
+                cache: None,
+            })
+    }
+
+    /// Copies a storage buffer (made with `COPY_SRC`) back to the CPU, after the work
+    /// submitted so far.
+    pub(crate) fn read_back<T: bytemuck::Pod>(
+        &self,
+        buffer: &wgpu::Buffer,
+    ) -> Result<Vec<T>, GpuError> {
+        let size = buffer.size();
+        let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("readback"),
+            size,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let mut encoder = self.device.create_command_encoder(&Default::default());
+        encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, size);
+        self.queue.submit([encoder.finish()]);
+        let slice = staging.slice(..);
+        let (sender, receiver) = std::sync::mpsc::channel();
+        slice.map_async(wgpu::MapMode::Read, move |r| {
+            let _ = sender.send(r);
+        });
+        self.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map_err(|e| GpuError::Readback(e.to_string()))?;
+        receiver
+            .recv()
+            .map_err(|e| GpuError::Readback(e.to_string()))?
+            .map_err(|e| GpuError::Readback(e.to_string()))?;
+        let data = slice
+            .get_mapped_range()
+            .map_err(|e| GpuError::Readback(e.to_string()))?;
+        Ok(bytemuck::cast_slice(&data).to_vec())
     }
 
     pub(crate) fn limits(&self) -> &wgpu::Limits {

@@ -19,9 +19,13 @@
 //! ```
 
 mod context;
+mod render;
+mod rng_check;
 mod scene;
 mod trace;
 
 pub use context::{adapters, Gpu, GpuError};
-pub use scene::{GpuPrimitive, GpuRay, GpuScene, MAX_TREE_DEPTH};
+pub use render::{DispatchStats, GpuMaterial, Renderer};
+pub use rng_check::first_words;
+pub use scene::{GpuPrimitive, GpuRay, GpuScene, FLAT, MAX_TREE_DEPTH};
 pub use trace::Tracer;

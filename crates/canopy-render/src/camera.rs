@@ -46,7 +46,34 @@ pub struct Camera {
     height: u32,
 }
 
+/// A camera's frame as vectors, for renderers that generate its rays themselves (the
+/// GPU's): a ray through `(s, t)` in `[0, 1)²` aims at
+/// `upper_left + s·horizontal − t·vertical` from `origin`, moved by up to `lens_radius`
+/// along `u` and `v` for depth of field.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CameraBasis {
+    pub origin: Vec3,
+    pub upper_left: Vec3,
+    pub horizontal: Vec3,
+    pub vertical: Vec3,
+    pub u: Vec3,
+    pub v: Vec3,
+    pub lens_radius: f32,
+}
+
 impl Camera {
+    pub fn basis(&self) -> CameraBasis {
+        CameraBasis {
+            origin: self.origin,
+            upper_left: self.upper_left,
+            horizontal: self.horizontal,
+            vertical: self.vertical,
+            u: self.u,
+            v: self.v,
+            lens_radius: self.lens_radius,
+        }
+    }
+
     pub fn new(spec: &CameraSpec, width: u32, height: u32) -> Self {
         let aspect = width as f32 / height as f32;
         let half_height = (spec.vfov.to_radians() / 2.0).tan();

@@ -28,7 +28,9 @@ use thiserror::Error;
 const MAGIC: &[u8; 8] = b"CANOPYCK";
 /// Version 2: the scene path is absolute and the fingerprint covers all geometry.
 /// Version 3: the integrator and Russian roulette settings.
-const VERSION: u32 = 3;
+/// Version 4: samples drawn from the counter-based random streams the GPU shares (a
+/// version 3 checkpoint's samples came from other streams).
+const VERSION: u32 = 4;
 
 /// Largest checkpoint read: the header and the largest film allowed.
 const MAX_CHECKPOINT_BYTES: u64 = 1024 * 1024 + RenderSettings::MAX_PIXELS * 12;

@@ -1,48 +1,80 @@
 //! Deterministic per-sample random numbers.
 //!
-//! Each sample gets its own generator seeded from (seed, pixel, sample index) only, so an
-//! image does not depend on how pixels are spread over threads.
+//! Each sample gets its own stream, keyed by (seed, pixel, sample index) only, so an image
+//! does not depend on how pixels are spread over threads. The streams are counter-based
+//! and use 32-bit arithmetic only, so the GPU (WGSL has no 64-bit integers) draws exactly
+//! the same numbers: canopy-gpu's `rng.wgsl` is the same generator.
 
 use glam::{Vec2, Vec3};
 
-/// PCG32 (O'Neill 2014, XSH-RR output): small state, good statistics, fast.
+/// Words of a stream: `pcg4d` (Jarzynski & Olano, "Hash Functions for GPU Rendering",
+/// JCGT 2020) of (pixel, sample, seed key, counter), four words per hash.
 #[derive(Clone, Debug)]
 pub struct Rng {
-    state: u64,
-    inc: u64,
+    key: [u32; 3],
+    counter: u32,
+    words: [u32; 4],
+    next: usize,
 }
 
-/// SplitMix64 finaliser: a bijective mix used to derive well-spread seeds.
+/// A 32-bit integer hash (Wellons' "lowbias32"), to fold 64-bit keys into 32 bits.
 #[inline]
-fn splitmix64(mut z: u64) -> u64 {
-    z = z.wrapping_add(0x9e37_79b9_7f4a_7c15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    z ^ (z >> 31)
+pub fn lowbias32(mut x: u32) -> u32 {
+    x ^= x >> 16;
+    x = x.wrapping_mul(0x7feb_352d);
+    x ^= x >> 15;
+    x = x.wrapping_mul(0x846c_a68b);
+    x ^ (x >> 16)
+}
+
+/// Folds a 64-bit key into 32 bits (the identity below 2^32).
+#[inline]
+pub fn fold64(x: u64) -> u32 {
+    x as u32 ^ lowbias32((x >> 32) as u32)
+}
+
+/// The pcg4d hash: four 32-bit words in, four out.
+#[inline]
+pub fn pcg4d(mut v: [u32; 4]) -> [u32; 4] {
+    for x in &mut v {
+        *x = x.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+    }
+    let mix = |v: &mut [u32; 4]| {
+        v[0] = v[0].wrapping_add(v[1].wrapping_mul(v[3]));
+        v[1] = v[1].wrapping_add(v[2].wrapping_mul(v[0]));
+        v[2] = v[2].wrapping_add(v[0].wrapping_mul(v[1]));
+        v[3] = v[3].wrapping_add(v[1].wrapping_mul(v[2]));
+    };
+    mix(&mut v);
+    for x in &mut v {
+        *x ^= *x >> 16;
+    }
+    mix(&mut v);
+    v
 }
 
 impl Rng {
     /// The generator of one sample of one pixel.
     pub fn for_sample(seed: u64, pixel: u64, sample: u64) -> Self {
-        let key = splitmix64(splitmix64(splitmix64(seed) ^ pixel) ^ sample);
-        let mut rng = Self {
-            state: 0,
-            inc: (splitmix64(key) << 1) | 1,
-        };
-        rng.next_u32();
-        rng.state = rng.state.wrapping_add(key);
-        rng.next_u32();
-        rng
+        Self {
+            key: [fold64(pixel), fold64(sample), fold64(seed)],
+            counter: 0,
+            words: [0; 4],
+            next: 4,
+        }
     }
 
     #[inline]
     pub fn next_u32(&mut self) -> u32 {
-        let old = self.state;
-        self.state = old
-            .wrapping_mul(6_364_136_223_846_793_005)
-            .wrapping_add(self.inc);
-        let xorshifted = (((old >> 18) ^ old) >> 27) as u32;
-        xorshifted.rotate_right((old >> 59) as u32)
+        if self.next == 4 {
+            let [a, b, c] = self.key;
+            self.words = pcg4d([a, b, c, self.counter]);
+            self.counter = self.counter.wrapping_add(1);
+            self.next = 0;
+        }
+        let word = self.words[self.next];
+        self.next += 1;
+        word
     }
 
     /// Uniform in `[0, 1)`.
@@ -90,6 +122,21 @@ mod tests {
             })
             .collect();
         assert_eq!(a, b);
+    }
+
+    #[test]
+    fn a_stream_does_not_repeat_its_words_soon() {
+        let mut rng = Rng::for_sample(3, 4, 5);
+        let words: std::collections::HashSet<u32> = (0..4096).map(|_| rng.next_u32()).collect();
+        assert!(words.len() > 4090, "{}", words.len());
+    }
+
+    #[test]
+    fn fold64_is_the_identity_below_two_to_the_32() {
+        for x in [0u64, 1, 12345, u32::MAX as u64] {
+            assert_eq!(fold64(x), x as u32);
+        }
+        assert_ne!(fold64(1 << 32), 0);
     }
 
     #[test]

@@ -117,16 +117,21 @@ impl Material {
                 let reflected = reflect(dir, facing.shading);
                 let direction = (reflected + fuzz * rng.unit_vector()).normalize_or_zero();
                 let delta = fuzz == 0.0;
-                (direction.dot(facing.geometric) > 0.0).then(|| BsdfSample {
-                    direction,
-                    weight: albedo,
-                    pdf: if delta {
-                        0.0
-                    } else {
-                        fuzz::pdf(reflected, fuzz, direction)
+                let pdf = if delta {
+                    0.0
+                } else {
+                    fuzz::pdf(reflected, fuzz, direction)
+                };
+                // A direction on the very edge of the lobe can round to density 0 (where
+                // the true density is unbounded): absorbed, like any sample without one.
+                (direction.dot(facing.geometric) > 0.0 && (delta || pdf > 0.0)).then_some(
+                    BsdfSample {
+                        direction,
+                        weight: albedo,
+                        pdf,
+                        delta,
                     },
-                    delta,
-                })
+                )
             }
             Material::Dielectric { ior } => {
                 let eta = if facing.entering { 1.0 / ior } else { ior };
@@ -261,7 +266,7 @@ mod tests {
                     let Some(s) = m.sample(dir, &surface, &mut rng) else {
                         continue;
                     };
-                    assert!(!s.delta && s.pdf > 0.0);
+                    assert!(!s.delta && s.pdf > 0.0, "{m:?} {dir} {s:?} {surface:?}");
                     let pdf = m.pdf(dir, &surface, s.direction);
                     let eval = m.eval(dir, &surface, s.direction);
                     assert!(

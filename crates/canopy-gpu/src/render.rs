@@ -1,0 +1,245 @@
+//! The path tracer on the GPU: the report's estimator (canopy's `bsdf` integrator), one
+//! invocation per pixel, samples added to a CPU [`Accumulator`] dispatch by dispatch.
+
+use crate::scene::GpuScene;
+use crate::{Gpu, GpuError};
+use bytemuck::{Pod, Zeroable};
+use canopy_bvh::Bvh2;
+use canopy_render::camera::Camera;
+use canopy_render::material::Material;
+use canopy_render::{Accumulator, Background, Integrator, Scene};
+use glam::Vec3;
+use std::time::{Duration, Instant};
+
+/// A material for the GPU: 32 bytes; WGSL `struct { kind: vec4<u32>, value: vec4<f32> }`.
+/// `kind.x`: 0 Lambertian (`value.xyz` albedo), 1 metal (albedo, `value.w` fuzz),
+/// 2 dielectric (`value.w` index of refraction), 3 emissive (`value.xyz` radiance).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+pub struct GpuMaterial {
+    pub kind: [u32; 4],
+    pub value: [f32; 4],
+}
+
+impl GpuMaterial {
+    pub fn new(m: &Material) -> Self {
+        let (kind, v, w) = match *m {
+            Material::Lambertian { albedo } => (0, albedo, 0.0),
+            Material::Metal { albedo, fuzz } => (1, albedo, fuzz),
+            Material::Dielectric { ior } => (2, Vec3::ZERO, ior),
+            Material::Emissive { radiance } => (3, radiance, 0.0),
+        };
+        Self {
+            kind: [kind, 0, 0, 0],
+            value: [v.x, v.y, v.z, w],
+        }
+    }
+}
+
+/// The per-dispatch constants: 144 bytes; WGSL `Frame` in `render.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+struct Frame {
+    /// xyz: camera origin, w: lens radius.
+    origin: [f32; 4],
+    upper_left: [f32; 4],
+    horizontal: [f32; 4],
+    vertical: [f32; 4],
+    u: [f32; 4],
+    v: [f32; 4],
+    /// width, height, seed key, max depth.
+    size: [u32; 4],
+    /// first sample, samples, background kind (0 sky, 1 constant), unused.
+    samples: [u32; 4],
+    background: [f32; 4],
+}
+
+fn vec4(v: Vec3, w: f32) -> [f32; 4] {
+    [v.x, v.y, v.z, w]
+}
+
+/// What a dispatch did.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct DispatchStats {
+    pub rays: u64,
+    pub invalid_samples: u64,
+    pub elapsed: Duration,
+}
+
+/// A scene uploaded for rendering, with the pipeline that renders it.
+pub struct Renderer<'g> {
+    gpu: &'g Gpu,
+    pipeline: wgpu::ComputePipeline,
+    bind_group: wgpu::BindGroup,
+    frame: Frame,
+    frame_buffer: wgpu::Buffer,
+    accum: wgpu::Buffer,
+    ray_count: wgpu::Buffer,
+    width: u32,
+    height: u32,
+}
+
+impl<'g> Renderer<'g> {
+    /// Uploads `scene` with the tree `bvh` built over its primitives. The GPU renders
+    /// with the `bsdf` integrator under a sky or constant background so far.
+    pub fn new(gpu: &'g Gpu, scene: &Scene, bvh: &Bvh2) -> Result<Self, GpuError> {
+        if scene.settings.integrator != Integrator::Bsdf {
+            return Err(GpuError::Unsupported(
+                "the GPU renders with the `bsdf` integrator so far (--integrator bsdf)".into(),
+            ));
+        }
+        let (background_kind, background) = match &scene.background {
+            Background::Sky => (0, Vec3::ZERO),
+            Background::Constant(c) => (1, *c),
+            Background::Environment(_) => {
+                return Err(GpuError::Unsupported(
+                    "environment maps are not on the GPU yet".into(),
+                ))
+            }
+        };
+        let flat = GpuScene::with_bvh(&scene.primitives, bvh)?;
+        let device = &gpu.device;
+        let (width, height) = (scene.settings.width, scene.settings.height);
+        let pixels = width as u64 * height as u64;
+        let storage = |label, bytes: &[u8], extra| gpu.storage(label, bytes, extra);
+        let none = wgpu::BufferUsages::empty();
+        let nodes = storage("BVH nodes", bytemuck::cast_slice(flat.bvh.nodes()), none)?;
+        let indices = storage(
+            "primitive indices",
+            bytemuck::cast_slice(flat.bvh.prim_indices()),
+            none,
+        )?;
+        let primitives = storage("primitives", bytemuck::cast_slice(&flat.primitives), none)?;
+        let materials: Vec<GpuMaterial> = scene.materials.iter().map(GpuMaterial::new).collect();
+        let materials = storage("materials", bytemuck::cast_slice(&materials), none)?;
+        let normals: Vec<[f32; 4]> = scene
+            .vertex_normals
+            .iter()
+            .flat_map(|n| n.map(|v| vec4(v, 0.0)))
+            .collect();
+        let normals = storage("vertex normals", bytemuck::cast_slice(&normals), none)?;
+        let accum_bytes = pixels * 16;
+        gpu.check_size("the image's sums", accum_bytes)?;
+        let accum = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("sums"),
+            size: accum_bytes,
+            usage: wgpu::BufferUsages::STORAGE
+                | wgpu::BufferUsages::COPY_SRC
+                | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let ray_count = storage(
+            "ray count",
+            &[0u8; 16],
+            wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+        )?;
+        let camera = Camera::new(&scene.camera, width, height).basis();
+        let frame = Frame {
+            origin: vec4(camera.origin, camera.lens_radius),
+            upper_left: vec4(camera.upper_left, 0.0),
+            horizontal: vec4(camera.horizontal, 0.0),
+            vertical: vec4(camera.vertical, 0.0),
+            u: vec4(camera.u, 0.0),
+            v: vec4(camera.v, 0.0),
+            size: [
+                width,
+                height,
+                canopy_render::rng::fold64(scene.settings.seed),
+                scene.settings.max_depth,
+            ],
+            samples: [0, 0, background_kind, 0],
+            background: vec4(background, 0.0),
+        };
+        let frame_buffer = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("frame"),
+            size: std::mem::size_of::<Frame>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let pipeline = gpu.pipeline(
+            "render",
+            &[
+                include_str!("shaders/rng.wgsl"),
+                include_str!("shaders/common.wgsl"),
+                include_str!("shaders/render.wgsl"),
+            ],
+        );
+        let layout = pipeline.get_bind_group_layout(0);
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("render"),
+            layout: &layout,
+            entries: &[
+                (0, &nodes),
+                (1, &indices),
+                (2, &primitives),
+                (3, &materials),
+                (4, &frame_buffer),
+                (5, &accum),
+                (6, &normals),
+                (7, &ray_count),
+            ]
+            .map(|(binding, buffer)| wgpu::BindGroupEntry {
+                binding,
+                resource: buffer.as_entire_binding(),
+            }),
+        });
+        Ok(Self {
+            gpu,
+            pipeline,
+            bind_group,
+            frame,
+            frame_buffer,
+            accum,
+            ray_count,
+            width,
+            height,
+        })
+    }
+
+    /// Renders `count` more samples of every pixel in one dispatch (samples
+    /// `accumulator.samples..` of each pixel's streams) and adds them to `accumulator`.
+    pub fn render_samples(
+        &self,
+        accumulator: &mut Accumulator,
+        count: u32,
+    ) -> Result<DispatchStats, GpuError> {
+        assert_eq!(
+            (accumulator.width, accumulator.height),
+            (self.width, self.height),
+            "accumulator and scene differ in image size"
+        );
+        let start = Instant::now();
+        let gpu = self.gpu;
+        let frame = Frame {
+            samples: [accumulator.samples, count, self.frame.samples[2], 0],
+            ..self.frame
+        };
+        gpu.queue
+            .write_buffer(&self.frame_buffer, 0, bytemuck::bytes_of(&frame));
+        let mut encoder = gpu.device.create_command_encoder(&Default::default());
+        encoder.clear_buffer(&self.accum, 0, None);
+        encoder.clear_buffer(&self.ray_count, 0, None);
+        {
+            let mut pass = encoder.begin_compute_pass(&Default::default());
+            pass.set_pipeline(&self.pipeline);
+            pass.set_bind_group(0, &self.bind_group, &[]);
+            pass.dispatch_workgroups(self.width.div_ceil(8), self.height.div_ceil(8), 1);
+        }
+        gpu.queue.submit([encoder.finish()]);
+        let sums: Vec<[f32; 4]> = gpu.read_back(&self.accum)?;
+        let rays: Vec<u32> = gpu.read_back(&self.ray_count)?;
+        let mut invalid = 0u64;
+        for (total, s) in accumulator.sums.iter_mut().zip(&sums) {
+            *total += Vec3::new(s[0], s[1], s[2]);
+            invalid += s[3] as u64;
+        }
+        accumulator.samples += count;
+        accumulator.rays += rays[0] as u64;
+        accumulator.invalid_samples += invalid;
+        Ok(DispatchStats {
+            rays: rays[0] as u64,
+            invalid_samples: invalid,
+            elapsed: start.elapsed(),
+        })
+    }
+}

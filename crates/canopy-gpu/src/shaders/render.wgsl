@@ -1,0 +1,312 @@
+// The report's path tracer (canopy's `bsdf` integrator) on the GPU, one invocation per
+// pixel (appended to rng.wgsl and common.wgsl). Materials, camera, background and random
+// streams are ports of canopy-render's: the same numbers drive the same decisions, up to
+// rounding.
+
+// kind 0 Lambertian (value = albedo), 1 metal (albedo, fuzz in w), 2 dielectric (ior in
+// w), 3 emissive (radiance).
+struct Material {
+    kind: vec4<u32>,
+    value: vec4<f32>,
+}
+
+struct Frame {
+    // xyz: camera origin, w: lens radius.
+    origin: vec4<f32>,
+    upper_left: vec4<f32>,
+    horizontal: vec4<f32>,
+    vertical: vec4<f32>,
+    u: vec4<f32>,
+    v: vec4<f32>,
+    // width, height, seed key, max depth
+    size: vec4<u32>,
+    // first sample, samples, background kind (0 sky, 1 constant), unused
+    samples: vec4<u32>,
+    background: vec4<f32>,
+}
+
+@group(0) @binding(3) var<storage, read> materials: array<Material>;
+@group(0) @binding(4) var<uniform> frame: Frame;
+// Per pixel: radiance sums (xyz) and samples that were not finite (w).
+@group(0) @binding(5) var<storage, read_write> accum: array<vec4<f32>>;
+// Three per smooth triangle (`header.z` indexes them; FLAT = none).
+@group(0) @binding(6) var<storage, read> vertex_normals: array<vec4<f32>>;
+@group(0) @binding(7) var<storage, read_write> ray_count: array<atomic<u32>>;
+
+const FLAT: u32 = 0xffffffffu;
+const POINT_ERROR_ULPS: f32 = 1.9073486e-6; // 16 f32::EPSILON
+const FRAC_1_PI: f32 = 0.3183098861837907;
+const PI: f32 = 3.141592653589793;
+
+struct Surface {
+    p: vec3<f32>,
+    geometric: vec3<f32>,
+    shading: vec3<f32>,
+    error: f32,
+}
+
+fn max_abs(v: vec3<f32>) -> f32 {
+    let a = abs(v);
+    return max(max(a.x, a.y), a.z);
+}
+
+fn normalize_or(v: vec3<f32>, fallback: vec3<f32>) -> vec3<f32> {
+    let l = length(v);
+    if (l > 0.0 && l < INF) {
+        return v / l;
+    }
+    return fallback;
+}
+
+fn surface_of(index: u32, origin: vec3<f32>, dir: vec3<f32>, hit: HitOut) -> Surface {
+    let p = prims[index];
+    var s: Surface;
+    switch p.header.x {
+        case 0u: {
+            let w0 = 1.0 - hit.u - hit.v;
+            s.p = w0 * p.d0.xyz + hit.u * p.d1.xyz + hit.v * p.d2.xyz;
+            s.geometric = normalize_or(cross(p.d1.xyz - p.d0.xyz, p.d2.xyz - p.d0.xyz), vec3<f32>(0.0, 1.0, 0.0));
+            s.shading = s.geometric;
+            if (p.header.z != FLAT) {
+                let n = 3u * p.header.z;
+                let interpolated = w0 * vertex_normals[n].xyz + hit.u * vertex_normals[n + 1u].xyz + hit.v * vertex_normals[n + 2u].xyz;
+                s.shading = normalize_or(interpolated, s.geometric);
+                if (dot(s.shading, s.geometric) < 0.0) {
+                    s.shading = -s.shading;
+                }
+            }
+            s.error = POINT_ERROR_ULPS * max(max(max_abs(p.d0.xyz), max_abs(p.d1.xyz)), max_abs(p.d2.xyz));
+        }
+        case 1u: {
+            let center = p.d0.xyz;
+            let normal = normalize(origin + hit.t * dir - center);
+            s.p = center + normal * p.d0.w;
+            s.geometric = normal;
+            s.shading = normal;
+            s.error = POINT_ERROR_ULPS * (max_abs(center) + p.d0.w);
+        }
+        default: {
+            let rel = origin - p.d3.xyz;
+            let o = vec3<f32>(dot(p.d0.xyz, rel), dot(p.d1.xyz, rel), dot(p.d2.xyz, rel));
+            let d = vec3<f32>(dot(p.d0.xyz, dir), dot(p.d1.xyz, dir), dot(p.d2.xyz, dir));
+            var local = o + hit.t * d;
+            let lo = vec3<f32>(p.d0.w, p.d1.w, p.d2.w);
+            let hi = p.d4.xyz;
+            let center = 0.5 * (lo + hi);
+            let half = 0.5 * (hi - lo);
+            let offset = local - center;
+            var axis = 0u;
+            var best = -1.0;
+            for (var i = 0u; i < 3u; i++) {
+                var closeness = INF;
+                if (half[i] > 0.0) {
+                    closeness = abs(offset[i]) / half[i];
+                }
+                if (closeness > best) {
+                    best = closeness;
+                    axis = i;
+                }
+            }
+            var positive = offset[axis] >= 0.0;
+            if (half[axis] <= 0.0) {
+                positive = d[axis] < 0.0;
+            }
+            var sign = -1.0;
+            local[axis] = lo[axis];
+            if (positive) {
+                sign = 1.0;
+                local[axis] = hi[axis];
+            }
+            // The rows stored for world-to-local are the rotation's columns.
+            var columns = array<vec3<f32>, 3>(p.d0.xyz, p.d1.xyz, p.d2.xyz);
+            let normal = sign * columns[axis];
+            s.p = local.x * columns[0] + local.y * columns[1] + local.z * columns[2] + p.d3.xyz;
+            s.geometric = normal;
+            s.shading = normal;
+            s.error = POINT_ERROR_ULPS * (max_abs(p.d3.xyz) + max(max_abs(lo), max_abs(hi)));
+        }
+    }
+    return s;
+}
+
+fn reflect_about(v: vec3<f32>, n: vec3<f32>) -> vec3<f32> {
+    return v - 2.0 * dot(v, n) * n;
+}
+
+fn refract_through(v: vec3<f32>, n: vec3<f32>, eta: f32, cos_theta: f32) -> vec3<f32> {
+    let perpendicular = eta * (v + cos_theta * n);
+    let parallel = -sqrt(abs(1.0 - dot(perpendicular, perpendicular))) * n;
+    return perpendicular + parallel;
+}
+
+fn schlick(cos_theta: f32, eta: f32) -> f32 {
+    let r = (1.0 - eta) / (1.0 + eta);
+    let r0 = r * r;
+    let m = 1.0 - cos_theta;
+    return r0 + (1.0 - r0) * m * m * m * m * m;
+}
+
+// The fuzzy-metal lobe's density (canopy-render's material/fuzz.rs).
+fn fuzz_pdf(mirror: vec3<f32>, fuzz: f32, direction: vec3<f32>) -> f32 {
+    let c = dot(direction, mirror);
+    let disc = c * c - 1.0 + fuzz * fuzz;
+    if (disc <= 0.0) {
+        return 0.0;
+    }
+    let root = sqrt(disc);
+    if (fuzz < 1.0) {
+        if (c <= 0.0) {
+            return 0.0;
+        }
+        return (c * c + disc) / (2.0 * PI * fuzz * root);
+    }
+    let t = c + root;
+    return t * t / (4.0 * PI * fuzz * root);
+}
+
+struct Scatter {
+    direction: vec3<f32>,
+    weight: vec3<f32>,
+    ok: bool,
+}
+
+fn scatter(m: Material, dir: vec3<f32>, s: Surface, rng: ptr<function, Rng>) -> Scatter {
+    let entering = dot(dir, s.geometric) < 0.0;
+    var geometric = s.geometric;
+    var shading = s.shading;
+    if (!entering) {
+        geometric = -geometric;
+        shading = -shading;
+    }
+    var out = Scatter(vec3<f32>(0.0), vec3<f32>(0.0), false);
+    switch m.kind.x {
+        case 0u: {
+            let d = shading + unit_vector(rng);
+            var direction = shading;
+            if (dot(d, d) >= 1e-12) {
+                direction = normalize(d);
+            }
+            let cos = dot(direction, shading);
+            out = Scatter(direction, m.value.xyz, dot(direction, geometric) > 0.0 && cos > 0.0);
+        }
+        case 1u: {
+            let fuzz = m.value.w;
+            let reflected = reflect_about(dir, shading);
+            let d = reflected + fuzz * unit_vector(rng);
+            var direction = vec3<f32>(0.0);
+            if (dot(d, d) > 0.0) {
+                direction = normalize(d);
+            }
+            let delta = fuzz == 0.0;
+            var pdf = 0.0;
+            if (!delta) {
+                pdf = fuzz_pdf(reflected, fuzz, direction);
+            }
+            out = Scatter(direction, m.value.xyz, dot(direction, geometric) > 0.0 && (delta || pdf > 0.0));
+        }
+        case 2u: {
+            let ior = m.value.w;
+            var eta = ior;
+            if (entering) {
+                eta = 1.0 / ior;
+            }
+            let cos_theta = min(dot(-dir, shading), 1.0);
+            let sin_theta = sqrt(max(1.0 - cos_theta * cos_theta, 0.0));
+            let total_internal = eta * sin_theta > 1.0;
+            var direction = vec3<f32>(0.0);
+            if (total_internal || schlick(cos_theta, eta) > next_f32(rng)) {
+                direction = reflect_about(dir, shading);
+            } else {
+                direction = refract_through(dir, shading, eta, cos_theta);
+            }
+            out = Scatter(normalize(direction), vec3<f32>(1.0), true);
+        }
+        default: {}
+    }
+    return out;
+}
+
+fn emitted(m: Material) -> vec3<f32> {
+    if (m.kind.x == 3u) {
+        return m.value.xyz;
+    }
+    return vec3<f32>(0.0);
+}
+
+fn background(dir: vec3<f32>) -> vec3<f32> {
+    if (frame.samples.z == 1u) {
+        return frame.background.xyz;
+    }
+    let a = 0.5 * (normalize(dir).y + 1.0);
+    return (1.0 - a) * vec3<f32>(1.0) + a * vec3<f32>(0.5, 0.7, 1.0);
+}
+
+fn offset_origin(s: Surface, direction: vec3<f32>) -> vec3<f32> {
+    let offset = 2.0 * max(s.error, 1.17549435e-38);
+    if (dot(direction, s.geometric) >= 0.0) {
+        return s.p + offset * s.geometric;
+    }
+    return s.p - offset * s.geometric;
+}
+
+// The bsdf estimator; returns the radiance and counts the rays it traced.
+fn radiance(camera_origin: vec3<f32>, camera_dir: vec3<f32>, rng: ptr<function, Rng>, rays: ptr<function, u32>) -> vec3<f32> {
+    var origin = camera_origin;
+    var dir = camera_dir;
+    var throughput = vec3<f32>(1.0);
+    var total = vec3<f32>(0.0);
+    for (var depth = 0u; depth < frame.size.w; depth++) {
+        *rays += 1u;
+        let hit = closest(RayIn(origin, 0.0, dir, INF));
+        if (hit.prim == NO_PRIM) {
+            total += throughput * background(dir);
+            break;
+        }
+        let material = materials[prims[hit.prim].header.y];
+        let s = surface_of(hit.prim, origin, dir, hit);
+        total += throughput * emitted(material);
+        let next = scatter(material, dir, s, rng);
+        if (!next.ok) {
+            break;
+        }
+        throughput *= next.weight;
+        if (all(throughput == vec3<f32>(0.0))) {
+            break;
+        }
+        origin = offset_origin(s, next.direction);
+        dir = next.direction;
+    }
+    return total;
+}
+
+@compute @workgroup_size(8, 8)
+fn render(@builtin(global_invocation_id) id: vec3<u32>) {
+    let width = frame.size.x;
+    let height = frame.size.y;
+    if (id.x >= width || id.y >= height) {
+        return;
+    }
+    let pixel = id.y * width + id.x;
+    var sum = accum[pixel];
+    var rays = 0u;
+    for (var sample = frame.samples.x; sample < frame.samples.x + frame.samples.y; sample++) {
+        var rng = rng_for_sample(frame.size.z, pixel, sample);
+        let s = (f32(id.x) + next_f32(&rng)) / f32(width);
+        let t = (f32(id.y) + next_f32(&rng)) / f32(height);
+        var origin = frame.origin.xyz;
+        if (frame.origin.w > 0.0) {
+            let disk = frame.origin.w * in_unit_disk(&rng);
+            origin = origin + disk.x * frame.u.xyz + disk.y * frame.v.xyz;
+        }
+        let aim = frame.upper_left.xyz + s * frame.horizontal.xyz - t * frame.vertical.xyz;
+        let l = radiance(origin, normalize(aim - origin), &rng, &rays);
+        let finite = all(l == l) && all(abs(l) < vec3<f32>(INF));
+        if (finite) {
+            sum = vec4<f32>(sum.xyz + l, sum.w);
+        } else {
+            sum.w += 1.0;
+        }
+    }
+    accum[pixel] = sum;
+    atomicAdd(&ray_count[0], rays);
+}
