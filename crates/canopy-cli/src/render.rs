@@ -54,6 +54,11 @@ pub struct RenderArgs {
     /// after three bounces; the image's expected value is the same).
     #[arg(long)]
     no_roulette: bool,
+    /// Where to render: `cpu` (all cores) or `gpu` (the first adapter wgpu finds; see
+    /// `canopy devices`). The GPU renders the `bsdf` integrator under a sky or constant
+    /// background so far, from the binary tree of the chosen builder.
+    #[arg(long, value_enum, default_value = "cpu")]
+    device: Device,
     /// Worker threads, 1 to 1024 [default: all cores].
     #[arg(long, value_parser = limits::threads())]
     threads: Option<u32>,
@@ -95,6 +100,13 @@ pub struct RenderArgs {
     json: bool,
 }
 
+/// Where a render runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Device {
+    Cpu,
+    Gpu,
+}
+
 fn parse_accel(s: &str) -> Result<AccelKind, String> {
     s.parse()
         .map_err(|e: canopy_bvh::UnknownBuilder| e.to_string())
@@ -110,6 +122,8 @@ struct Summary {
     bvh: String,
     bvh_width: u32,
     build_ms: f64,
+    /// `cpu`, or the GPU adapter rendered on.
+    device: String,
     threads: usize,
     /// Samples per pixel in the image (fewer than `spp` when interrupted).
     samples: u32,
@@ -246,20 +260,34 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     if let AccelKind::Bvh(builder) = args.bvh {
         args.build.check_memory(builder, scene.primitives.len())?;
     }
+    let gpu = match args.device {
+        Device::Cpu => None,
+        Device::Gpu if args.bvh == AccelKind::None => {
+            bail!("--device gpu traces through a BVH; choose a builder with --bvh")
+        }
+        Device::Gpu if args.heatmap => {
+            bail!("--heatmap counts CPU traversal work; drop --device gpu")
+        }
+        Device::Gpu => Some(canopy_gpu::Gpu::new()?),
+    };
+    // The GPU walks the binary tree (in its own layout, derived from it).
+    let width = if gpu.is_some() {
+        BvhWidth::Two
+    } else {
+        args.width
+    };
     let accel = pool.install(|| {
-        Accel::build_optimized(
-            args.bvh,
-            args.width,
-            &scene.primitives,
-            &params,
-            args.optimize,
-        )
+        Accel::build_optimized(args.bvh, width, &scene.primitives, &params, args.optimize)
     });
     if args.show_bvh && accel.tree().is_none() {
         bail!("--show-bvh needs a BVH; choose a builder with --bvh");
     }
 
     let mut summary = scene_summary(args, &job, &accel, pool.current_num_threads());
+    if let Some(gpu) = &gpu {
+        summary.device = gpu.describe();
+        summary.bvh_width = 2;
+    }
     print_scene_summary(&summary, args.json);
     for warning in scene.warnings() {
         summary.warn(warning);
@@ -279,11 +307,32 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         return finish(&summary, args.json);
     }
 
+    let rows = scene.settings.height as u64;
+    let mut pass: Box<Pass> = match (&gpu, accel.tree()) {
+        (Some(gpu), Some(canopy_bvh::Tree::Binary(bvh))) => {
+            let renderer = canopy_gpu::Renderer::new(gpu, scene, bvh)?;
+            Box::new(move |accumulator, progress| {
+                let done = renderer.render_samples(accumulator, 1)?;
+                progress.inc(rows);
+                Ok(RenderStats {
+                    rays: done.rays,
+                    invalid_samples: done.invalid_samples,
+                    elapsed: done.elapsed,
+                    ..RenderStats::default()
+                })
+            })
+        }
+        _ => Box::new(|accumulator, progress| {
+            Ok(render_samples(scene, &accel, accumulator, 1, &|| {
+                progress.inc(1)
+            }))
+        }),
+    };
     let run = pool.install(|| {
         progressive(
             scene,
             &job.source,
-            &accel,
+            &mut pass,
             job.accumulator,
             dest.periodic.as_deref(),
             args.every,
@@ -308,12 +357,20 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     summary.rays = stats.rays;
     summary.shadow_rays = stats.shadow_rays;
     summary.mrays_per_second = stats.mrays_per_second();
-    say!(
-        args.json,
-        "render      {:.3} s on {} threads",
-        summary.render_seconds,
-        summary.threads
-    );
+    match &gpu {
+        Some(_) => say!(
+            args.json,
+            "render      {:.3} s on {}",
+            summary.render_seconds,
+            summary.device
+        ),
+        None => say!(
+            args.json,
+            "render      {:.3} s on {} threads",
+            summary.render_seconds,
+            summary.threads
+        ),
+    }
     say!(
         args.json,
         "rays        {} ({:.2} Mrays/s), {} of them shadow rays",
@@ -369,6 +426,7 @@ fn scene_summary(args: &RenderArgs, job: &Job, accel: &Accel, threads: usize) ->
         bvh: args.bvh.to_string(),
         bvh_width: args.width.children(),
         build_ms: accel.build_time.as_secs_f64() * 1e3,
+        device: "cpu".into(),
         threads,
         ..Summary::default()
     }
@@ -381,13 +439,18 @@ struct Progressive {
     stats: RenderStats,
 }
 
+/// A pass: one more sample of every pixel, added to the accumulator (on the CPU or on
+/// the GPU), advancing the progress bar by rows.
+type Pass<'a> =
+    dyn FnMut(&mut Accumulator, &ProgressBar) -> anyhow::Result<RenderStats> + Send + 'a;
+
 /// Renders one sample per pixel at a time until the scene's spp are done or Ctrl-C is
 /// pressed, saving a checkpoint every `every` when asked. Passes add samples in order, so
 /// the image is the same as an uninterrupted render's.
 fn progressive(
     scene: &Scene,
     scene_source: &str,
-    accel: &Accel,
+    pass: &mut Pass,
     mut accumulator: Accumulator,
     checkpoint: Option<&Path>,
     every: Duration,
@@ -416,7 +479,7 @@ fn progressive(
     let mut last_save = Instant::now();
     let mut save_failing = false;
     while accumulator.samples < scene.settings.spp && !interrupted.load(Ordering::SeqCst) {
-        let pass = render_samples(scene, accel, &mut accumulator, 1, &|| progress.inc(1));
+        let pass = pass(&mut accumulator, &progress)?;
         stats.rays += pass.rays;
         stats.shadow_rays += pass.shadow_rays;
         stats.elapsed += pass.elapsed;

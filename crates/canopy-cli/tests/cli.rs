@@ -158,6 +158,71 @@ fn devices_lists_adapters_or_says_there_are_none() {
     }
 }
 
+/// `--device gpu` renders the same image as the CPU where an adapter exists (the software
+/// one in CI): the same random streams give the same paths, so pixels differ only by
+/// rounding. Without an adapter, it is a clear error and no image is left behind.
+#[test]
+fn the_gpu_renders_what_the_cpu_renders() {
+    let dir = scratch("gpu");
+    let args = |device: &'static str, out: &'static str| {
+        [
+            "render",
+            "paper-3",
+            "--integrator",
+            "bsdf",
+            "--size",
+            "48x48",
+            "--spp",
+            "4",
+            "--device",
+            device,
+            "-o",
+            out,
+        ]
+    };
+    let cpu = canopy(&args("cpu", "cpu.png"), &dir);
+    assert_eq!(cpu.status.code(), Some(0), "{}", stderr(&cpu));
+    let gpu = canopy(&args("gpu", "gpu.png"), &dir);
+    let err = stderr(&gpu);
+    assert!(!err.contains("panicked"), "{err}");
+    if gpu.status.code() == Some(1) && err.contains("no GPU adapter") {
+        eprintln!("SKIPPED: no GPU adapter: {err}");
+        assert!(!dir.join("gpu.png").exists());
+        return;
+    }
+    assert_eq!(gpu.status.code(), Some(0), "{err}");
+    let (a, b) = (
+        image::open(dir.join("cpu.png")).unwrap().to_rgb8(),
+        image::open(dir.join("gpu.png")).unwrap().to_rgb8(),
+    );
+    let differing = a
+        .pixels()
+        .zip(b.pixels())
+        .filter(|(p, q)| p.0.iter().zip(q.0).any(|(x, y)| x.abs_diff(y) > 2))
+        .count();
+    assert!(differing * 100 <= (48 * 48), "{differing} pixels differ");
+    // What the GPU cannot do yet is refused before any work, naming the way out.
+    for (extra, words) in [
+        (&["--integrator", "path"][..], "--integrator bsdf"),
+        (&["--bvh", "none"][..], "--bvh"),
+    ] {
+        let mut a = vec![
+            "render", "paper-3", "--size", "8x8", "--spp", "1", "--device", "gpu",
+        ];
+        a.extend_from_slice(extra);
+        a.extend(["-o", "refused.png"]);
+        let out = canopy(&a, &dir);
+        let err = stderr(&out);
+        assert_eq!(out.status.code(), Some(1), "{a:?}: {err}");
+        assert!(
+            err.contains(words) || err.contains("no GPU adapter"),
+            "{a:?}: {err}"
+        );
+        assert!(!dir.join("refused.png").exists());
+    }
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
 #[test]
 fn unknown_key_is_reported_with_file_line_and_key() {
     let scene = format!("{CAMERA}[[spheres]]\ncenter = [0, 0, 0]\nradus = 1\n");
