@@ -55,8 +55,8 @@ pub struct RenderArgs {
     #[arg(long)]
     no_roulette: bool,
     /// Where to render: `cpu` (all cores) or `gpu` (the first adapter wgpu finds; see
-    /// `canopy devices`). The GPU renders the `bsdf` integrator under a sky or constant
-    /// background so far, from the binary tree of the chosen builder.
+    /// `canopy devices`), with either integrator, from the binary tree of the chosen
+    /// builder. Environment maps are not on the GPU yet.
     #[arg(long, value_enum, default_value = "cpu")]
     device: Device,
     /// Worker threads, 1 to 1024 [default: all cores].
@@ -316,6 +316,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
                 progress.inc(rows);
                 Ok(RenderStats {
                     rays: done.rays,
+                    shadow_rays: done.shadow_rays,
                     invalid_samples: done.invalid_samples,
                     elapsed: done.elapsed,
                     ..RenderStats::default()

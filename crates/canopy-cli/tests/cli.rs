@@ -166,18 +166,7 @@ fn the_gpu_renders_what_the_cpu_renders() {
     let dir = scratch("gpu");
     let args = |device: &'static str, out: &'static str| {
         [
-            "render",
-            "paper-3",
-            "--integrator",
-            "bsdf",
-            "--size",
-            "48x48",
-            "--spp",
-            "4",
-            "--device",
-            device,
-            "-o",
-            out,
+            "render", "paper-3", "--size", "48x48", "--spp", "4", "--device", device, "-o", out,
         ]
     };
     let cpu = canopy(&args("cpu", "cpu.png"), &dir);
@@ -203,8 +192,8 @@ fn the_gpu_renders_what_the_cpu_renders() {
     assert!(differing * 100 <= (48 * 48), "{differing} pixels differ");
     // What the GPU cannot do yet is refused before any work, naming the way out.
     for (extra, words) in [
-        (&["--integrator", "path"][..], "--integrator bsdf"),
         (&["--bvh", "none"][..], "--bvh"),
+        (&["--heatmap"][..], "--heatmap"),
     ] {
         let mut a = vec![
             "render", "paper-3", "--size", "8x8", "--spp", "1", "--device", "gpu",
@@ -221,6 +210,27 @@ fn the_gpu_renders_what_the_cpu_renders() {
         assert!(!dir.join("refused.png").exists());
     }
     std::fs::remove_dir_all(dir).unwrap();
+}
+
+#[test]
+fn bench_gpu_times_both_devices_on_the_same_scene() {
+    let out = canopy(
+        &["bench", "gpu", "paper-1", "--size", "16x16", "--spp", "2"],
+        &std::env::temp_dir(),
+    );
+    let (table, err) = (
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr),
+    );
+    assert!(!err.contains("panicked"), "{err}");
+    if out.status.code() == Some(1) && err.contains("no GPU adapter") {
+        eprintln!("SKIPPED: no GPU adapter: {err}");
+        return;
+    }
+    assert_eq!(out.status.code(), Some(0), "{err}");
+    let rows: Vec<&str> = table.lines().filter(|l| l.starts_with("paper-1")).collect();
+    assert_eq!(rows.len(), 2, "{table}");
+    assert!(rows[0].contains("CPU") && rows[1].contains('x'), "{table}");
 }
 
 #[test]

@@ -69,6 +69,11 @@ impl Gpu {
         })
     }
 
+    /// Whether the adapter is a CPU in disguise (a software driver such as lavapipe).
+    pub fn is_software(&self) -> bool {
+        self.info.device_type == wgpu::DeviceType::Cpu
+    }
+
     /// The adapter's name, backend and kind, in one line.
     pub fn describe(&self) -> String {
         describe(&self.info)

@@ -1,5 +1,6 @@
-//! The path tracer on the GPU: the report's estimator (canopy's `bsdf` integrator), one
-//! invocation per pixel, samples added to a CPU [`Accumulator`] dispatch by dispatch.
+//! The path tracers on the GPU — canopy's `path` integrator (light sampling with MIS,
+//! Russian roulette) and the report's `bsdf` — one invocation per pixel, samples added
+//! to a CPU [`Accumulator`] dispatch by dispatch.
 
 use crate::scene::GpuScene;
 use crate::{Gpu, GpuError};
@@ -36,7 +37,7 @@ impl GpuMaterial {
     }
 }
 
-/// The per-dispatch constants: 144 bytes; WGSL `Frame` in `render.wgsl`.
+/// The per-dispatch constants: 160 bytes; WGSL `Frame` in `render.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
 struct Frame {
@@ -52,6 +53,53 @@ struct Frame {
     /// first sample, samples, background kind (0 sky, 1 constant), unused.
     samples: [u32; 4],
     background: [f32; 4],
+    /// lights, background is black (1), integrator (0 bsdf, 1 path), roulette (1).
+    options: [u32; 4],
+}
+
+/// A light for the GPU: 16 bytes; WGSL `Light` in `path.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+struct GpuLight {
+    prim: u32,
+    /// Probability of choosing it.
+    pmf: f32,
+    /// End of its slice of the cumulative distribution, normalised to 1.
+    cdf_end: f32,
+    unused: u32,
+}
+
+/// The scene's emitters as the GPU samples them: by power (luminance times area), as
+/// `canopy_render::lights::Lights` does, with each primitive's light index (or `u32::MAX`).
+fn gpu_lights(scene: &Scene) -> (Vec<GpuLight>, Vec<u32>) {
+    let mut table = Vec::new();
+    let mut light_of_prim = vec![u32::MAX; scene.primitives.len()];
+    let mut powers = Vec::new();
+    for (index, primitive) in scene.primitives.iter().enumerate() {
+        let emitted = scene.materials[primitive.material as usize].emitted();
+        let power = canopy_render::sampling::luminance(emitted) * primitive.shape.area();
+        if power.is_finite() && power > 0.0 {
+            light_of_prim[index] = table.len() as u32;
+            table.push(GpuLight {
+                prim: index as u32,
+                pmf: 0.0,
+                cdf_end: 0.0,
+                unused: 0,
+            });
+            powers.push(power as f64);
+        }
+    }
+    let total: f64 = powers.iter().sum();
+    let mut running = 0.0;
+    for (light, power) in table.iter_mut().zip(&powers) {
+        running += power;
+        light.pmf = (power / total) as f32;
+        light.cdf_end = (running / total) as f32;
+    }
+    if let Some(last) = table.last_mut() {
+        last.cdf_end = 1.0;
+    }
+    (table, light_of_prim)
 }
 
 fn vec4(v: Vec3, w: f32) -> [f32; 4] {
@@ -61,7 +109,9 @@ fn vec4(v: Vec3, w: f32) -> [f32; 4] {
 /// What a dispatch did.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct DispatchStats {
+    /// Rays traced, shadow rays included.
     pub rays: u64,
+    pub shadow_rays: u64,
     pub invalid_samples: u64,
     pub elapsed: Duration,
 }
@@ -81,13 +131,8 @@ pub struct Renderer<'g> {
 
 impl<'g> Renderer<'g> {
     /// Uploads `scene` with the tree `bvh` built over its primitives. The GPU renders
-    /// with the `bsdf` integrator under a sky or constant background so far.
+    /// under a sky or constant background so far (no environment maps).
     pub fn new(gpu: &'g Gpu, scene: &Scene, bvh: &Bvh2) -> Result<Self, GpuError> {
-        if scene.settings.integrator != Integrator::Bsdf {
-            return Err(GpuError::Unsupported(
-                "the GPU renders with the `bsdf` integrator so far (--integrator bsdf)".into(),
-            ));
-        }
         let (background_kind, background) = match &scene.background {
             Background::Sky => (0, Vec3::ZERO),
             Background::Constant(c) => (1, *c),
@@ -118,6 +163,13 @@ impl<'g> Renderer<'g> {
             .flat_map(|n| n.map(|v| vec4(v, 0.0)))
             .collect();
         let normals = storage("vertex normals", bytemuck::cast_slice(&normals), none)?;
+        let (light_table, light_of_prim) = gpu_lights(scene);
+        let lights = storage("lights", bytemuck::cast_slice(&light_table), none)?;
+        let light_of_prim = storage(
+            "light of each primitive",
+            bytemuck::cast_slice(&light_of_prim),
+            none,
+        )?;
         let accum_bytes = pixels * 16;
         gpu.check_size("the image's sums", accum_bytes)?;
         let accum = device.create_buffer(&wgpu::BufferDescriptor {
@@ -149,6 +201,12 @@ impl<'g> Renderer<'g> {
             ],
             samples: [0, 0, background_kind, 0],
             background: vec4(background, 0.0),
+            options: [
+                light_table.len() as u32,
+                scene.background.is_black() as u32,
+                (scene.settings.integrator == Integrator::Path) as u32,
+                scene.settings.russian_roulette as u32,
+            ],
         };
         let frame_buffer = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("frame"),
@@ -162,6 +220,7 @@ impl<'g> Renderer<'g> {
                 include_str!("shaders/rng.wgsl"),
                 include_str!("shaders/common.wgsl"),
                 include_str!("shaders/render.wgsl"),
+                include_str!("shaders/path.wgsl"),
             ],
         );
         let layout = pipeline.get_bind_group_layout(0);
@@ -177,6 +236,8 @@ impl<'g> Renderer<'g> {
                 (5, &accum),
                 (6, &normals),
                 (7, &ray_count),
+                (8, &lights),
+                (9, &light_of_prim),
             ]
             .map(|(binding, buffer)| wgpu::BindGroupEntry {
                 binding,
@@ -238,6 +299,7 @@ impl<'g> Renderer<'g> {
         accumulator.invalid_samples += invalid;
         Ok(DispatchStats {
             rays: rays[0] as u64,
+            shadow_rays: rays[1] as u64,
             invalid_samples: invalid,
             elapsed: start.elapsed(),
         })

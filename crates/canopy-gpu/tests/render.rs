@@ -78,6 +78,14 @@ fn stats(per_run: &[Vec<f64>]) -> (Vec<f64>, Vec<f64>) {
 }
 
 fn assert_devices_agree(name: &str, gpu: &Gpu, scene: &Scene, runs: u64) {
+    for integrator in [Integrator::Bsdf, Integrator::Path] {
+        let mut s = scene.clone();
+        s.settings.integrator = integrator;
+        assert_devices_agree_with(&format!("{name} ({integrator})"), gpu, &s, runs);
+    }
+}
+
+fn assert_devices_agree_with(name: &str, gpu: &Gpu, scene: &Scene, runs: u64) {
     let params = BuildParams::default();
     let boxes: Vec<_> = scene.primitives.iter().map(|p| p.shape.bounds()).collect();
     let bvh = canopy_bvh::build(Builder::BinnedSah, &boxes, &params);
@@ -248,9 +256,16 @@ material = {{ type = "emissive", radiance = [6, 6, 6] }}
 fn what_the_gpu_cannot_render_yet_is_an_error_not_a_wrong_image() {
     let Some(gpu) = gpu() else { return };
     let mut scene = scene_from("unsupported", SPHERES);
-    scene.settings.integrator = Integrator::Path;
+    let map = canopy_render::EnvironmentMap::new(
+        "sky.hdr",
+        2,
+        1,
+        vec![glam::Vec3::ONE; 2],
+        glam::Mat3::IDENTITY,
+    );
+    scene.background = canopy_render::Background::Environment(std::sync::Arc::new(map));
     let boxes: Vec<_> = scene.primitives.iter().map(|p| p.shape.bounds()).collect();
     let bvh = canopy_bvh::build(Builder::BinnedSah, &boxes, &BuildParams::default());
     let err = Renderer::new(&gpu, &scene, &bvh).err().expect("an error");
-    assert!(err.to_string().contains("bsdf"), "{err}");
+    assert!(err.to_string().contains("environment maps"), "{err}");
 }

@@ -2,6 +2,7 @@
 //! machine — every reference scene rendered with the report's methods and canopy's other
 //! builders at every width, repeated, timed and tabulated.
 
+mod gpu;
 mod lights;
 mod plots;
 mod report_figures;
@@ -33,6 +34,8 @@ enum BenchCommand {
     /// Equal-time error of light sampling against the report's integrator, with the
     /// shadow rays' share of the time.
     Lights(lights::LightsArgs),
+    /// The same renders on the CPU and on the GPU: seconds, Mrays/s, speed-up.
+    Gpu(gpu::GpuArgs),
 }
 
 #[derive(Args)]
@@ -193,6 +196,7 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
     match &args.what {
         BenchCommand::Paper(args) => paper(args),
         BenchCommand::Lights(args) => lights::run(args),
+        BenchCommand::Gpu(args) => gpu::run(args),
     }
 }
 

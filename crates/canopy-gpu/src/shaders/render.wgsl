@@ -1,5 +1,6 @@
-// The report's path tracer (canopy's `bsdf` integrator) on the GPU, one invocation per
-// pixel (appended to rng.wgsl and common.wgsl). Materials, camera, background and random
+// canopy's path tracers on the GPU, one invocation per pixel (appended to rng.wgsl and
+// common.wgsl, followed by path.wgsl): the report's estimator (`bsdf`) here, light
+// sampling (`path`) in path.wgsl. Materials, camera, background and random
 // streams are ports of canopy-render's: the same numbers drive the same decisions, up to
 // rounding.
 
@@ -23,6 +24,8 @@ struct Frame {
     // first sample, samples, background kind (0 sky, 1 constant), unused
     samples: vec4<u32>,
     background: vec4<f32>,
+    // lights, background is black (1), integrator (0 bsdf, 1 path), Russian roulette (1)
+    options: vec4<u32>,
 }
 
 @group(0) @binding(3) var<storage, read> materials: array<Material>;
@@ -168,6 +171,9 @@ struct Scatter {
     direction: vec3<f32>,
     weight: vec3<f32>,
     ok: bool,
+    // Density per solid angle; meaningless when `delta`.
+    pdf: f32,
+    delta: bool,
 }
 
 fn scatter(m: Material, dir: vec3<f32>, s: Surface, rng: ptr<function, Rng>) -> Scatter {
@@ -178,7 +184,7 @@ fn scatter(m: Material, dir: vec3<f32>, s: Surface, rng: ptr<function, Rng>) -> 
         geometric = -geometric;
         shading = -shading;
     }
-    var out = Scatter(vec3<f32>(0.0), vec3<f32>(0.0), false);
+    var out = Scatter(vec3<f32>(0.0), vec3<f32>(0.0), false, 0.0, false);
     switch m.kind.x {
         case 0u: {
             let d = shading + unit_vector(rng);
@@ -187,7 +193,7 @@ fn scatter(m: Material, dir: vec3<f32>, s: Surface, rng: ptr<function, Rng>) -> 
                 direction = normalize(d);
             }
             let cos = dot(direction, shading);
-            out = Scatter(direction, m.value.xyz, dot(direction, geometric) > 0.0 && cos > 0.0);
+            out = Scatter(direction, m.value.xyz, dot(direction, geometric) > 0.0 && cos > 0.0, cos * FRAC_1_PI, false);
         }
         case 1u: {
             let fuzz = m.value.w;
@@ -202,7 +208,7 @@ fn scatter(m: Material, dir: vec3<f32>, s: Surface, rng: ptr<function, Rng>) -> 
             if (!delta) {
                 pdf = fuzz_pdf(reflected, fuzz, direction);
             }
-            out = Scatter(direction, m.value.xyz, dot(direction, geometric) > 0.0 && (delta || pdf > 0.0));
+            out = Scatter(direction, m.value.xyz, dot(direction, geometric) > 0.0 && (delta || pdf > 0.0), pdf, delta);
         }
         case 2u: {
             let ior = m.value.w;
@@ -219,7 +225,7 @@ fn scatter(m: Material, dir: vec3<f32>, s: Surface, rng: ptr<function, Rng>) -> 
             } else {
                 direction = refract_through(dir, shading, eta, cos_theta);
             }
-            out = Scatter(normalize(direction), vec3<f32>(1.0), true);
+            out = Scatter(normalize(direction), vec3<f32>(1.0), true, 0.0, true);
         }
         default: {}
     }
@@ -250,13 +256,13 @@ fn offset_origin(s: Surface, direction: vec3<f32>) -> vec3<f32> {
 }
 
 // The bsdf estimator; returns the radiance and counts the rays it traced.
-fn radiance(camera_origin: vec3<f32>, camera_dir: vec3<f32>, rng: ptr<function, Rng>, rays: ptr<function, u32>) -> vec3<f32> {
+fn radiance_bsdf(camera_origin: vec3<f32>, camera_dir: vec3<f32>, rng: ptr<function, Rng>, rays: ptr<function, vec2<u32>>) -> vec3<f32> {
     var origin = camera_origin;
     var dir = camera_dir;
     var throughput = vec3<f32>(1.0);
     var total = vec3<f32>(0.0);
     for (var depth = 0u; depth < frame.size.w; depth++) {
-        *rays += 1u;
+        *rays += vec2<u32>(1u, 0u);
         let hit = closest(RayIn(origin, 0.0, dir, INF));
         if (hit.prim == NO_PRIM) {
             total += throughput * background(dir);
@@ -288,7 +294,7 @@ fn render(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     let pixel = id.y * width + id.x;
     var sum = accum[pixel];
-    var rays = 0u;
+    var rays = vec2<u32>(0u);
     for (var sample = frame.samples.x; sample < frame.samples.x + frame.samples.y; sample++) {
         var rng = rng_for_sample(frame.size.z, pixel, sample);
         let s = (f32(id.x) + next_f32(&rng)) / f32(width);
@@ -299,7 +305,12 @@ fn render(@builtin(global_invocation_id) id: vec3<u32>) {
             origin = origin + disk.x * frame.u.xyz + disk.y * frame.v.xyz;
         }
         let aim = frame.upper_left.xyz + s * frame.horizontal.xyz - t * frame.vertical.xyz;
-        let l = radiance(origin, normalize(aim - origin), &rng, &rays);
+        var l = vec3<f32>(0.0);
+        if (frame.options.z == 1u) {
+            l = radiance_path(origin, normalize(aim - origin), &rng, &rays);
+        } else {
+            l = radiance_bsdf(origin, normalize(aim - origin), &rng, &rays);
+        }
         let finite = all(l == l) && all(abs(l) < vec3<f32>(INF));
         if (finite) {
             sum = vec4<f32>(sum.xyz + l, sum.w);
@@ -308,5 +319,6 @@ fn render(@builtin(global_invocation_id) id: vec3<u32>) {
         }
     }
     accum[pixel] = sum;
-    atomicAdd(&ray_count[0], rays);
+    atomicAdd(&ray_count[0], rays.x);
+    atomicAdd(&ray_count[1], rays.y);
 }
