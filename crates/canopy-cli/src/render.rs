@@ -56,7 +56,7 @@ pub struct RenderArgs {
     no_roulette: bool,
     /// Where to render: `cpu` (all cores) or `gpu` (the first adapter wgpu finds; see
     /// `canopy devices`), with either integrator, from the binary tree of the chosen
-    /// builder. Environment maps are not on the GPU yet.
+    /// builder: the same image up to rounding.
     #[arg(long, value_enum, default_value = "cpu")]
     device: Device,
     /// Worker threads, 1 to 1024 [default: all cores].

@@ -20,8 +20,6 @@ pub enum GpuError {
     TooDeep { depth: usize, max: usize },
     #[error("reading results back from the GPU failed: {0}")]
     Readback(String),
-    #[error("not supported on the GPU: {0}")]
-    Unsupported(String),
 }
 
 /// A GPU device and its queue.

@@ -37,7 +37,7 @@ impl GpuMaterial {
     }
 }
 
-/// The per-dispatch constants: 160 bytes; WGSL `Frame` in `render.wgsl`.
+/// The per-dispatch constants: 224 bytes; WGSL `Frame` in `render.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
 struct Frame {
@@ -55,6 +55,50 @@ struct Frame {
     background: [f32; 4],
     /// lights, background is black (1), integrator (0 bsdf, 1 path), roulette (1).
     options: [u32; 4],
+    /// An environment map's rotation to the world, by columns.
+    env_x: [f32; 4],
+    env_y: [f32; 4],
+    env_z: [f32; 4],
+    /// Its width and height.
+    env_size: [u32; 4],
+}
+
+/// An environment map as the GPU reads it: pixels, and per pixel the end of its slice of
+/// its row's CDF and its cell density, and per row the end of its slice of the marginal
+/// CDF (CDFs normalised to 1; the CPU's are f64 sums).
+#[derive(Default)]
+struct EnvironmentTables {
+    size: [u32; 2],
+    to_world: glam::Mat3,
+    pixels: Vec<[f32; 4]>,
+    cells: Vec<[f32; 2]>,
+    rows: Vec<f32>,
+}
+
+fn environment_tables(map: &canopy_render::EnvironmentMap) -> EnvironmentTables {
+    let (width, height) = map.size();
+    let pixels = map.pixels().iter().map(|&p| vec4(p, 0.0)).collect();
+    let (mut cells, mut rows) = (vec![[0.0; 2]; width * height], vec![0.0; height]);
+    if let Some(d) = map.distribution() {
+        let marginal = d.marginal();
+        for (row, end) in rows.iter_mut().enumerate() {
+            *end = (marginal.cdf()[row + 1] / marginal.total()) as f32;
+            let Some(cdf) = d.row(row) else { continue };
+            for column in 0..width {
+                cells[row * width + column] = [
+                    (cdf.cdf()[column + 1] / cdf.total()) as f32,
+                    d.pdf_cell(column, row),
+                ];
+            }
+        }
+    }
+    EnvironmentTables {
+        size: [width as u32, height as u32],
+        to_world: map.to_world(),
+        pixels,
+        cells,
+        rows,
+    }
 }
 
 /// A light for the GPU: 16 bytes; WGSL `Light` in `path.wgsl`.
@@ -130,17 +174,12 @@ pub struct Renderer<'g> {
 }
 
 impl<'g> Renderer<'g> {
-    /// Uploads `scene` with the tree `bvh` built over its primitives. The GPU renders
-    /// under a sky or constant background so far (no environment maps).
+    /// Uploads `scene` with the tree `bvh` built over its primitives.
     pub fn new(gpu: &'g Gpu, scene: &Scene, bvh: &Bvh2) -> Result<Self, GpuError> {
-        let (background_kind, background) = match &scene.background {
-            Background::Sky => (0, Vec3::ZERO),
-            Background::Constant(c) => (1, *c),
-            Background::Environment(_) => {
-                return Err(GpuError::Unsupported(
-                    "environment maps are not on the GPU yet".into(),
-                ))
-            }
+        let (background_kind, background, env) = match &scene.background {
+            Background::Sky => (0, Vec3::ZERO, EnvironmentTables::default()),
+            Background::Constant(c) => (1, *c, EnvironmentTables::default()),
+            Background::Environment(map) => (2, Vec3::ZERO, environment_tables(map)),
         };
         let flat = GpuScene::with_bvh(&scene.primitives, bvh)?;
         let device = &gpu.device;
@@ -168,6 +207,17 @@ impl<'g> Renderer<'g> {
         let light_of_prim = storage(
             "light of each primitive",
             bytemuck::cast_slice(&light_of_prim),
+            none,
+        )?;
+        let env_pixels = storage("environment map", bytemuck::cast_slice(&env.pixels), none)?;
+        let env_cells = storage(
+            "environment map distribution",
+            bytemuck::cast_slice(&env.cells),
+            none,
+        )?;
+        let env_rows = storage(
+            "environment map rows",
+            bytemuck::cast_slice(&env.rows),
             none,
         )?;
         let accum_bytes = pixels * 16;
@@ -207,6 +257,10 @@ impl<'g> Renderer<'g> {
                 (scene.settings.integrator == Integrator::Path) as u32,
                 scene.settings.russian_roulette as u32,
             ],
+            env_x: vec4(env.to_world.x_axis, 0.0),
+            env_y: vec4(env.to_world.y_axis, 0.0),
+            env_z: vec4(env.to_world.z_axis, 0.0),
+            env_size: [env.size[0].max(1), env.size[1].max(1), 0, 0],
         };
         let frame_buffer = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("frame"),
@@ -221,6 +275,7 @@ impl<'g> Renderer<'g> {
                 include_str!("shaders/common.wgsl"),
                 include_str!("shaders/render.wgsl"),
                 include_str!("shaders/path.wgsl"),
+                include_str!("shaders/environment.wgsl"),
             ],
         );
         let layout = pipeline.get_bind_group_layout(0);
@@ -238,6 +293,9 @@ impl<'g> Renderer<'g> {
                 (7, &ray_count),
                 (8, &lights),
                 (9, &light_of_prim),
+                (10, &env_pixels),
+                (11, &env_cells),
+                (12, &env_rows),
             ]
             .map(|(binding, buffer)| wgpu::BindGroupEntry {
                 binding,

@@ -147,6 +147,21 @@ impl EnvironmentMap {
         (self.width, self.height)
     }
 
+    /// The pixels, rows from the top (for renderers that look the map up themselves).
+    pub fn pixels(&self) -> &[Vec3] {
+        &self.pixels
+    }
+
+    /// The rotation from the map's frame to the world.
+    pub fn to_world(&self) -> Mat3 {
+        self.to_world
+    }
+
+    /// The luminance × sin θ distribution the map is sampled by; `None` when it is black.
+    pub fn distribution(&self) -> Option<&Distribution2D> {
+        self.distribution.as_ref()
+    }
+
     /// Image coordinates in `[0, 1]²` of the world direction `dir`.
     fn uv(&self, dir: Vec3) -> Vec2 {
         let d = (self.to_world.transpose() * dir).normalize_or(Vec3::Y);

@@ -116,6 +116,11 @@ impl Distribution1D {
         self.cdf[self.len()]
     }
 
+    /// The cumulative sums: `cdf()[i]` is the weight before index `i`, the last the total.
+    pub fn cdf(&self) -> &[f64] {
+        &self.cdf
+    }
+
     /// Probability of drawing `index`.
     #[inline]
     pub fn pmf(&self, index: usize) -> f32 {
@@ -192,7 +197,23 @@ impl Distribution2D {
         self.pdf_cell(column, row)
     }
 
-    fn pdf_cell(&self, column: usize, row: usize) -> f32 {
+    /// Cells per row and rows.
+    pub fn size(&self) -> (usize, usize) {
+        (self.width, self.height)
+    }
+
+    /// The distribution over the columns of `row` (`None` for a row of zero weight).
+    pub fn row(&self, row: usize) -> Option<&Distribution1D> {
+        self.rows[row].as_ref()
+    }
+
+    /// The distribution over rows.
+    pub fn marginal(&self) -> &Distribution1D {
+        &self.marginal
+    }
+
+    /// The density in cell (`column`, `row`), constant over the cell.
+    pub fn pdf_cell(&self, column: usize, row: usize) -> f32 {
         match &self.rows[row] {
             Some(cells) => {
                 self.marginal.pmf(row) * cells.pmf(column) * (self.width * self.height) as f32

@@ -219,6 +219,28 @@ fn light_pdf(prim: u32, reference: vec3<f32>, point: vec3<f32>, normal: vec3<f32
     return lights[light].pmf * pdf_toward(prim, reference, point, normal);
 }
 
+// A direction towards the background (xyz) and its density (w; zero for none): uniform
+// over the sphere for the sky and constant colours, by the map's distribution.
+fn sample_background(u: vec2<f32>) -> vec4<f32> {
+    if (frame.options.y == 1u) {
+        return vec4<f32>(0.0);
+    }
+    if (frame.samples.z == 2u) {
+        return env_sample(u);
+    }
+    return vec4<f32>(uniform_sphere(u), UNIFORM_SPHERE_PDF);
+}
+
+fn background_pdf(dir: vec3<f32>) -> f32 {
+    if (frame.options.y == 1u) {
+        return 0.0;
+    }
+    if (frame.samples.z == 2u) {
+        return env_pdf(dir);
+    }
+    return UNIFORM_SPHERE_PDF;
+}
+
 fn power_heuristic(own: f32, other: f32) -> f32 {
     if (own >= INF) {
         return 1.0;
@@ -315,15 +337,16 @@ fn sample_lights(m: Material, dir: vec3<f32>, s: Surface, rng: ptr<function, Rng
         }
     }
     let u = vec2<f32>(next_f32(rng), next_f32(rng));
-    if (frame.options.y == 0u) {
-        let direction = uniform_sphere(u);
+    let sky = sample_background(u);
+    if (sky.w > 0.0) {
+        let direction = sky.xyz;
         let f = material_eval(m, dir, s, direction);
         if (any(f != vec3<f32>(0.0))) {
             let origin = offset_origin(s, direction);
             *rays += vec2<u32>(1u, 1u);
             if (!occluded(RayIn(origin, 0.0, direction, INF))) {
-                let weight = power_heuristic(UNIFORM_SPHERE_PDF, material_pdf(m, dir, s, direction));
-                direct += f * background(direction) * (weight / UNIFORM_SPHERE_PDF);
+                let weight = power_heuristic(sky.w, material_pdf(m, dir, s, direction));
+                direct += f * background(direction) * (weight / sky.w);
             }
         }
     }
@@ -346,7 +369,7 @@ fn radiance_path(camera_origin: vec3<f32>, camera_dir: vec3<f32>, rng: ptr<funct
         if (hit.prim == NO_PRIM) {
             var weight = 1.0;
             if (has_previous && sample_background) {
-                weight = power_heuristic(previous_pdf, UNIFORM_SPHERE_PDF);
+                weight = power_heuristic(previous_pdf, background_pdf(dir));
             }
             total += throughput * weight * background(dir);
             break;

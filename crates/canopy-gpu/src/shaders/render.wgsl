@@ -21,11 +21,16 @@ struct Frame {
     v: vec4<f32>,
     // width, height, seed key, max depth
     size: vec4<u32>,
-    // first sample, samples, background kind (0 sky, 1 constant), unused
+    // first sample, samples, background kind (0 sky, 1 constant, 2 map), unused
     samples: vec4<u32>,
     background: vec4<f32>,
     // lights, background is black (1), integrator (0 bsdf, 1 path), Russian roulette (1)
     options: vec4<u32>,
+    // An environment map's rotation to the world, by columns, and its width and height.
+    env_x: vec4<f32>,
+    env_y: vec4<f32>,
+    env_z: vec4<f32>,
+    env_size: vec4<u32>,
 }
 
 @group(0) @binding(3) var<storage, read> materials: array<Material>;
@@ -242,6 +247,9 @@ fn emitted(m: Material) -> vec3<f32> {
 fn background(dir: vec3<f32>) -> vec3<f32> {
     if (frame.samples.z == 1u) {
         return frame.background.xyz;
+    }
+    if (frame.samples.z == 2u) {
+        return env_radiance(dir);
     }
     let a = 0.5 * (normalize(dir).y + 1.0);
     return (1.0 - a) * vec3<f32>(1.0) + a * vec3<f32>(0.5, 0.7, 1.0);
