@@ -6,7 +6,7 @@
 
 use crate::aabb::SlabRay;
 use crate::view::{Child, ChildKind, TreeView};
-use crate::{Aabb, Bvh2, Hit, PrimHit, Ray};
+use crate::{Aabb, Bvh2, Hit, PrimHit, Ray, TraversalCounter};
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
 
@@ -129,18 +129,55 @@ impl GpuBvh {
     pub fn intersect<P: Into<PrimHit>>(
         &self,
         ray: &Ray,
+        hit: impl FnMut(u32, &Ray) -> Option<P>,
+    ) -> Option<Hit> {
+        self.intersect_counted(ray, hit, &mut ())
+    }
+
+    /// [`GpuBvh::intersect`], reporting its work to `counter`.
+    pub fn intersect_counted<P: Into<PrimHit>>(
+        &self,
+        ray: &Ray,
         mut hit: impl FnMut(u32, &Ray) -> Option<P>,
+        counter: &mut impl TraversalCounter,
     ) -> Option<Hit> {
         let mut best: Option<Hit> = None;
         let mut ray = *ray;
+        self.walk(&mut ray, counter, |prim, ray| {
+            if let Some(h) = hit(prim, ray) {
+                let h = Hit::new(prim, h.into());
+                if best.is_none_or(|b| h.is_before(&b)) {
+                    best = Some(h);
+                    ray.t_max = h.t;
+                }
+            }
+            false
+        });
+        best
+    }
+
+    /// Whether anything blocks `ray` (the walk ends at the first hit).
+    pub fn occluded(&self, ray: &Ray, mut hit: impl FnMut(u32, &Ray) -> bool) -> bool {
+        let mut ray = *ray;
+        self.walk(&mut ray, &mut (), |prim, ray| hit(prim, ray))
+    }
+
+    /// The kernel's walk: `test(prim, ray)` for every primitive of every leaf entered (it
+    /// may shorten `ray.t_max`); stops and returns true when `test` does.
+    fn walk(
+        &self,
+        ray: &mut Ray,
+        counter: &mut impl TraversalCounter,
+        mut test: impl FnMut(u32, &mut Ray) -> bool,
+    ) -> bool {
+        if self.nodes.is_empty() {
+            return false;
+        }
         let mut stack = Vec::new();
         let mut node = 0usize;
-        if self.nodes.is_empty() {
-            return None;
-        }
         loop {
+            counter.visit_node();
             let n = &self.nodes[node];
-            let slab = SlabRay::new(&ray);
             let mut inner = [(f32::INFINITY, 0u32); 2];
             for (i, inner) in inner.iter_mut().enumerate() {
                 let (bounds, child, count) = n.slot(i);
@@ -148,7 +185,7 @@ impl GpuBvh {
                 if count == 0 && child == GPU_EMPTY {
                     continue;
                 }
-                let t = slab.entry_or_inf(bounds.min, bounds.max);
+                let t = SlabRay::new(ray).entry_or_inf(bounds.min, bounds.max);
                 if t == f32::INFINITY {
                     continue;
                 }
@@ -157,12 +194,9 @@ impl GpuBvh {
                     continue;
                 }
                 for &prim in &self.prim_indices[child as usize..(child + count) as usize] {
-                    if let Some(h) = hit(prim, &ray) {
-                        let h = Hit::new(prim, h.into());
-                        if best.is_none_or(|b| h.is_before(&b)) {
-                            best = Some(h);
-                            ray.t_max = h.t;
-                        }
+                    counter.test_primitive();
+                    if test(prim, ray) {
+                        return true;
                     }
                 }
             }
@@ -177,7 +211,7 @@ impl GpuBvh {
                 (false, true) => r as usize,
                 (false, false) => match stack.pop() {
                     Some(next) => next as usize,
-                    None => return best,
+                    None => return false,
                 },
             };
         }

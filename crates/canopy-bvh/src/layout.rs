@@ -4,7 +4,7 @@
 
 use crate::traverse::TraversalCounter;
 use crate::view::{self, TreeView};
-use crate::{Aabb, Bvh2, Bvh4, Bvh8, BvhError, Hit, Isa, IsaError, PrimHit, Ray};
+use crate::{Aabb, Bvh2, Bvh4, Bvh8, BvhError, GpuBvh, Hit, Isa, IsaError, PrimHit, Ray};
 use crate::{SahCosts, TreeStats};
 use glam::Vec3;
 use std::fmt;
@@ -55,6 +55,9 @@ pub enum Tree {
     Binary(Bvh2),
     Four(Bvh4),
     Eight(Bvh8),
+    /// The binary tree with both children's boxes in each node: the layout canopy-gpu's
+    /// kernels walk (traced here by their CPU twin). Made by [`Tree::for_gpu`].
+    Gpu(GpuBvh),
 }
 
 impl Tree {
@@ -67,9 +70,15 @@ impl Tree {
         }
     }
 
+    /// The binary tree in the GPU layout.
+    pub fn for_gpu(bvh: &Bvh2) -> Self {
+        Tree::Gpu(GpuBvh::from_bvh2(bvh))
+    }
+
+    /// Children per node (the GPU layout is binary).
     pub fn width(&self) -> BvhWidth {
         match self {
-            Tree::Binary(_) => BvhWidth::Two,
+            Tree::Binary(_) | Tree::Gpu(_) => BvhWidth::Two,
             Tree::Four(_) => BvhWidth::Four,
             Tree::Eight(_) => BvhWidth::Eight,
         }
@@ -79,7 +88,7 @@ impl Tree {
     /// tree tests every primitive through the closure). See [`BvhN::pack_triangles`].
     pub fn pack_triangles(&mut self, triangle: impl Fn(u32) -> Option<[Vec3; 3]>) {
         match self {
-            Tree::Binary(_) => {}
+            Tree::Binary(_) | Tree::Gpu(_) => {}
             Tree::Four(t) => t.pack_triangles(triangle),
             Tree::Eight(t) => t.pack_triangles(triangle),
         }
@@ -88,7 +97,7 @@ impl Tree {
     /// Whether the tree tests triangles itself, from packs in its leaves.
     pub fn has_triangle_packs(&self) -> bool {
         match self {
-            Tree::Binary(_) => false,
+            Tree::Binary(_) | Tree::Gpu(_) => false,
             Tree::Four(t) => t.has_triangle_packs(),
             Tree::Eight(t) => t.has_triangle_packs(),
         }
@@ -97,7 +106,7 @@ impl Tree {
     /// Uses the kernels of `isa` (wide layouts; the binary traversal is scalar).
     pub fn set_isa(&mut self, isa: Isa) -> Result<(), IsaError> {
         match self {
-            Tree::Binary(_) => Ok(()),
+            Tree::Binary(_) | Tree::Gpu(_) => Ok(()),
             Tree::Four(t) => t.set_isa(isa),
             Tree::Eight(t) => t.set_isa(isa),
         }
@@ -109,6 +118,7 @@ impl Tree {
             Tree::Binary(t) => t,
             Tree::Four(t) => t,
             Tree::Eight(t) => t,
+            Tree::Gpu(t) => t,
         }
     }
 
@@ -138,6 +148,7 @@ impl Tree {
             Tree::Binary(t) => t.intersect_counted(ray, hit_prim, counter),
             Tree::Four(t) => t.intersect_counted(ray, hit_prim, counter),
             Tree::Eight(t) => t.intersect_counted(ray, hit_prim, counter),
+            Tree::Gpu(t) => t.intersect_counted(ray, hit_prim, counter),
         }
     }
 
@@ -151,6 +162,7 @@ impl Tree {
             Tree::Binary(t) => t.occluded(ray, hit_prim),
             Tree::Four(t) => t.occluded(ray, hit_prim),
             Tree::Eight(t) => t.occluded(ray, hit_prim),
+            Tree::Gpu(t) => t.occluded(ray, hit_prim),
         }
     }
 }

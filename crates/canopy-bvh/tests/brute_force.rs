@@ -2,7 +2,7 @@
 //! primitives does. Primitives here are boxes, tested with the same slab test.
 
 use canopy_bvh::{
-    build, optimize, Aabb, BuildParams, Builder, Bvh4, Bvh8, Hit, Isa, OptimizeBudget, Ray,
+    build, optimize, Aabb, BuildParams, Builder, Bvh4, Bvh8, Hit, Isa, OptimizeBudget, Ray, Tree,
 };
 use glam::Vec3;
 use proptest::prelude::*;
@@ -55,6 +55,23 @@ fn check_against_brute_force(boxes: &[Aabb], rays: &[Ray], params: &BuildParams)
                 assert_eq!(bvh4.occluded(ray, any), hit, "{builder} x4 {isa}: {ray:?}");
                 assert_eq!(bvh8.occluded(ray, any), hit, "{builder} x8 {isa}: {ray:?}");
             }
+        }
+        // The GPU layout, walked by its CPU twin.
+        let gpu = Tree::for_gpu(&bvh);
+        gpu.validate(boxes)
+            .unwrap_or_else(|e| panic!("{builder} gpu layout: {e}"));
+        for ray in rays {
+            let expected = brute_force_closest(boxes, ray);
+            assert_eq!(
+                gpu.intersect_counted(ray, closest, &mut ()),
+                expected,
+                "{builder} gpu layout: {ray:?}"
+            );
+            assert_eq!(
+                gpu.occluded(ray, any),
+                expected.is_some(),
+                "{builder} gpu layout"
+            );
         }
         // The binary tree (the wide ones are checked per kernel above), and the same tree
         // after a pass of the optimiser.
