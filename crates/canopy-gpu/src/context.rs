@@ -1,5 +1,6 @@
 //! The device: adapter choice, limits, and the errors of GPU work.
 
+use std::sync::{Arc, Mutex};
 use thiserror::Error;
 
 /// What can go wrong on the GPU side; never a panic.
@@ -9,6 +10,8 @@ pub enum GpuError {
     NoAdapter(String),
     #[error("the GPU adapter `{adapter}` refused a device: {reason}")]
     Device { adapter: String, reason: String },
+    #[error("the GPU reported an error: {0}")]
+    Reported(String),
     #[error("{what} needs {bytes} bytes in one buffer, more than this adapter's limit of {limit} bytes ({limit_name})")]
     TooLarge {
         what: &'static str,
@@ -28,6 +31,8 @@ pub struct Gpu {
     pub(crate) queue: wgpu::Queue,
     info: wgpu::AdapterInfo,
     limits: wgpu::Limits,
+    /// The first error wgpu reported since the last check (it would panic otherwise).
+    reported: Arc<Mutex<Option<String>>>,
 }
 
 impl Gpu {
@@ -59,11 +64,18 @@ impl Gpu {
                 adapter: info.name.clone(),
                 reason: e.to_string(),
             })?;
+        let reported = Arc::new(Mutex::new(None));
+        let slot = reported.clone();
+        device.on_uncaptured_error(Arc::new(move |e: wgpu::Error| {
+            let mut first = slot.lock().unwrap_or_else(|p| p.into_inner());
+            first.get_or_insert_with(|| e.to_string());
+        }));
         Ok(Self {
             device,
             queue,
             info,
             limits,
+            reported,
         })
     }
 
@@ -102,15 +114,29 @@ impl Gpu {
             }))
     }
 
+    /// The error wgpu reported since the last check, if any (and clears it).
+    pub(crate) fn check(&self) -> Result<(), GpuError> {
+        let mut reported = self.reported.lock().unwrap_or_else(|p| p.into_inner());
+        match reported.take() {
+            Some(message) => Err(GpuError::Reported(message)),
+            None => Ok(()),
+        }
+    }
+
     /// A compute pipeline from WGSL sources joined in order, entry point `entry`.
-    pub(crate) fn pipeline(&self, entry: &str, sources: &[&str]) -> wgpu::ComputePipeline {
+    pub(crate) fn pipeline(
+        &self,
+        entry: &str,
+        sources: &[&str],
+    ) -> Result<wgpu::ComputePipeline, GpuError> {
         let module = self
             .device
             .create_shader_module(wgpu::ShaderModuleDescriptor {
                 label: Some(entry),
                 source: wgpu::ShaderSource::Wgsl(sources.join("\n").into()),
             });
-        self.device
+        let pipeline = self
+            .device
             .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
                 label: Some(entry),
                 layout: None,
@@ -118,7 +144,9 @@ impl Gpu {
                 entry_point: Some(entry),
                 compilation_options: Default::default(),
                 cache: None,
-            })
+            });
+        self.check()?;
+        Ok(pipeline)
     }
 
     /// Copies a storage buffer (made with `COPY_SRC`) back to the CPU, after the work
@@ -149,6 +177,7 @@ impl Gpu {
             .recv()
             .map_err(|e| GpuError::Readback(e.to_string()))?
             .map_err(|e| GpuError::Readback(e.to_string()))?;
+        self.check()?;
         let data = slice
             .get_mapped_range()
             .map_err(|e| GpuError::Readback(e.to_string()))?;
@@ -194,4 +223,25 @@ pub fn adapters() -> Vec<String> {
         .iter()
         .map(|a| describe(&a.get_info()))
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_shader_that_does_not_compile_is_an_error_not_a_panic() {
+        let gpu = match Gpu::new() {
+            Ok(gpu) => gpu,
+            Err(e) => return eprintln!("SKIPPED: no GPU adapter: {e}"),
+        };
+        let Err(err) = gpu.pipeline("broken", &["@compute @workgroup_size(1) fn broken( {"]) else {
+            panic!("a broken shader compiled");
+        };
+        assert!(matches!(err, GpuError::Reported(_)), "{err}");
+        // The error was taken: the device goes on working.
+        assert!(gpu.check().is_ok());
+        gpu.pipeline("fine", &["@compute @workgroup_size(1) fn fine() {}"])
+            .unwrap();
+    }
 }

@@ -277,7 +277,7 @@ impl<'g> Renderer<'g> {
                 include_str!("shaders/path.wgsl"),
                 include_str!("shaders/environment.wgsl"),
             ],
-        );
+        )?;
         let layout = pipeline.get_bind_group_layout(0);
         let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("render"),

@@ -44,7 +44,7 @@ impl<'g> Tracer<'g> {
                 include_str!("shaders/common.wgsl"),
                 include_str!("shaders/trace.wgsl"),
             ],
-        );
+        )?;
         Ok(Self {
             gpu,
             pipeline,
