@@ -279,16 +279,8 @@ impl TreeView for GpuBvh {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::view::tests::boxes;
     use crate::{build, BuildParams, Builder};
-
-    fn boxes(n: usize) -> Vec<Aabb> {
-        (0..n)
-            .map(|i| {
-                let p = Vec3::new((i * 7 % 13) as f32, (i * 5 % 11) as f32, (i % 3) as f32);
-                Aabb::new(p, p + Vec3::splat(0.5 + (i % 4) as f32 * 0.25))
-            })
-            .collect()
-    }
 
     #[test]
     fn the_gpu_layout_validates_and_answers_as_the_binary_tree_does() {

@@ -223,12 +223,13 @@ pub fn boxes_at_levels(view: &dyn TreeView, first: usize, last: usize) -> Vec<(A
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::{build, BuildParams, Builder, Bvh2, BvhWidth, Tree};
     use glam::Vec3;
 
-    fn boxes(n: usize) -> Vec<Aabb> {
+    /// A few hundred overlapping boxes of four sizes, for layout tests.
+    pub(crate) fn boxes(n: usize) -> Vec<Aabb> {
         (0..n)
             .map(|i| {
                 let p = Vec3::new((i * 7 % 13) as f32, (i * 5 % 11) as f32, (i % 3) as f32);

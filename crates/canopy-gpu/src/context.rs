@@ -90,7 +90,8 @@ impl Gpu {
     }
 
     /// A storage buffer holding `bytes` (checked against the binding limits; an empty one
-    /// gets a zeroed element's worth, as bindings cannot be empty), usable also as `extra`.
+    /// gets 256 zero bytes, at least one element of any buffer canopy binds, as bindings
+    /// cannot be empty), usable also as `extra`.
     pub(crate) fn storage(
         &self,
         label: &'static str,
@@ -99,7 +100,7 @@ impl Gpu {
     ) -> Result<wgpu::Buffer, GpuError> {
         use wgpu::util::DeviceExt;
         self.check_size(label, bytes.len() as u64)?;
-        let padding = [0u8; 64];
+        let padding = [0u8; 256];
         let contents = if bytes.is_empty() {
             &padding[..]
         } else {

@@ -113,36 +113,28 @@ struct GpuLight {
     unused: u32,
 }
 
-/// The scene's emitters as the GPU samples them: by power (luminance times area), as
-/// `canopy_render::lights::Lights` does, with each primitive's light index (or `u32::MAX`).
+/// The scene's emitters as the GPU samples them: `canopy_render::lights::Lights`'s,
+/// with their CDF normalised to f32, and each primitive's light index (or `u32::MAX`).
 fn gpu_lights(scene: &Scene) -> (Vec<GpuLight>, Vec<u32>) {
-    let mut table = Vec::new();
+    let lights = canopy_render::lights::Lights::new(scene);
     let mut light_of_prim = vec![u32::MAX; scene.primitives.len()];
-    let mut powers = Vec::new();
-    for (index, primitive) in scene.primitives.iter().enumerate() {
-        let emitted = scene.materials[primitive.material as usize].emitted();
-        let power = canopy_render::sampling::luminance(emitted) * primitive.shape.area();
-        if power.is_finite() && power > 0.0 {
-            light_of_prim[index] = table.len() as u32;
-            table.push(GpuLight {
-                prim: index as u32,
-                pmf: 0.0,
-                cdf_end: 0.0,
+    let Some(choice) = lights.choice() else {
+        return (Vec::new(), light_of_prim);
+    };
+    let table = lights
+        .prims()
+        .iter()
+        .enumerate()
+        .map(|(light, &prim)| {
+            light_of_prim[prim as usize] = light as u32;
+            GpuLight {
+                prim,
+                pmf: choice.pmf(light),
+                cdf_end: (choice.cdf()[light + 1] / choice.total()) as f32,
                 unused: 0,
-            });
-            powers.push(power as f64);
-        }
-    }
-    let total: f64 = powers.iter().sum();
-    let mut running = 0.0;
-    for (light, power) in table.iter_mut().zip(&powers) {
-        running += power;
-        light.pmf = (power / total) as f32;
-        light.cdf_end = (running / total) as f32;
-    }
-    if let Some(last) = table.last_mut() {
-        last.cdf_end = 1.0;
-    }
+            }
+        })
+        .collect();
     (table, light_of_prim)
 }
 
@@ -187,7 +179,11 @@ impl<'g> Renderer<'g> {
         let pixels = width as u64 * height as u64;
         let storage = |label, bytes: &[u8], extra| gpu.storage(label, bytes, extra);
         let none = wgpu::BufferUsages::empty();
-        let nodes = storage("BVH nodes", bytemuck::cast_slice(flat.bvh.nodes()), none)?;
+        let nodes = storage(
+            "BVH nodes",
+            bytemuck::cast_slice(&flat.upload_nodes()),
+            none,
+        )?;
         let indices = storage(
             "primitive indices",
             bytemuck::cast_slice(flat.bvh.prim_indices()),

@@ -3,9 +3,12 @@
 
 use crate::GpuError;
 use bytemuck::{Pod, Zeroable};
-use canopy_bvh::{BuildParams, Builder, Bvh2, GpuBvh, Ray, SahCosts, TreeView};
+use canopy_bvh::{
+    Aabb, BuildParams, Builder, Bvh2, GpuBvh, GpuNode, Ray, SahCosts, TreeView, GPU_EMPTY,
+};
 use canopy_render::geometry::Shape;
 use canopy_render::scene::Primitive;
+use std::borrow::Cow;
 
 /// Deepest tree the GPU traversal's stack of pending nodes can walk.
 pub const MAX_TREE_DEPTH: usize = 64;
@@ -138,6 +141,25 @@ impl GpuScene {
     /// The tree as uploaded (validate it, or walk it with its CPU twin).
     pub fn bvh(&self) -> &GpuBvh {
         &self.bvh
+    }
+
+    /// The nodes to upload: the tree's, or for an empty tree one node with two empty
+    /// slots (a binding cannot be empty), in which the kernels find nothing.
+    pub(crate) fn upload_nodes(&self) -> Cow<'_, [GpuNode]> {
+        if !self.bvh.nodes().is_empty() {
+            return Cow::Borrowed(self.bvh.nodes());
+        }
+        let empty = Aabb::EMPTY;
+        Cow::Owned(vec![GpuNode {
+            left_min: empty.min,
+            left: GPU_EMPTY,
+            left_max: empty.max,
+            left_count: 0,
+            right_min: empty.min,
+            right: GPU_EMPTY,
+            right_max: empty.max,
+            right_count: 0,
+        }])
     }
 
     /// Bytes of the buffers this scene uploads.

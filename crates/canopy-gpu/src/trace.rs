@@ -25,14 +25,12 @@ pub struct Tracer<'g> {
     nodes: wgpu::Buffer,
     prim_indices: wgpu::Buffer,
     primitives: wgpu::Buffer,
-    /// No primitives: every ray misses (the node buffer holds only padding).
-    empty: bool,
 }
 
 impl<'g> Tracer<'g> {
     pub fn new(gpu: &'g Gpu, scene: &GpuScene) -> Result<Self, GpuError> {
         let storage = |label, bytes: &[u8]| gpu.storage(label, bytes, wgpu::BufferUsages::empty());
-        let nodes = storage("BVH nodes", bytemuck::cast_slice(scene.bvh.nodes()))?;
+        let nodes = storage("BVH nodes", bytemuck::cast_slice(&scene.upload_nodes()))?;
         let prim_indices = storage(
             "primitive indices",
             bytemuck::cast_slice(scene.bvh.prim_indices()),
@@ -51,16 +49,12 @@ impl<'g> Tracer<'g> {
             nodes,
             prim_indices,
             primitives,
-            empty: scene.bvh.nodes().is_empty(),
         })
     }
 
     /// The closest hit of each ray (ties to the lower primitive index), in dispatches
     /// of at most a million rays.
     pub fn closest(&self, rays: &[Ray]) -> Result<Vec<Option<Hit>>, GpuError> {
-        if self.empty {
-            return Ok(vec![None; rays.len()]);
-        }
         let per_dispatch = RAYS_PER_DISPATCH
             .min(self.gpu.limits().max_compute_workgroups_per_dimension as usize * 64);
         let mut hits = Vec::with_capacity(rays.len());

@@ -61,6 +61,16 @@ impl Lights {
         self.prims.is_empty()
     }
 
+    /// The primitive of each light, in light order.
+    pub fn prims(&self) -> &[u32] {
+        &self.prims
+    }
+
+    /// The distribution lights are chosen by (their power); `None` without lights.
+    pub fn choice(&self) -> Option<&Distribution1D> {
+        self.choice.as_ref()
+    }
+
     /// Chooses a light and a point on it for light arriving at `reference`; `None` when
     /// there are no lights or the point drawn cannot send light there.
     pub fn sample(&self, scene: &Scene, reference: Vec3, rng: &mut Rng) -> Option<LightSample> {

@@ -214,11 +214,10 @@ fn hit_primitive(index: u32, q: Query, t_max: f32) -> vec3<f32> {
     }
 }
 
-fn closest(r: RayIn) -> HitOut {
+// The closest hit (ties to the lower primitive index), or with `first_ends` the first
+// hit found (for occlusion): the node stack walk both queries share.
+fn walk(r: RayIn, first_ends: bool) -> HitOut {
     var best = HitOut(r.t_max, NO_PRIM, 0.0, 0.0);
-    if (arrayLength(&nodes) == 0u) {
-        return best;
-    }
     let q = make_query(r);
     var stack: array<u32, STACK>;
     var sp = 0u;
@@ -254,6 +253,9 @@ fn closest(r: RayIn) -> HitOut {
                 let h = hit_primitive(prim, q, best.t);
                 if (h.x >= 0.0 && (h.x < best.t || (h.x == best.t && prim < best.prim))) {
                     best = HitOut(h.x, prim, h.y, h.z);
+                    if (first_ends) {
+                        return best;
+                    }
                 }
             }
         }
@@ -286,63 +288,11 @@ fn closest(r: RayIn) -> HitOut {
     return best;
 }
 
-// Whether anything is hit within [t_min, t_max]: the same walk, ending at the first hit.
+fn closest(r: RayIn) -> HitOut {
+    return walk(r, false);
+}
+
+// Whether anything is hit within [t_min, t_max].
 fn occluded(r: RayIn) -> bool {
-    let q = make_query(r);
-    var stack: array<u32, STACK>;
-    var sp = 0u;
-    var node = 0u;
-    loop {
-        let n = nodes[node];
-        var children = array<vec3<u32>, 2>(
-            vec3<u32>(n.left, n.left_count, 0u),
-            vec3<u32>(n.right, n.right_count, 0u),
-        );
-        var entry = array<f32, 2>(INF, INF);
-        for (var i = 0u; i < 2u; i++) {
-            let child = children[i].x;
-            let count = children[i].y;
-            if (count == 0u && child == EMPTY) {
-                continue;
-            }
-            var t = INF;
-            if (i == 0u) {
-                t = slab(n.lmin, n.lmax, q, r.t_max);
-            } else {
-                t = slab(n.rmin, n.rmax, q, r.t_max);
-            }
-            if (t >= INF) {
-                continue;
-            }
-            if (count == 0u) {
-                entry[i] = t;
-                continue;
-            }
-            for (var k = child; k < child + count; k++) {
-                if (hit_primitive(prim_indices[k], q, r.t_max).x >= 0.0) {
-                    return true;
-                }
-            }
-        }
-        let l = entry[0] < INF;
-        let rr = entry[1] < INF;
-        if (l && rr) {
-            if (sp < STACK) {
-                stack[sp] = n.right;
-                sp++;
-            }
-            node = n.left;
-        } else if (l) {
-            node = n.left;
-        } else if (rr) {
-            node = n.right;
-        } else {
-            if (sp == 0u) {
-                return false;
-            }
-            sp--;
-            node = stack[sp];
-        }
-    }
-    return false;
+    return walk(r, true).prim != NO_PRIM;
 }
