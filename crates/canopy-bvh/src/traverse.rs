@@ -4,11 +4,15 @@ use crate::aabb::SlabRay;
 use crate::{Bvh2, Hit, PrimHit, Ray};
 use std::mem::MaybeUninit;
 
+/// Entries a [`TraversalStack`] holds before it spills to the heap.
+const STACK_INLINE: usize = 64;
+
 /// Traversal stack: a fixed array for the common case, spilling to the heap only for
 /// trees deeper than its capacity (degenerate inputs can make very deep trees). The array
-/// is left uninitialised: clearing it would cost more than a short traversal.
+/// is left uninitialised: clearing it would cost more than a short traversal. Spilled
+/// entries sit above a full array, so `pop` looks at the heap only when the array is full.
 pub(crate) struct TraversalStack<T: Copy> {
-    inline: [MaybeUninit<T>; 64],
+    inline: [MaybeUninit<T>; STACK_INLINE],
     len: usize,
     spill: Vec<T>,
 }
@@ -17,7 +21,7 @@ impl<T: Copy> TraversalStack<T> {
     #[inline(always)]
     pub(crate) fn new() -> Self {
         Self {
-            inline: [const { MaybeUninit::uninit() }; 64],
+            inline: [const { MaybeUninit::uninit() }; STACK_INLINE],
             len: 0,
             spill: Vec::new(),
         }
@@ -25,7 +29,7 @@ impl<T: Copy> TraversalStack<T> {
 
     #[inline(always)]
     pub(crate) fn push(&mut self, item: T) {
-        if self.len < self.inline.len() {
+        if self.len < STACK_INLINE {
             self.inline[self.len].write(item);
             self.len += 1;
         } else {
@@ -35,11 +39,13 @@ impl<T: Copy> TraversalStack<T> {
 
     #[inline(always)]
     pub(crate) fn pop(&mut self) -> Option<T> {
-        if let Some(item) = self.spill.pop() {
-            return Some(item);
-        }
         if self.len == 0 {
             return None;
+        }
+        if self.len == STACK_INLINE {
+            if let Some(item) = self.spill.pop() {
+                return Some(item);
+            }
         }
         self.len -= 1;
         // SAFETY: entries below `len` were written by `push` and not yet popped.

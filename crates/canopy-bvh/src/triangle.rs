@@ -29,18 +29,38 @@ impl ShearedRay {
         shear: Vec3::ZERO,
     };
 
+    #[inline]
     pub fn new(ray: &Ray) -> Self {
-        let d = ray.dir;
-        let kz = d.abs().max_position();
-        let (mut kx, mut ky) = ((kz + 1) % 3, (kz + 2) % 3);
-        if d[kz] < 0.0 {
-            std::mem::swap(&mut kx, &mut ky);
-        }
+        let d = ray.dir.to_array();
+        let a = ray.dir.abs();
+        // The first axis of largest magnitude (as `Vec3::max_position`), without indexing.
+        let (kz, dz) = if a.y > a.x {
+            if a.z > a.y {
+                (2, d[2])
+            } else {
+                (1, d[1])
+            }
+        } else if a.z > a.x {
+            (2, d[2])
+        } else {
+            (0, d[0])
+        };
+        // x and y follow z cyclically, swapped when the ray runs down z to keep the winding.
+        let ((kx, dx), (ky, dy)) = match kz {
+            0 => ((1, d[1]), (2, d[2])),
+            1 => ((2, d[2]), (0, d[0])),
+            _ => ((0, d[0]), (1, d[1])),
+        };
+        let ((kx, dx), (ky, dy)) = if dz < 0.0 {
+            ((ky, dy), (kx, dx))
+        } else {
+            ((kx, dx), (ky, dy))
+        };
         Self {
             kx,
             ky,
             kz,
-            shear: Vec3::new(d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]),
+            shear: Vec3::new(dx / dz, dy / dz, 1.0 / dz),
         }
     }
 }

@@ -43,6 +43,42 @@ pub(crate) trait AnyLeaves {
     fn any(&mut self, first: u32, count: u32, ray: &Ray) -> bool;
 }
 
+/// Leaves whose data can be fetched ahead of their test.
+pub(crate) trait PrefetchLeaves {
+    /// Starts loading the leaf of `count` entries at `first` into the cache.
+    #[inline(always)]
+    fn prefetch(&self, _first: u32, _count: u32) {}
+}
+
+/// Starts loading the cache lines of `value` (a hint: no effect on results).
+#[inline(always)]
+pub(crate) fn prefetch<T>(value: &T) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        let p = value as *const T as *const i8;
+        let mut offset = 0;
+        while offset < std::mem::size_of::<T>() {
+            // SAFETY: SSE is baseline x86-64; a prefetch never faults, and the address
+            // lies inside `value`.
+            unsafe {
+                std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>(p.add(offset))
+            };
+            offset += 64;
+        }
+    }
+}
+
+impl<F> PrefetchLeaves for ClosureLeaves<'_, F> {}
+
+impl<T, F> PrefetchLeaves for PackedLeaves<'_, T, F> {
+    #[inline(always)]
+    fn prefetch(&self, first: u32, count: u32) {
+        for pack in leaf_packs(self.packs, first, count) {
+            prefetch(pack);
+        }
+    }
+}
+
 /// Leaves whose primitives are all tested by the caller's closure.
 pub(crate) struct ClosureLeaves<'a, F> {
     pub prims: &'a [u32],
@@ -156,6 +192,22 @@ impl<T: PackKernel, F: FnMut(u32, &Ray) -> bool> AnyLeaves for PackedLeaves<'_, 
     }
 }
 
+/// Starts loading a slot's node or leaf: it goes on the stack, and memory latency, not
+/// arithmetic, bounds incoherent rays, so its loads overlap the work until it is popped.
+#[inline(always)]
+fn prefetch_child<const N: usize, L: PrefetchLeaves>(
+    nodes: &[WideNode<N>],
+    leaves: &L,
+    child: u32,
+    count: u32,
+) {
+    if count == 0 {
+        prefetch(&nodes[child as usize]);
+    } else {
+        leaves.prefetch(child, count);
+    }
+}
+
 /// A stack entry: a slot's `child` and `count` (see [`WideNode`]) and its entry distance.
 type Entry = (u32, u32, f32);
 
@@ -172,7 +224,7 @@ pub(crate) unsafe fn closest<const N: usize, K, L, C>(
 ) -> Option<Hit>
 where
     K: NodeKernel<N>,
-    L: ClosestLeaves,
+    L: ClosestLeaves + PrefetchLeaves,
     C: TraversalCounter,
 {
     let oct = OctRay::new(ray);
@@ -193,11 +245,34 @@ where
             // SAFETY: as above.
             let (mask, t) = unsafe { K::hit_mask(node, &kray, search.ray.t_max) };
             if mask != 0 {
-                // Gather the entered slots, sort them far to near (only those: usually
-                // one to three), push all but the nearest and descend into it.
+                let first = mask.trailing_zeros() as usize;
+                let rest = mask & (mask - 1);
+                if rest == 0 {
+                    // One slot entered (the common case deep in the tree): descend.
+                    (child, count) = (node.child[first], node.count[first]);
+                    continue;
+                }
+                if rest & (rest - 1) == 0 {
+                    // Two: push the farther, descend into the nearer.
+                    let second = rest.trailing_zeros() as usize;
+                    let (near, far) = if t[second] < t[first] {
+                        (second, first)
+                    } else {
+                        (first, second)
+                    };
+                    prefetch_child(nodes, leaves, node.child[far], node.count[far]);
+                    stack.push((node.child[far], node.count[far], t[far]));
+                    (child, count) = (node.child[near], node.count[near]);
+                    continue;
+                }
+                // More: sort the entered slots far to near (insertion sort of a few),
+                // push all but the nearest and descend into it.
                 let mut hits = [(0u32, 0u32, 0f32); N];
                 let mut n = 0;
-                for i in lanes(mask) {
+                let mut lanes = mask;
+                while lanes != 0 {
+                    let i = lanes.trailing_zeros() as usize;
+                    lanes &= lanes - 1;
                     let entry = (node.child[i], node.count[i], t[i]);
                     let mut j = n;
                     while j > 0 && hits[j - 1].2 < entry.2 {
@@ -208,6 +283,7 @@ where
                     n += 1;
                 }
                 for &entry in &hits[..n - 1] {
+                    prefetch_child(nodes, leaves, entry.0, entry.1);
                     stack.push(entry);
                 }
                 (child, count) = (hits[n - 1].0, hits[n - 1].1);
@@ -240,28 +316,41 @@ pub(crate) unsafe fn any<const N: usize, K, L>(
 ) -> bool
 where
     K: NodeKernel<N>,
-    L: AnyLeaves,
+    L: AnyLeaves + PrefetchLeaves,
 {
     let oct = OctRay::new(ray);
     // SAFETY: the caller guarantees the instruction set.
     let kray = unsafe { K::prepare(&oct) };
     let mut stack = TraversalStack::<(u32, u32)>::new();
-    stack.push((0, 0));
-    while let Some((child, count)) = stack.pop() {
+    let (mut child, mut count) = (0u32, 0u32);
+    loop {
         if count > 0 {
             if leaves.any(child, count, ray) {
                 return true;
             }
-            continue;
+        } else {
+            let node = &nodes[child as usize];
+            // SAFETY: as above.
+            let (mask, _) = unsafe { K::hit_mask(node, &kray, ray.t_max) };
+            if mask != 0 {
+                // Descend into the first entered slot, push the others.
+                let first = mask.trailing_zeros() as usize;
+                let mut rest = mask & (mask - 1);
+                while rest != 0 {
+                    let i = rest.trailing_zeros() as usize;
+                    rest &= rest - 1;
+                    prefetch_child(nodes, leaves, node.child[i], node.count[i]);
+                    stack.push((node.child[i], node.count[i]));
+                }
+                (child, count) = (node.child[first], node.count[first]);
+                continue;
+            }
         }
-        let node = &nodes[child as usize];
-        // SAFETY: as above.
-        let (mask, _) = unsafe { K::hit_mask(node, &kray, ray.t_max) };
-        for i in lanes(mask) {
-            stack.push((node.child[i], node.count[i]));
+        match stack.pop() {
+            None => return false,
+            Some(entry) => (child, count) = entry,
         }
     }
-    false
 }
 
 /// A traversal to run with the kernels of one instruction set.
