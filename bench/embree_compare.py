@@ -122,12 +122,15 @@ def embree_run(scene, o, d, query, threads):
     return elapsed, merged
 
 
-def best_of(runs, f):
-    best, out = float("inf"), None
+def best_of(runs, *fs):
+    """Best time and last output of each function, run in turns `runs` times: this
+    machine's speed drifts over seconds, and turns expose every side to the same drift."""
+    best, out = [float("inf")] * len(fs), [None] * len(fs)
     for _ in range(runs):
-        t, out = f()
-        best = min(best, t)
-    return best, out
+        for k, f in enumerate(fs):
+            t, out[k] = f()
+            best[k] = min(best[k], t)
+    return list(zip(best, out))
 
 
 def canopy_run(bvh, o, d, query, threads):
@@ -214,9 +217,12 @@ def main():
         for kind, (o, d) in (("primary", (po, pd)), ("incoherent", (io, idir))):
             for query in ("closest", "occluded"):
                 for threads in (1, 2):
-                    e_s, e_out = best_of(args.runs, lambda: embree_run(scene, o, d, query, threads))
-                    x_s, _ = best_of(args.runs, lambda: embree_run(far, o, d, query, threads))
-                    c_s, c_out = best_of(args.runs, lambda: canopy_run(bvh, o, d, query, threads))
+                    (e_s, e_out), (x_s, _), (c_s, c_out) = best_of(
+                        args.runs,
+                        lambda: embree_run(scene, o, d, query, threads),
+                        lambda: embree_run(far, o, d, query, threads),
+                        lambda: canopy_run(bvh, o, d, query, threads),
+                    )
                     n = len(o)
                     row = {
                         "mesh": name, "rays": kind, "query": query, "threads": threads, "n": n,

@@ -335,39 +335,40 @@ mod sse2 {
                     _mm_or_ps(_mm_cmpgt_ps(u, zero), _mm_cmpgt_ps(v, zero)),
                     _mm_cmpgt_ps(w, zero),
                 );
-                let inside =
-                    _mm_andnot_ps(_mm_and_ps(negative, positive), _mm_cmpeq_ps(zero, zero));
-                let det = _mm_add_ps(_mm_add_ps(u, v), w);
-                let det_ok = _mm_and_ps(
-                    _mm_cmpneq_ps(det, zero),
-                    _mm_cmpeq_ps(_mm_sub_ps(det, det), zero),
-                );
-                let t = _mm_div_ps(
-                    _mm_add_ps(
-                        _mm_add_ps(
-                            _mm_mul_ps(u, _mm_mul_ps(sz, a2)),
-                            _mm_mul_ps(v, _mm_mul_ps(sz, b2)),
-                        ),
-                        _mm_mul_ps(w, _mm_mul_ps(sz, c2)),
-                    ),
-                    det,
-                );
-                let in_range = _mm_and_ps(
-                    _mm_cmpge_ps(t, _mm_set1_ps(t_min)),
-                    _mm_cmple_ps(t, _mm_set1_ps(t_max)),
-                );
-                let ok = _mm_and_ps(_mm_and_ps(inside, det_ok), in_range);
                 let lanes = pack.triangles;
                 let redo = _mm_movemask_ps(any_zero) as u32 & lanes;
-                let mask = _mm_movemask_ps(ok) as u32 & lanes & !redo;
-                let mut hits = PackHits {
-                    mask,
-                    ..PackHits::default()
-                };
-                if mask != 0 {
-                    _mm_storeu_ps(hits.t.as_mut_ptr(), t);
-                    _mm_storeu_ps(hits.u.as_mut_ptr(), _mm_div_ps(v, det));
-                    _mm_storeu_ps(hits.v.as_mut_ptr(), _mm_div_ps(w, det));
+                // Inside: no edge function of each sign (or all zero, sent to `redo`).
+                let straddles = _mm_movemask_ps(_mm_and_ps(negative, positive)) as u32;
+                let inside = lanes & !straddles & !redo;
+                let mut hits = PackHits::default();
+                // Most packs a ray reaches it misses: skip the division unless a lane
+                // is inside all three edges.
+                if inside != 0 {
+                    let det = _mm_add_ps(_mm_add_ps(u, v), w);
+                    let det_ok = _mm_and_ps(
+                        _mm_cmpneq_ps(det, zero),
+                        _mm_cmpeq_ps(_mm_sub_ps(det, det), zero),
+                    );
+                    let t = _mm_div_ps(
+                        _mm_add_ps(
+                            _mm_add_ps(
+                                _mm_mul_ps(u, _mm_mul_ps(sz, a2)),
+                                _mm_mul_ps(v, _mm_mul_ps(sz, b2)),
+                            ),
+                            _mm_mul_ps(w, _mm_mul_ps(sz, c2)),
+                        ),
+                        det,
+                    );
+                    let in_range = _mm_and_ps(
+                        _mm_cmpge_ps(t, _mm_set1_ps(t_min)),
+                        _mm_cmple_ps(t, _mm_set1_ps(t_max)),
+                    );
+                    hits.mask = _mm_movemask_ps(_mm_and_ps(det_ok, in_range)) as u32 & inside;
+                    if hits.mask != 0 {
+                        _mm_storeu_ps(hits.t.as_mut_ptr(), t);
+                        _mm_storeu_ps(hits.u.as_mut_ptr(), _mm_div_ps(v, det));
+                        _mm_storeu_ps(hits.v.as_mut_ptr(), _mm_div_ps(w, det));
+                    }
                 }
                 // Lanes with an exactly-zero edge function go to the scalar core's
                 // f64 fallback.

@@ -8,14 +8,15 @@
 //! libraries agree on the hits and prints `ratio canopy/obvhs <cell>: X.XX` lines from
 //! alternating best-of-7 timings in this process (above 1: canopy is faster).
 //!
-//! canopy: binned SAH with leaves priced in packs of four, collapsed to 8-wide, triangles
-//! packed in the leaves (what the renderer builds for a mesh). obvhs: `build_cwbvh_from_tris` with its `medium_build` preset ("around the
+//! canopy: binned SAH with leaves priced in packs of four and up to two packs a leaf,
+//! collapsed to 8-wide, triangles packed in the leaves (what the renderer builds for a mesh). obvhs: `build_cwbvh_from_tris` with its `medium_build` preset ("around the
 //! same build time as embree but with faster traversal") and its Möller-Trumbore triangle
 //! test, as in its examples.
 
 mod common;
 
-use canopy_bvh::{build, BuildParams, Builder, Bvh8, Ray, PACK_LANES};
+use canopy_bvh::{build, BuildParams, Builder, Bvh8, Ray};
+use canopy_render::accel::packed_params;
 use canopy_render::geometry::Shape;
 use canopy_render::rng::Rng;
 use canopy_render::{load_scene, Scene};
@@ -71,11 +72,8 @@ fn build_canopy(tris: &[[Vec3; 3]]) -> Bvh8 {
         .iter()
         .map(|t| canopy_bvh::Aabb::new(t[0].min(t[1]).min(t[2]), t[0].max(t[1]).max(t[2])))
         .collect();
-    // As the renderer builds a wide tree over triangles: leaves priced in packs.
-    let params = BuildParams {
-        leaf_block: PACK_LANES as u32,
-        ..BuildParams::default()
-    };
+    // As the renderer builds a wide tree over triangles.
+    let params = packed_params(&BuildParams::default());
     let mut bvh8 = Bvh8::from_bvh2(&build(Builder::BinnedSah, &boxes, &params));
     bvh8.pack_triangles(|p| Some(tris[p as usize]));
     bvh8

@@ -1,10 +1,14 @@
-//! Single-thread traversal throughput of a mesh's 8-wide tree (as the renderer builds it),
-//! for every instruction set this CPU has: primary and incoherent rays, closest hit and
-//! occlusion. A quick profiling harness; the benchmarks of record are the criterion
-//! benches and `bench/embree_compare.sh`.
+//! Single-thread traversal throughput of a mesh's 8-wide tree, as the renderer builds it:
+//! primary and incoherent rays, closest hit and occlusion, for every instruction set this
+//! CPU has. With `--leaf a,b,...` it builds one tree per maximum leaf size and times them
+//! in turns (this machine's speed drifts; turns expose every tree to the same drift).
+//! A profiling harness; the benchmarks of record are the criterion benches and
+//! `bench/embree_compare.sh`.
 //!
-//! `cargo run --release -p canopy-render --example ray_speed -- mesh.ply [runs] [isa|all] [primary|incoherent]`
-use canopy_bvh::{build, BuildParams, Builder, Bvh8, Isa, Ray, TraversalStats, PACK_LANES};
+//! `cargo run --release -p canopy-render --example ray_speed -- mesh.ply [--runs N]
+//!  [--isa scalar|sse2|avx2|avx512] [--rays primary|incoherent] [--leaf 4,8]`
+use canopy_bvh::{build, BuildParams, Builder, Bvh8, Isa, Ray, TraversalStats};
+use canopy_render::accel::packed_params;
 use canopy_render::camera::Camera;
 use canopy_render::geometry::Shape;
 use canopy_render::load_scene;
@@ -12,16 +16,44 @@ use canopy_render::rng::Rng;
 use glam::Vec3;
 use std::time::Instant;
 
-fn main() {
+struct Options {
+    mesh: String,
+    runs: usize,
+    isa: Option<Isa>,
+    rays: Option<String>,
+    leaf: Vec<u32>,
+}
+
+fn options() -> Options {
     let mut args = std::env::args().skip(1);
-    let path = args.next().expect("a mesh file");
-    let runs: usize = args.next().map_or(5, |r| r.parse().expect("runs"));
-    let only: Option<Isa> = args
-        .next()
-        .filter(|i| i != "all")
-        .map(|i| i.parse().expect("an instruction set"));
-    let only_kind = args.next();
-    let scene = load_scene(&path).expect("mesh");
+    let mut o = Options {
+        mesh: String::new(),
+        runs: 5,
+        isa: None,
+        rays: None,
+        leaf: vec![packed_params(&BuildParams::default()).max_leaf_size],
+    };
+    while let Some(arg) = args.next() {
+        let mut value = || args.next().expect("a value after each option");
+        match arg.as_str() {
+            "--runs" => o.runs = value().parse().expect("runs"),
+            "--isa" => o.isa = Some(value().parse().expect("an instruction set")),
+            "--rays" => o.rays = Some(value()),
+            "--leaf" => {
+                o.leaf = value()
+                    .split(',')
+                    .map(|l| l.parse().expect("leaf sizes"))
+                    .collect()
+            }
+            _ => o.mesh = arg,
+        }
+    }
+    o
+}
+
+fn main() {
+    let o = options();
+    let scene = load_scene(&o.mesh).expect("mesh");
     let tris: Vec<[Vec3; 3]> = scene
         .primitives
         .iter()
@@ -31,12 +63,19 @@ fn main() {
         })
         .collect();
     let boxes = scene.primitive_bounds();
-    let params = BuildParams {
-        leaf_block: PACK_LANES as u32,
-        ..BuildParams::default()
-    };
-    let mut bvh = Bvh8::from_bvh2(&build(Builder::BinnedSah, &boxes, &params));
-    bvh.pack_triangles(|p| Some(tris[p as usize]));
+    let mut trees: Vec<Bvh8> = o
+        .leaf
+        .iter()
+        .map(|&max_leaf_size| {
+            let params = BuildParams {
+                max_leaf_size,
+                ..packed_params(&BuildParams::default())
+            };
+            let mut bvh = Bvh8::from_bvh2(&build(Builder::BinnedSah, &boxes, &params));
+            bvh.pack_triangles(|p| Some(tris[p as usize]));
+            bvh
+        })
+        .collect();
 
     let side = 1024;
     let camera = Camera::new(&scene.camera, side, side);
@@ -59,7 +98,7 @@ fn main() {
     let mut incoherent: Vec<Ray> = primary
         .iter()
         .filter_map(|ray| {
-            let hit = bvh.intersect(ray, |_, _| None::<f32>)?;
+            let hit = trees[0].intersect(ray, |_, _| None::<f32>)?;
             let [a, b, c] = tris[hit.prim as usize];
             let mut n = (b - a).cross(c - a).normalize_or_zero();
             if n.dot(ray.dir) > 0.0 {
@@ -79,54 +118,65 @@ fn main() {
         let j = (rng.next_f32() * (i + 1) as f32) as usize;
         incoherent.swap(i, j.min(i));
     }
+    let ray_sets = [("primary", &primary), ("incoherent", &incoherent)];
+    let ray_sets: Vec<_> = ray_sets
+        .into_iter()
+        .filter(|(kind, _)| o.rays.as_ref().is_none_or(|k| k == kind))
+        .collect();
 
-    for (kind, rays) in [("primary", &primary), ("incoherent", &incoherent)] {
-        let mut stats = TraversalStats::default();
-        for ray in rays.iter() {
-            bvh.intersect_counted(ray, |_, _| None::<f32>, &mut stats);
+    for (leaf, bvh) in o.leaf.iter().zip(&trees) {
+        let st = bvh.stats(&BuildParams::default().sah);
+        print!("max leaf {leaf}: {} nodes;", st.nodes);
+        for (kind, rays) in &ray_sets {
+            let mut stats = TraversalStats::default();
+            for ray in rays.iter() {
+                bvh.intersect_counted(ray, |_, _| None::<f32>, &mut stats);
+            }
+            let n = rays.len() as f64;
+            print!(
+                " {kind} ({} rays): {:.1} visits, {:.1} triangles per ray;",
+                rays.len(),
+                stats.nodes_visited as f64 / n,
+                stats.primitives_tested as f64 / n
+            );
         }
-        let n = rays.len() as f64;
-        println!(
-            "{kind}: {} rays; per closest-hit ray {:.1} visits (nodes and leaves), {:.1} triangles",
-            rays.len(),
-            stats.nodes_visited as f64 / n,
-            stats.primitives_tested as f64 / n
-        );
+        println!();
     }
     for isa in Isa::supported() {
-        if only.is_some_and(|o| o != isa) {
+        if o.isa.is_some_and(|i| i != isa) {
             continue;
         }
-        bvh.set_isa(isa).unwrap();
-        for (kind, rays) in [("primary", &primary), ("incoherent", &incoherent)] {
-            if only_kind.as_ref().is_some_and(|k| k != kind) {
-                continue;
+        for bvh in &mut trees {
+            bvh.set_isa(isa).unwrap();
+        }
+        for (kind, rays) in &ray_sets {
+            // best[tree][query] over turns.
+            let mut best = vec![[f64::MAX; 2]; trees.len()];
+            for _ in 0..o.runs {
+                for (bvh, best) in trees.iter().zip(&mut best) {
+                    let start = Instant::now();
+                    let hits = rays
+                        .iter()
+                        .filter(|r| bvh.intersect(r, |_, _| None::<f32>).is_some())
+                        .count();
+                    best[0] = best[0].min(start.elapsed().as_secs_f64());
+                    let start = Instant::now();
+                    let blocked = rays
+                        .iter()
+                        .filter(|r| bvh.occluded(r, |_, _| false))
+                        .count();
+                    best[1] = best[1].min(start.elapsed().as_secs_f64());
+                    assert_eq!(hits, blocked, "closest and any hit disagree");
+                }
             }
-            let best = |f: &dyn Fn() -> usize| {
-                (0..runs)
-                    .map(|_| {
-                        let start = Instant::now();
-                        std::hint::black_box(f());
-                        start.elapsed().as_secs_f64()
-                    })
-                    .fold(f64::MAX, f64::min)
-            };
-            let closest = best(&|| {
-                rays.iter()
-                    .filter(|r| bvh.intersect(r, |_, _| None::<f32>).is_some())
-                    .count()
-            });
-            let occluded = best(&|| {
-                rays.iter()
-                    .filter(|r| bvh.occluded(r, |_, _| false))
-                    .count()
-            });
             let n = rays.len() as f64 / 1e6;
-            println!(
-                "{isa:>6} {kind:>10}: closest {:6.2}  occluded {:6.2} Mrays/s",
-                n / closest,
-                n / occluded
-            );
+            for (leaf, best) in o.leaf.iter().zip(&best) {
+                println!(
+                    "{isa:>6} {kind:>10} max leaf {leaf:>2}: closest {:6.2}  occluded {:6.2} Mrays/s",
+                    n / best[0],
+                    n / best[1]
+                );
+            }
         }
     }
 }
