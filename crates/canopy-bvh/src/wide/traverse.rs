@@ -331,18 +331,22 @@ where
         } else {
             let node = &nodes[child as usize];
             // SAFETY: as above.
-            let (mask, _) = unsafe { K::hit_mask(node, &kray, ray.t_max) };
+            let (mask, t) = unsafe { K::hit_mask(node, &kray, ray.t_max) };
             if mask != 0 {
-                // Descend into the first entered slot, push the others.
-                let first = mask.trailing_zeros() as usize;
+                // Descend into the nearest entered slot (where a blocker is likeliest),
+                // push the others.
+                let mut nearest = mask.trailing_zeros() as usize;
                 let mut rest = mask & (mask - 1);
                 while rest != 0 {
-                    let i = rest.trailing_zeros() as usize;
+                    let mut i = rest.trailing_zeros() as usize;
                     rest &= rest - 1;
+                    if t[i] < t[nearest] {
+                        std::mem::swap(&mut i, &mut nearest);
+                    }
                     prefetch_child(nodes, leaves, node.child[i], node.count[i]);
                     stack.push((node.child[i], node.count[i]));
                 }
-                (child, count) = (node.child[first], node.count[first]);
+                (child, count) = (node.child[nearest], node.count[nearest]);
                 continue;
             }
         }
