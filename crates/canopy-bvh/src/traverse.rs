@@ -219,26 +219,22 @@ impl Bvh2 {
                     return true;
                 }
             } else {
+                // Nearer child first, where a blocker is likeliest.
                 let (left, right) = (node.first, node.first + 1);
-                let hit_left =
-                    self.nodes[left as usize].bounds().ray_entry_or_inf(ray) != f32::INFINITY;
-                let hit_right =
-                    self.nodes[right as usize].bounds().ray_entry_or_inf(ray) != f32::INFINITY;
-                match (hit_left, hit_right) {
-                    (true, true) => {
-                        stack.push(right);
-                        node = &self.nodes[left as usize];
-                        continue;
+                let (l, r) = (&self.nodes[left as usize], &self.nodes[right as usize]);
+                let t_left = slab.entry_or_inf(l.min, l.max);
+                let t_right = slab.entry_or_inf(r.min, r.max);
+                let (near, t_near, far, t_far) = if t_left <= t_right {
+                    (left, t_left, right, t_right)
+                } else {
+                    (right, t_right, left, t_left)
+                };
+                if t_near != f32::INFINITY {
+                    if t_far != f32::INFINITY {
+                        stack.push(far);
                     }
-                    (true, false) => {
-                        node = &self.nodes[left as usize];
-                        continue;
-                    }
-                    (false, true) => {
-                        node = &self.nodes[right as usize];
-                        continue;
-                    }
-                    (false, false) => {}
+                    node = &self.nodes[near as usize];
+                    continue;
                 }
             }
             match stack.pop() {
