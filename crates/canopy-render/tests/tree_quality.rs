@@ -60,3 +60,38 @@ fn spatial_splits_lower_the_sah_of_binned_sah_on_the_bunny() {
         "sbvh {a:?}, binned-sah {b:?}"
     );
 }
+
+#[test]
+fn packed_trees_take_two_pack_leaves_only_where_the_caller_left_the_defaults() {
+    use canopy_bvh::{BvhWidth, PACK_LANES};
+    use canopy_render::accel::packed_params;
+    use canopy_render::{Accel, AccelKind};
+
+    let lanes = PACK_LANES as u32;
+    let auto = packed_params(&BuildParams::default());
+    assert_eq!((auto.leaf_block, auto.max_leaf_size), (lanes, 2 * lanes));
+    let chosen = BuildParams {
+        max_leaf_size: 6,
+        leaf_block: 2,
+        ..BuildParams::default()
+    };
+    let kept = packed_params(&chosen);
+    assert_eq!((kept.leaf_block, kept.max_leaf_size), (2, 6));
+
+    // On a mesh, the renderer's 8-wide tree has leaves of more than one pack, none over
+    // two, and every leaf stays valid; a binary tree keeps the default leaf size.
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../scenes/meshes/bunny.ply");
+    let scene = load_scene(path).unwrap();
+    let boxes = scene.primitive_bounds();
+    let kind = AccelKind::Bvh(Builder::BinnedSah);
+    let params = BuildParams::default();
+    let leaf_sizes = |width| {
+        let accel = Accel::build(kind, width, &scene.primitives, &params);
+        let tree = accel.tree().unwrap();
+        tree.validate(&boxes).unwrap();
+        tree.stats(&params.sah).max_leaf_size as u32
+    };
+    let wide = leaf_sizes(BvhWidth::Eight);
+    assert!(wide > lanes && wide <= 2 * lanes, "largest leaf {wide}");
+    assert!(leaf_sizes(BvhWidth::Two) <= params.max_leaf_size);
+}

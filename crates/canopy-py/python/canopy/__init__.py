@@ -117,7 +117,8 @@ class Bvh:
     report's ``agglomerative``, ``ploc``, ``sbvh`` with spatial splits ...; or ``none``, a plain loop over every
     primitive, the reference every tree is tested against); ``width`` is the layout: 2 (binary), 4 or 8
     (SIMD wide nodes with triangles packed in the leaves; the fastest). The other options
-    are the builders' (``max_leaf_size``, the SAH costs, ``ploc_radius``, and
+    are the builders' (``max_leaf_size``: 4 by default, 8 for a 4- or 8-wide tree over
+    triangles, whose leaves hold up to two packs of four; the SAH costs, ``ploc_radius``, and
     ``max_duplication``, the fraction of extra references ``sbvh`` may make); ``optimize=s``
     improves the tree by reinsertion for ``s`` seconds before it is laid out.
     """
