@@ -1,18 +1,19 @@
 //! Single-thread traversal throughput of a mesh's 8-wide tree, as the renderer builds it:
 //! primary and incoherent rays, closest hit and occlusion, for every instruction set this
-//! CPU has. With `--leaf a,b,...` it builds one tree per maximum leaf size and times them
+//! CPU has. With `--leaf a,b,...` and `--builder x,y,...` it builds one tree per builder and
+//! maximum leaf size and times them
 //! in turns (this machine's speed drifts; turns expose every tree to the same drift).
 //! A profiling harness; the benchmarks of record are the criterion benches and
 //! `bench/embree_compare.sh`.
 //!
 //! `cargo run --release -p canopy-render --example ray_speed -- mesh.ply [--runs N]
-//!  [--isa scalar|sse2|avx2|avx512] [--rays primary|incoherent] [--leaf 4,8]`
-use canopy_bvh::{build, BuildParams, Builder, Bvh8, Isa, Ray, TraversalStats};
+//!  [--isa scalar|sse2|avx2|avx512] [--rays primary|incoherent] [--leaf 4,8] [--builder binned-sah,sbvh]`
+use canopy_bvh::{build_with_clipper, BuildParams, Builder, Bvh8, Isa, Ray, TraversalStats};
 use canopy_render::accel::packed_params;
 use canopy_render::camera::Camera;
 use canopy_render::geometry::Shape;
-use canopy_render::load_scene;
 use canopy_render::rng::Rng;
+use canopy_render::{clipper, load_scene};
 use glam::Vec3;
 use std::time::Instant;
 
@@ -22,6 +23,7 @@ struct Options {
     isa: Option<Isa>,
     rays: Option<String>,
     leaf: Vec<u32>,
+    builders: Vec<Builder>,
 }
 
 fn options() -> Options {
@@ -32,6 +34,7 @@ fn options() -> Options {
         isa: None,
         rays: None,
         leaf: vec![packed_params(&BuildParams::default()).max_leaf_size],
+        builders: vec![Builder::BinnedSah],
     };
     while let Some(arg) = args.next() {
         let mut value = || args.next().expect("a value after each option");
@@ -39,6 +42,12 @@ fn options() -> Options {
             "--runs" => o.runs = value().parse().expect("runs"),
             "--isa" => o.isa = Some(value().parse().expect("an instruction set")),
             "--rays" => o.rays = Some(value()),
+            "--builder" => {
+                o.builders = value()
+                    .split(',')
+                    .map(|b| b.parse().expect("builder names"))
+                    .collect()
+            }
             "--leaf" => {
                 o.leaf = value()
                     .split(',')
@@ -63,15 +72,20 @@ fn main() {
         })
         .collect();
     let boxes = scene.primitive_bounds();
-    let mut trees: Vec<Bvh8> = o
-        .leaf
+    let variants: Vec<(Builder, u32)> = o
+        .builders
         .iter()
-        .map(|&max_leaf_size| {
+        .flat_map(|&b| o.leaf.iter().map(move |&l| (b, l)))
+        .collect();
+    let clip = clipper(&scene.primitives);
+    let mut trees: Vec<Bvh8> = variants
+        .iter()
+        .map(|&(builder, max_leaf_size)| {
             let params = BuildParams {
                 max_leaf_size,
                 ..packed_params(&BuildParams::default())
             };
-            let mut bvh = Bvh8::from_bvh2(&build(Builder::BinnedSah, &boxes, &params));
+            let mut bvh = Bvh8::from_bvh2(&build_with_clipper(builder, &boxes, &params, &clip));
             bvh.pack_triangles(|p| Some(tris[p as usize]));
             bvh
         })
@@ -124,9 +138,9 @@ fn main() {
         .filter(|(kind, _)| o.rays.as_ref().is_none_or(|k| k == kind))
         .collect();
 
-    for (leaf, bvh) in o.leaf.iter().zip(&trees) {
+    for ((builder, leaf), bvh) in variants.iter().zip(&trees) {
         let st = bvh.stats(&BuildParams::default().sah);
-        print!("max leaf {leaf}: {} nodes;", st.nodes);
+        print!("{builder} max leaf {leaf}: {} nodes;", st.nodes);
         for (kind, rays) in &ray_sets {
             let mut stats = TraversalStats::default();
             for ray in rays.iter() {
@@ -170,9 +184,9 @@ fn main() {
                 }
             }
             let n = rays.len() as f64 / 1e6;
-            for (leaf, best) in o.leaf.iter().zip(&best) {
+            for ((builder, leaf), best) in variants.iter().zip(&best) {
                 println!(
-                    "{isa:>6} {kind:>10} max leaf {leaf:>2}: closest {:6.2}  occluded {:6.2} Mrays/s",
+                    "{isa:>6} {kind:>10} {builder:>10} max leaf {leaf:>2}: closest {:6.2}  occluded {:6.2} Mrays/s",
                     n / best[0],
                     n / best[1]
                 );
