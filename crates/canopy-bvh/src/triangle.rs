@@ -31,36 +31,23 @@ impl ShearedRay {
 
     #[inline]
     pub fn new(ray: &Ray) -> Self {
+        // x and y follow z cyclically, swapped when the ray runs down z to keep the
+        // winding: `AXES[kz][runs down z]`.
+        const AXES: [[[usize; 2]; 2]; 3] = [[[1, 2], [2, 1]], [[2, 0], [0, 2]], [[0, 1], [1, 0]]];
         let d = ray.dir.to_array();
         let a = ray.dir.abs();
-        // The first axis of largest magnitude (as `Vec3::max_position`), without indexing.
-        let (kz, dz) = if a.y > a.x {
-            if a.z > a.y {
-                (2, d[2])
-            } else {
-                (1, d[1])
-            }
-        } else if a.z > a.x {
-            (2, d[2])
-        } else {
-            (0, d[0])
-        };
-        // x and y follow z cyclically, swapped when the ray runs down z to keep the winding.
-        let ((kx, dx), (ky, dy)) = match kz {
-            0 => ((1, d[1]), (2, d[2])),
-            1 => ((2, d[2]), (0, d[0])),
-            _ => ((0, d[0]), (1, d[1])),
-        };
-        let ((kx, dx), (ky, dy)) = if dz < 0.0 {
-            ((ky, dy), (kx, dx))
-        } else {
-            ((kx, dx), (ky, dy))
-        };
+        // The first axis of largest magnitude (as `Vec3::max_position`), by selects
+        // rather than branches: ray directions are random, branches on them mispredict.
+        let y_wins = a.y > a.x;
+        let largest = if y_wins { a.y } else { a.x };
+        let kz = if a.z > largest { 2 } else { y_wins as usize };
+        let dz = d[kz];
+        let [kx, ky] = AXES[kz][(dz < 0.0) as usize];
         Self {
             kx,
             ky,
             kz,
-            shear: Vec3::new(dx / dz, dy / dz, 1.0 / dz),
+            shear: Vec3::new(d[kx] / dz, d[ky] / dz, 1.0 / dz),
         }
     }
 }

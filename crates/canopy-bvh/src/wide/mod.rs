@@ -12,7 +12,7 @@ mod kernels;
 mod traverse;
 
 use crate::traverse::TraversalCounter;
-use crate::triangle::{PackRay, TrianglePack, NO_PRIM, PACK_LANES};
+use crate::triangle::{TrianglePack, NO_PRIM, PACK_LANES};
 use crate::view::{Child, ChildKind, TreeView};
 use crate::{Aabb, Bvh2, BvhError, Hit, Isa, IsaError, PrimHit, Ray, SahCosts, TreeStats};
 use bytemuck::{Pod, Zeroable};
@@ -465,7 +465,7 @@ where
         } else {
             let mut leaves = PackedLeaves::<T, F> {
                 packs: &bvh.packs,
-                ray: PackRay::new(ray),
+                ray: None,
                 test,
                 kernel: PhantomData,
             };
@@ -496,7 +496,7 @@ impl<const N: usize, F: FnMut(u32, &Ray) -> bool> Query<N> for AnyQuery<'_, N, F
         } else {
             let mut leaves = PackedLeaves::<T, F> {
                 packs: &bvh.packs,
-                ray: PackRay::new(ray),
+                ray: None,
                 test,
                 kernel: PhantomData,
             };

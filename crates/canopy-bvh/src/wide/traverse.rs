@@ -116,9 +116,18 @@ impl<F: FnMut(u32, &Ray) -> bool> AnyLeaves for ClosureLeaves<'_, F> {
 /// by the caller's closure.
 pub(crate) struct PackedLeaves<'a, T, F> {
     pub packs: &'a [TrianglePack],
-    pub ray: PackRay,
+    /// The ray prepared for pack tests, made at the first leaf: a ray that misses every
+    /// leaf (most rays past a mesh's silhouette) never pays for it.
+    pub ray: Option<PackRay>,
     pub test: F,
     pub kernel: PhantomData<T>,
+}
+
+impl<T, F> PackedLeaves<'_, T, F> {
+    #[inline(always)]
+    fn pack_ray(&mut self, ray: &Ray) -> PackRay {
+        *self.ray.get_or_insert_with(|| PackRay::new(ray))
+    }
 }
 
 /// The packs holding `count` leaf entries from position `first` (leaves start on a pack).
@@ -147,13 +156,14 @@ where
 {
     #[inline(always)]
     fn closest<C: TraversalCounter>(&mut self, first: u32, count: u32, s: &mut Closest, c: &mut C) {
+        let pack_ray = self.pack_ray(&s.ray);
         for pack in leaf_packs(self.packs, first, count) {
             if pack.triangles != 0 {
                 for _ in 0..pack.triangles.count_ones() {
                     c.test_primitive();
                 }
                 // SAFETY: `dispatch` runs this only where `T`'s instruction set exists.
-                let hits = unsafe { T::test(pack, &self.ray, s.ray.t_min, s.ray.t_max) };
+                let hits = unsafe { T::test(pack, &pack_ray, s.ray.t_min, s.ray.t_max) };
                 for lane in lanes(hits.mask) {
                     let hit = PrimHit {
                         t: hits.t[lane],
@@ -177,10 +187,11 @@ where
 impl<T: PackKernel, F: FnMut(u32, &Ray) -> bool> AnyLeaves for PackedLeaves<'_, T, F> {
     #[inline(always)]
     fn any(&mut self, first: u32, count: u32, ray: &Ray) -> bool {
+        let pack_ray = self.pack_ray(ray);
         for pack in leaf_packs(self.packs, first, count) {
             // SAFETY: as above.
             if pack.triangles != 0
-                && unsafe { T::test(pack, &self.ray, ray.t_min, ray.t_max) }.mask != 0
+                && unsafe { T::test(pack, &pack_ray, ray.t_min, ray.t_max) }.mask != 0
             {
                 return true;
             }
