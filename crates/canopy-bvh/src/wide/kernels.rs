@@ -20,8 +20,10 @@ pub struct OctRay {
     pub o: [f32; 3],
     pub inv: [f32; 3],
     /// Index into [`WideNode::bounds`] of the near plane of each axis (min or max).
-    pub near: [usize; 3],
-    pub far: [usize; 3],
+    /// Always below 6: the SIMD kernels index planes with it unchecked.
+    near: [usize; 3],
+    /// The far plane of each axis, likewise below 6.
+    far: [usize; 3],
     pub t_min: f32,
 }
 
@@ -29,14 +31,24 @@ impl OctRay {
     #[inline(always)]
     pub fn new(ray: &Ray) -> Self {
         let inv = ray.inv_dir.to_array();
-        let near = [0, 1, 2].map(|a| if inv[a].is_sign_negative() { a + 3 } else { a });
+        // A ray running down an axis meets its max plane first.
+        let down = [0, 1, 2].map(|a| inv[a].is_sign_negative() as usize);
         Self {
             o: ray.origin.to_array(),
             inv,
-            near,
-            far: near.map(|p| (p + 3) % 6),
+            near: [0, 1, 2].map(|a| a + 3 * down[a]),
+            far: [0, 1, 2].map(|a| a + 3 - 3 * down[a]),
             t_min: ray.t_min,
         }
+    }
+
+    /// A pointer to plane `near[axis]` (or `far[axis]`) of `bounds`, in range by the
+    /// invariant above.
+    #[inline(always)]
+    fn plane<const N: usize>(bounds: &[[f32; N]; 6], index: usize) -> *const f32 {
+        debug_assert!(index < 6);
+        // SAFETY: `index < 6` (the fields' invariant), so the pointer is in `bounds`.
+        unsafe { bounds.as_ptr().add(index).cast::<f32>() }
     }
 }
 
@@ -119,7 +131,7 @@ mod x86 {
             // SAFETY: SSE2 is baseline; `offset + 4 <= N` and the lanes are 16-aligned
             // because nodes are 64-aligned and planes are multiples of 16 bytes.
             unsafe {
-                let plane = |p: usize| _mm_load_ps(b[p].as_ptr().add(offset));
+                let plane = |p: usize| _mm_load_ps(OctRay::plane(b, p).add(offset));
                 let near = |a: usize| _mm_mul_ps(_mm_sub_ps(plane(r.near[a]), r.o[a]), r.inv[a]);
                 let far = |a: usize| _mm_mul_ps(_mm_sub_ps(plane(r.far[a]), r.o[a]), r.inv[a]);
                 let enter = _mm_max_ps(_mm_max_ps(near(0), near(1)), _mm_max_ps(near(2), r.t_min));
@@ -207,7 +219,7 @@ mod x86 {
         // 64-aligned, planes 32 bytes).
         unsafe {
             let b = &node.bounds;
-            let plane = |p: usize| _mm256_load_ps(b[p].as_ptr());
+            let plane = |p: usize| _mm256_load_ps(OctRay::plane(b, p));
             let near = |a: usize| _mm256_mul_ps(_mm256_sub_ps(plane(r.near[a]), r.o[a]), r.inv[a]);
             let far = |a: usize| _mm256_mul_ps(_mm256_sub_ps(plane(r.far[a]), r.o[a]), r.inv[a]);
             let enter = _mm256_max_ps(
