@@ -23,6 +23,11 @@ use traverse::{closest, ClosureLeaves, PackedLeaves, Query};
 
 pub(crate) use traverse::Dispatch;
 
+/// Trees whose nodes and packs take more bytes than this are traversed with prefetches of
+/// stacked children: about the size of a core's L2 cache, past which incoherent rays wait
+/// on memory. Smaller trees stay in the cache, where prefetches only cost instructions.
+pub const PREFETCH_ABOVE_BYTES: usize = 1 << 20;
+
 /// `count` of a slot that holds nothing; its box is [`Aabb::EMPTY`].
 pub const EMPTY_SLOT: u32 = u32::MAX;
 
@@ -155,6 +160,13 @@ impl<const N: usize> BvhN<N> {
 }
 
 impl<const N: usize> BvhN<N> {
+    /// Whether traversal prefetches stacked children ([`PREFETCH_ABOVE_BYTES`]).
+    #[inline(always)]
+    fn prefetches(&self) -> bool {
+        std::mem::size_of_val(self.nodes.as_slice()) + std::mem::size_of_val(self.packs.as_slice())
+            > PREFETCH_ABOVE_BYTES
+    }
+
     /// Collapses a binary tree; the primitive order is kept. Traversal uses the best
     /// instruction set of this CPU.
     pub fn from_bvh2(bvh: &Bvh2) -> Self {
@@ -461,7 +473,9 @@ where
                 prims: &bvh.prim_indices,
                 test,
             };
-            unsafe { closest::<N, K, _, _>(&bvh.nodes, ray, &mut leaves, counter) }
+            unsafe {
+                closest::<N, K, _, _>(&bvh.nodes, ray, &mut leaves, counter, bvh.prefetches())
+            }
         } else {
             let mut leaves = PackedLeaves::<T, F> {
                 packs: &bvh.packs,
@@ -469,7 +483,9 @@ where
                 test,
                 kernel: PhantomData,
             };
-            unsafe { closest::<N, K, _, _>(&bvh.nodes, ray, &mut leaves, counter) }
+            unsafe {
+                closest::<N, K, _, _>(&bvh.nodes, ray, &mut leaves, counter, bvh.prefetches())
+            }
         }
     }
 }
@@ -492,7 +508,7 @@ impl<const N: usize, F: FnMut(u32, &Ray) -> bool> Query<N> for AnyQuery<'_, N, F
                 prims: &bvh.prim_indices,
                 test,
             };
-            unsafe { traverse::any::<N, K, _>(&bvh.nodes, ray, &mut leaves) }
+            unsafe { traverse::any::<N, K, _>(&bvh.nodes, ray, &mut leaves, bvh.prefetches()) }
         } else {
             let mut leaves = PackedLeaves::<T, F> {
                 packs: &bvh.packs,
@@ -500,7 +516,7 @@ impl<const N: usize, F: FnMut(u32, &Ray) -> bool> Query<N> for AnyQuery<'_, N, F
                 test,
                 kernel: PhantomData,
             };
-            unsafe { traverse::any::<N, K, _>(&bvh.nodes, ray, &mut leaves) }
+            unsafe { traverse::any::<N, K, _>(&bvh.nodes, ray, &mut leaves, bvh.prefetches()) }
         }
     }
 }

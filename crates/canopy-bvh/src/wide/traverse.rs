@@ -204,7 +204,8 @@ impl<T: PackKernel, F: FnMut(u32, &Ray) -> bool> AnyLeaves for PackedLeaves<'_, 
 }
 
 /// Starts loading a slot's node or leaf: it goes on the stack, and memory latency, not
-/// arithmetic, bounds incoherent rays, so its loads overlap the work until it is popped.
+/// arithmetic, bounds incoherent rays in a large tree, so its loads overlap the work
+/// until it is popped. Trees that stay in the cache skip it (see `BvhN::prefetches`).
 #[inline(always)]
 fn prefetch_child<const N: usize, L: PrefetchLeaves>(
     nodes: &[WideNode<N>],
@@ -232,6 +233,7 @@ pub(crate) unsafe fn closest<const N: usize, K, L, C>(
     ray: &Ray,
     leaves: &mut L,
     counter: &mut C,
+    prefetch: bool,
 ) -> Option<Hit>
 where
     K: NodeKernel<N>,
@@ -271,7 +273,9 @@ where
                     } else {
                         (first, second)
                     };
-                    prefetch_child(nodes, leaves, node.child[far], node.count[far]);
+                    if prefetch {
+                        prefetch_child(nodes, leaves, node.child[far], node.count[far]);
+                    }
                     stack.push((node.child[far], node.count[far], t[far]));
                     (child, count) = (node.child[near], node.count[near]);
                     continue;
@@ -294,7 +298,9 @@ where
                     n += 1;
                 }
                 for &entry in &hits[..n - 1] {
-                    prefetch_child(nodes, leaves, entry.0, entry.1);
+                    if prefetch {
+                        prefetch_child(nodes, leaves, entry.0, entry.1);
+                    }
                     stack.push(entry);
                 }
                 (child, count) = (hits[n - 1].0, hits[n - 1].1);
@@ -324,6 +330,7 @@ pub(crate) unsafe fn any<const N: usize, K, L>(
     nodes: &[WideNode<N>],
     ray: &Ray,
     leaves: &mut L,
+    prefetch: bool,
 ) -> bool
 where
     K: NodeKernel<N>,
@@ -354,7 +361,9 @@ where
                     if t[i] < t[nearest] {
                         std::mem::swap(&mut i, &mut nearest);
                     }
-                    prefetch_child(nodes, leaves, node.child[i], node.count[i]);
+                    if prefetch {
+                        prefetch_child(nodes, leaves, node.child[i], node.count[i]);
+                    }
                     stack.push((node.child[i], node.count[i]));
                 }
                 (child, count) = (node.child[nearest], node.count[nearest]);
