@@ -51,4 +51,4 @@ pub use stats::TreeStats;
 pub use traverse::{TraversalCounter, TraversalStats};
 pub use triangle::{intersect_triangle, ShearedRay, TrianglePack, NO_PRIM, PACK_LANES};
 pub use view::TreeView;
-pub use wide::{Bvh4, Bvh8, BvhN, WideNode, EMPTY_SLOT};
+pub use wide::{Bvh4, Bvh8, BvhN, WideNode, EMPTY_SLOT, PREFETCH_ABOVE_BYTES};

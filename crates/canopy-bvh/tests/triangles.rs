@@ -5,7 +5,7 @@
 
 use canopy_bvh::{
     build, build_with_clipper, intersect_triangle, split_box, split_triangle, Aabb, BuildParams,
-    Builder, Bvh4, Bvh8, BvhN, Hit, Isa, PrimHit, Ray, ShearedRay,
+    Builder, Bvh4, Bvh8, BvhN, Hit, Isa, PrimHit, Ray, ShearedRay, TreeView, PREFETCH_ABOVE_BYTES,
 };
 use glam::Vec3;
 use proptest::prelude::*;
@@ -264,7 +264,8 @@ fn clipped_slivers_match_brute_force_in_every_kernel() {
 }
 
 /// Parallel subtree splicing happens above a few thousand primitives: a validated build of
-/// 20,000 triangles from every parallel builder, packed, against brute force on a sample.
+/// 20,000 triangles from every parallel builder, packed, against brute force on a sample
+/// (a tree large enough to be traversed with prefetches).
 #[test]
 fn large_builds_validate_and_match_brute_force() {
     let mut state = 12345u32;
@@ -299,6 +300,13 @@ fn large_builds_validate_and_match_brute_force() {
         let bvh = build(builder, &boxes, &BuildParams::default());
         bvh.validate(&boxes)
             .unwrap_or_else(|e| panic!("{builder}: {e}"));
+        // Large enough that traversal prefetches stacked children.
+        let mut packed = Bvh8::from_bvh2(&bvh);
+        packed.pack_triangles(|p| match &prims[p as usize] {
+            Prim::Triangle(v) => Some(*v),
+            Prim::Box(_) => None,
+        });
+        assert!(TreeView::memory_bytes(&packed) > 2 * PREFETCH_ABOVE_BYTES);
         check_tree(
             &format!("{builder} x8"),
             Bvh8::from_bvh2(&bvh),
