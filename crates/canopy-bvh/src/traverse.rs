@@ -1,7 +1,7 @@
 //! Closest-hit and any-hit traversal of a [`Bvh2`], generic over the primitive test.
 
 use crate::aabb::SlabRay;
-use crate::{Bvh2, Hit, PrimHit, Ray};
+use crate::{Bvh2, Bvh2Node, Hit, PrimHit, Ray};
 use std::mem::MaybeUninit;
 
 /// Entries a [`TraversalStack`] holds before it spills to the heap.
@@ -168,15 +168,7 @@ impl Bvh2 {
             if node.is_leaf() {
                 search.test_leaf(self.leaf_prims(node), &mut hit_prim, counter);
             } else {
-                let (left, right) = (node.first, node.first + 1);
-                let (l, r) = (&self.nodes[left as usize], &self.nodes[right as usize]);
-                let t_left = search.slab.entry_or_inf(l.min, l.max);
-                let t_right = search.slab.entry_or_inf(r.min, r.max);
-                let (near, t_near, far, t_far) = if t_left <= t_right {
-                    (left, t_left, right, t_right)
-                } else {
-                    (right, t_right, left, t_left)
-                };
+                let [(near, t_near), (far, t_far)] = self.children_near_first(node, &search.slab);
                 if t_near != f32::INFINITY {
                     if t_far != f32::INFINITY {
                         stack.push((far, t_far));
@@ -196,6 +188,21 @@ impl Bvh2 {
                     Some(_) => {}
                 }
             }
+        }
+    }
+
+    /// The two children of interior `node`, nearer first, each with the ray's entry
+    /// distance (infinity where the ray misses its box).
+    #[inline(always)]
+    fn children_near_first(&self, node: &Bvh2Node, slab: &SlabRay) -> [(u32, f32); 2] {
+        let (left, right) = (node.first, node.first + 1);
+        let (l, r) = (&self.nodes[left as usize], &self.nodes[right as usize]);
+        let t_left = slab.entry_or_inf(l.min, l.max);
+        let t_right = slab.entry_or_inf(r.min, r.max);
+        if t_left <= t_right {
+            [(left, t_left), (right, t_right)]
+        } else {
+            [(right, t_right), (left, t_left)]
         }
     }
 
@@ -220,15 +227,7 @@ impl Bvh2 {
                 }
             } else {
                 // Nearer child first, where a blocker is likeliest.
-                let (left, right) = (node.first, node.first + 1);
-                let (l, r) = (&self.nodes[left as usize], &self.nodes[right as usize]);
-                let t_left = slab.entry_or_inf(l.min, l.max);
-                let t_right = slab.entry_or_inf(r.min, r.max);
-                let (near, t_near, far, t_far) = if t_left <= t_right {
-                    (left, t_left, right, t_right)
-                } else {
-                    (right, t_right, left, t_left)
-                };
+                let [(near, t_near), (far, t_far)] = self.children_near_first(node, &slab);
                 if t_near != f32::INFINITY {
                     if t_far != f32::INFINITY {
                         stack.push(far);
