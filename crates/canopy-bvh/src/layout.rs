@@ -86,7 +86,7 @@ impl Tree {
 
     /// Packs the leaves' triangles for the SIMD triangle kernel (wide layouts; the binary
     /// tree tests every primitive through the closure). See [`BvhN::pack_triangles`].
-    pub fn pack_triangles(&mut self, triangle: impl Fn(u32) -> Option<[Vec3; 3]>) {
+    pub fn pack_triangles(&mut self, triangle: impl Fn(u32) -> Option<[Vec3; 3]> + Sync) {
         match self {
             Tree::Binary(_) | Tree::Gpu(_) => {}
             Tree::Four(t) => t.pack_triangles(triangle),

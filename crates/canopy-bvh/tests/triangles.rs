@@ -263,9 +263,10 @@ fn clipped_slivers_match_brute_force_in_every_kernel() {
     check(&prims, &rays, &params);
 }
 
-/// Parallel subtree splicing happens above a few thousand primitives: a validated build of
-/// 20,000 triangles from every parallel builder, packed, against brute force on a sample
-/// (a tree large enough to be traversed with prefetches).
+/// Parallel subtree building happens above a few thousand primitives, parallel binning
+/// above 32,768: a validated build of 40,000 triangles from every parallel builder,
+/// packed, against brute force on a sample (a tree large enough to be traversed with
+/// prefetches).
 #[test]
 fn large_builds_validate_and_match_brute_force() {
     let mut state = 12345u32;
@@ -276,7 +277,7 @@ fn large_builds_validate_and_match_brute_force() {
         state as f32 / u32::MAX as f32
     };
     let mut point = || Vec3::new(next(), next(), next()) * 100.0;
-    let prims: Vec<Prim> = (0..20_000)
+    let prims: Vec<Prim> = (0..40_000)
         .map(|_| {
             let a = point();
             let e = Vec3::new(1.0, 0.5, 0.25);

@@ -7,6 +7,7 @@ use canopy_bvh::{
     build_with_clipper, split_box, split_triangle, Aabb, BuildParams, Builder, BvhWidth, Clipper,
     Hit, OptimizeBudget, Ray, TraversalCounter, TraversalStats, Tree, PACK_LANES,
 };
+use rayon::prelude::*;
 use std::fmt;
 use std::str::FromStr;
 use std::time::{Duration, Instant};
@@ -134,10 +135,10 @@ impl Accel {
                 build_time: start.elapsed(),
             };
         };
-        let boxes: Vec<_> = primitives.iter().map(|p| p.shape.bounds()).collect();
+        let boxes: Vec<_> = primitives.par_iter().map(|p| p.shape.bounds()).collect();
         let packed = width != BvhWidth::Two
             && primitives
-                .iter()
+                .par_iter()
                 .all(|p| matches!(p.shape, Shape::Triangle(_)));
         let params = if packed {
             packed_params(params)

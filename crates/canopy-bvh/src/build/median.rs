@@ -8,9 +8,13 @@ use super::top_down::{self, Cut, Splitter};
 use crate::{Aabb, BuildParams, Bvh2};
 
 /// Halves every node that holds more primitives than a leaf may.
-struct MedianSplit;
+struct MedianSplit<'a> {
+    boxes: &'a [Aabb],
+}
 
-impl Splitter for MedianSplit {
+impl Splitter for MedianSplit<'_> {
+    type Item = u32;
+
     fn split(
         &self,
         prims: &mut [u32],
@@ -19,6 +23,14 @@ impl Splitter for MedianSplit {
         must_split: bool,
     ) -> Option<Cut> {
         must_split.then_some(Cut::at(prims.len() / 2))
+    }
+
+    fn bounds(&self, prims: &[u32]) -> Aabb {
+        top_down::bounds_of(self.boxes, prims)
+    }
+
+    fn prim(item: &u32) -> u32 {
+        *item
     }
 }
 
@@ -32,11 +44,11 @@ pub(crate) fn build_sort_axis(boxes: &[Aabb], params: &BuildParams, axis: usize)
         );
         ca.total_cmp(&cb).then(a.cmp(&b))
     });
-    top_down::build_with_order(boxes, params, &MedianSplit, order)
+    top_down::build(params, &MedianSplit { boxes }, order)
 }
 
 /// Sorted by Morton code of the centroid, split at the median.
 pub(crate) fn build_morton_median(boxes: &[Aabb], params: &BuildParams) -> Bvh2 {
     let order = morton_order(&morton_codes(boxes));
-    top_down::build_with_order(boxes, params, &MedianSplit, order)
+    top_down::build(params, &MedianSplit { boxes }, order)
 }

@@ -12,7 +12,7 @@ pub(crate) fn build(boxes: &[Aabb], params: &BuildParams) -> Bvh2 {
         centroids: boxes.iter().map(Aabb::center).collect(),
         params,
     };
-    top_down::build(boxes, params, &splitter)
+    top_down::build(params, &splitter, (0..boxes.len() as u32).collect())
 }
 
 struct SweepSah<'a> {
@@ -22,6 +22,16 @@ struct SweepSah<'a> {
 }
 
 impl Splitter for SweepSah<'_> {
+    type Item = u32;
+
+    fn bounds(&self, prims: &[u32]) -> Aabb {
+        top_down::bounds_of(self.boxes, prims)
+    }
+
+    fn prim(item: &u32) -> u32 {
+        *item
+    }
+
     fn split(
         &self,
         prims: &mut [u32],
@@ -30,7 +40,9 @@ impl Splitter for SweepSah<'_> {
         must_split: bool,
     ) -> Option<Cut> {
         let n = prims.len();
-        if n < 2 {
+        let leaf_cost = self.params.leaf_tests(n) * self.params.sah.intersection;
+        // No split costs less than its traversal: then the leaf wins before sorting.
+        if n < 2 || (!must_split && self.params.sah.traversal >= leaf_cost) {
             return None;
         }
         let inv_area = 1.0 / bounds.surface_area().max(f32::MIN_POSITIVE);
@@ -72,7 +84,6 @@ impl Splitter for SweepSah<'_> {
             }
         }
         let (cost, mid, sorted) = best?;
-        let leaf_cost = self.params.leaf_tests(n) * sah.intersection;
         (cost < leaf_cost || must_split).then(|| {
             prims.copy_from_slice(&sorted);
             Cut::at(mid)

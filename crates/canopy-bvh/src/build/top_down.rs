@@ -1,11 +1,15 @@
 //! The driver shared by top-down builders: a splitter decides how to cut one node's
-//! primitives, the driver makes leaves, enforces the leaf size and lays out nodes.
+//! primitives, the driver makes leaves, enforces the leaf size and lays out nodes. The
+//! splitter chooses what it reorders ([`Splitter::Item`]): primitive indices, or records
+//! that carry each primitive's box so that its passes over a node read memory in order.
 //!
 //! Subtrees whose two halves are both large are built in parallel (rayon) into their own
-//! node arrays and spliced together; everything else is built serially from an explicit
-//! work list, so even a degenerate, very deep tree cannot overflow the call stack.
+//! node arrays, which are copied into one array once, at the end; everything else is built
+//! serially from an explicit work list, so even a degenerate, very deep tree cannot
+//! overflow the call stack.
 
 use crate::{Aabb, BuildParams, Bvh2, Bvh2Node};
+use rayon::prelude::*;
 
 /// Below this many primitives on either side, a subtree is built on one thread.
 const PARALLEL_THRESHOLD: usize = 4096;
@@ -16,13 +20,29 @@ const PARALLEL_THRESHOLD: usize = 4096;
 /// declines or returns an empty side. `centroids` is the box of the primitives'
 /// centroids when the parent's cut reported it (saving the splitter a pass).
 pub(crate) trait Splitter: Sync {
+    /// What stands for a primitive in the arrays the splitter reorders.
+    type Item: Copy + Send + Sync;
+
     fn split(
         &self,
-        prims: &mut [u32],
+        prims: &mut [Self::Item],
         bounds: Aabb,
         centroids: Option<Aabb>,
         must_split: bool,
     ) -> Option<Cut>;
+
+    /// The box around `prims`.
+    fn bounds(&self, prims: &[Self::Item]) -> Aabb;
+
+    /// The primitive an item stands for.
+    fn prim(item: &Self::Item) -> u32;
+}
+
+/// [`Splitter::bounds`] of primitive indices into `boxes`.
+pub(crate) fn bounds_of(boxes: &[Aabb], prims: &[u32]) -> Aabb {
+    prims
+        .iter()
+        .fold(Aabb::EMPTY, |b, &p| b.union(boxes[p as usize]))
 }
 
 /// Where a node is cut.
@@ -55,44 +75,96 @@ struct Known {
     centroids: Option<Aabb>,
 }
 
-pub(crate) fn build(boxes: &[Aabb], params: &BuildParams, splitter: &impl Splitter) -> Bvh2 {
-    build_with_order(boxes, params, splitter, (0..boxes.len() as u32).collect())
-}
-
-/// As [`build`], starting from a given primitive order (for builders that sort first).
-pub(crate) fn build_with_order(
-    boxes: &[Aabb],
+/// Builds the tree over `items`, one per primitive, in the order the leaves will list
+/// them once the splitter has reordered them.
+pub(crate) fn build<S: Splitter>(
     params: &BuildParams,
-    splitter: &impl Splitter,
-    mut prim_indices: Vec<u32>,
+    splitter: &S,
+    mut items: Vec<S::Item>,
 ) -> Bvh2 {
-    if boxes.is_empty() {
+    if items.is_empty() {
         return Bvh2::default();
     }
     let driver = Driver {
-        boxes,
         max_leaf: params.max_leaf_size as usize,
         splitter,
     };
-    let nodes = driver.subtree(&mut prim_indices, 0, None);
-    Bvh2::from_parts(nodes, prim_indices)
+    let part = driver.subtree(&mut items, 0, None);
+    let mut nodes = Vec::with_capacity(part.nodes());
+    nodes.push(part.root());
+    part.append_below(0, &mut nodes);
+    Bvh2::from_parts(nodes, items.par_iter().map(S::prim).collect())
+}
+
+/// A subtree as the parallel recursion returns it: built on one thread, or two parts
+/// joined under a root.
+enum Part {
+    Serial(Vec<Bvh2Node>),
+    Joined {
+        bounds: Aabb,
+        nodes: usize,
+        children: Box<(Part, Part)>,
+    },
+}
+
+impl Part {
+    fn nodes(&self) -> usize {
+        match self {
+            Part::Serial(nodes) => nodes.len(),
+            Part::Joined { nodes, .. } => *nodes,
+        }
+    }
+
+    /// The root node as it stands before its children are placed.
+    fn root(&self) -> Bvh2Node {
+        match self {
+            Part::Serial(nodes) => nodes[0],
+            Part::Joined { bounds, .. } => Bvh2Node::interior(*bounds, 0),
+        }
+    }
+
+    /// Appends the nodes below the root to `out`, whose node `at` is this part's root,
+    /// and points that root at its children. Siblings stay side by side, as in
+    /// [`splice`]: a serial part keeps its own order, shifted.
+    fn append_below(self, at: usize, out: &mut Vec<Bvh2Node>) {
+        match self {
+            Part::Serial(nodes) => {
+                if nodes[0].is_leaf() {
+                    return;
+                }
+                // Node i >= 1 of the part lands at base + i - 1.
+                let base = out.len() as u32;
+                let place = |node: Bvh2Node| match node.is_leaf() {
+                    true => node,
+                    false => Bvh2Node {
+                        first: base + node.first - 1,
+                        ..node
+                    },
+                };
+                out[at] = place(nodes[0]);
+                out.extend(nodes[1..].iter().map(|&n| place(n)));
+            }
+            Part::Joined { children, .. } => {
+                let (left, right) = *children;
+                let first = out.len();
+                out[at].first = first as u32;
+                out.push(left.root());
+                out.push(right.root());
+                left.append_below(first, out);
+                right.append_below(first + 1, out);
+            }
+        }
+    }
 }
 
 struct Driver<'a, S> {
-    boxes: &'a [Aabb],
     max_leaf: usize,
     splitter: &'a S,
 }
 
 impl<S: Splitter> Driver<'_, S> {
-    fn bounds(&self, prims: &[u32]) -> Aabb {
-        prims
-            .iter()
-            .fold(Aabb::EMPTY, |b, &p| b.union(self.boxes[p as usize]))
-    }
-
     /// Where to cut `prims`, or `None` for a leaf.
-    fn cut(&self, prims: &mut [u32], known: Known) -> Option<Cut> {
+    fn cut(&self, prims: &mut [S::Item], known: Known) -> Option<Cut> {
         let count = prims.len();
         let must_split = count > self.max_leaf;
         match self
@@ -107,10 +179,10 @@ impl<S: Splitter> Driver<'_, S> {
 
     /// What is known of the children of `cut`: the splitter's bounds or computed ones,
     /// and the splitter's centroid bounds if it has them.
-    fn children(&self, prims: &[u32], cut: &Cut) -> (Known, Known) {
+    fn children(&self, prims: &[S::Item], cut: &Cut) -> (Known, Known) {
         let (left, right) = cut.bounds.unwrap_or_else(|| {
             let (left, right) = prims.split_at(cut.mid);
-            (self.bounds(left), self.bounds(right))
+            (self.splitter.bounds(left), self.splitter.bounds(right))
         });
         let (left_centroids, right_centroids) = match cut.centroids {
             Some((l, r)) => (Some(l), Some(r)),
@@ -130,9 +202,9 @@ impl<S: Splitter> Driver<'_, S> {
 
     /// Nodes of the subtree over `prims` (which start at `first` in the final index
     /// array), root first. `known` is what the caller knows of the subtree's root.
-    fn subtree(&self, prims: &mut [u32], first: usize, known: Option<Known>) -> Vec<Bvh2Node> {
+    fn subtree(&self, prims: &mut [S::Item], first: usize, known: Option<Known>) -> Part {
         let known = known.unwrap_or_else(|| Known {
-            bounds: self.bounds(prims),
+            bounds: self.splitter.bounds(prims),
             centroids: None,
         });
         match self.cut(prims, known) {
@@ -145,21 +217,26 @@ impl<S: Splitter> Driver<'_, S> {
                     || self.subtree(left_prims, first, Some(left_known)),
                     || self.subtree(right_prims, first + cut.mid, Some(right_known)),
                 );
-                splice(known.bounds, left, right, 0)
+                Part::Joined {
+                    bounds: known.bounds,
+                    nodes: 1 + left.nodes() + right.nodes(),
+                    children: Box::new((left, right)),
+                }
             }
-            cut => self.serial(prims, first, known.bounds, cut),
+            cut => Part::Serial(self.serial(prims, first, known.bounds, cut)),
         }
     }
 
     /// Builds a subtree on this thread; its root's cut is already decided.
     fn serial(
         &self,
-        prims: &mut [u32],
+        prims: &mut [S::Item],
         first: usize,
         bounds: Aabb,
         root_cut: Option<Cut>,
     ) -> Vec<Bvh2Node> {
-        let mut nodes = Vec::with_capacity(2 * prims.len() / self.max_leaf.max(1) + 1);
+        // A leaf holds at least one primitive, so there are fewer than 2n nodes.
+        let mut nodes = Vec::with_capacity(2 * prims.len() - 1);
         nodes.push(Bvh2Node::leaf(bounds, first as u32, prims.len() as u32));
         // (node, start, end, bounds, cut) with start/end relative to `prims`.
         let mut work = vec![(0usize, 0usize, prims.len(), bounds, root_cut)];

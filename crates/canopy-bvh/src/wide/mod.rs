@@ -190,24 +190,30 @@ impl<const N: usize> BvhN<N> {
         let mut work = vec![(0usize, 0usize)];
         while let Some((binary, slot_node)) = work.pop() {
             let first = src[binary].first as usize;
-            let mut children = vec![first, first + 1];
-            while children.len() < N {
-                // Open the interior child with the largest surface area.
-                let widest = children
-                    .iter()
-                    .enumerate()
-                    .filter(|(_, &c)| !src[c].is_leaf())
-                    .max_by(|a, b| {
-                        src[*a.1]
-                            .bounds()
-                            .surface_area()
-                            .total_cmp(&src[*b.1].bounds().surface_area())
-                    });
-                let Some((i, &c)) = widest else { break };
-                let grandchild = src[c].first as usize;
-                children[i] = grandchild;
-                children.push(grandchild + 1);
+            // Each slot's binary node, and its surface area if it can be opened.
+            let openable = |c: usize| match src[c].is_leaf() {
+                true => None,
+                false => Some(src[c].bounds().surface_area()),
+            };
+            let mut slots = [0usize; N];
+            let mut areas = [None; N];
+            for (i, c) in [first, first + 1].into_iter().enumerate() {
+                (slots[i], areas[i]) = (c, openable(c));
             }
+            let mut len = 2;
+            while len < N {
+                // Open the interior child with the largest surface area (the last of
+                // equals).
+                let widest = (0..len)
+                    .filter_map(|i| areas[i].map(|a| (i, a)))
+                    .max_by(|a, b| a.1.total_cmp(&b.1));
+                let Some((i, _)) = widest else { break };
+                let grandchild = src[slots[i]].first as usize;
+                (slots[i], areas[i]) = (grandchild, openable(grandchild));
+                (slots[len], areas[len]) = (grandchild + 1, openable(grandchild + 1));
+                len += 1;
+            }
+            let children = &slots[..len];
             let mut node = WideNode::empty();
             for (i, &c) in children.iter().enumerate() {
                 let child = &src[c];
@@ -231,35 +237,48 @@ impl<const N: usize> BvhN<N> {
     /// boundary with its triangles first (`prim_indices` gets [`NO_PRIM`] padding
     /// between leaves, never inside one).
     /// A tree without triangles is left as it is.
-    pub fn pack_triangles(&mut self, triangle: impl Fn(u32) -> Option<[Vec3; 3]>) {
-        if !self.prim_indices.iter().any(|&p| triangle(p).is_some()) {
+    pub fn pack_triangles(&mut self, triangle: impl Fn(u32) -> Option<[Vec3; 3]> + Sync) {
+        // Which primitives are triangles, looked up in the caller's order (the leaf order
+        // scatters it, so lookups there are cache misses: each primitive's vertices are
+        // fetched only once, for its pack).
+        let prims = self
+            .prim_indices
+            .iter()
+            .max()
+            .map_or(0, |&p| p as usize + 1);
+        let is_triangle: Vec<bool> = (0..prims as u32)
+            .into_par_iter()
+            .map(|p| triangle(p).is_some())
+            .collect();
+        if !is_triangle.contains(&true) {
             return;
         }
+        let is_triangle = |p: u32| is_triangle[p as usize];
         let mut order = Vec::with_capacity(self.prim_indices.len() * 2);
-        for n in 0..self.nodes.len() {
+        for node in &mut self.nodes {
             for i in 0..N {
-                let (first, count) = (self.nodes[n].child[i], self.nodes[n].count[i]);
+                let (first, count) = (node.child[i], node.count[i]);
                 if count == 0 || count == EMPTY_SLOT {
                     continue;
                 }
+                // Each leaf starts on a pack, triangles first.
                 order.resize(order.len().next_multiple_of(PACK_LANES), NO_PRIM);
-                self.nodes[n].child[i] = order.len() as u32;
+                node.child[i] = order.len() as u32;
                 let leaf = &self.prim_indices[first as usize..(first + count) as usize];
-                let (tris, others): (Vec<u32>, Vec<u32>) =
-                    leaf.iter().partition(|&&p| triangle(p).is_some());
-                order.extend(tris.into_iter().chain(others));
+                order.extend(leaf.iter().filter(|&&p| is_triangle(p)));
+                order.extend(leaf.iter().filter(|&&p| !is_triangle(p)));
             }
         }
         order.resize(order.len().next_multiple_of(PACK_LANES), NO_PRIM);
         self.packs = order
-            .chunks_exact(PACK_LANES)
+            .par_chunks_exact(PACK_LANES)
             .map(|lanes| {
                 let mut pack = TrianglePack::EMPTY;
                 for (lane, &prim) in lanes.iter().enumerate() {
                     if prim == NO_PRIM {
                         continue;
                     }
-                    match triangle(prim) {
+                    match is_triangle(prim).then(|| triangle(prim)).flatten() {
                         Some(v) => pack.set_triangle(lane, prim, v),
                         None => pack.set_other(lane, prim),
                     }
