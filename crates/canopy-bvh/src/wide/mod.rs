@@ -185,6 +185,9 @@ impl<const N: usize> BvhN<N> {
             wide.nodes.push(node);
             return wide;
         }
+        // At most one wide node per binary interior node: room reserved but never
+        // touched costs nothing, growing the array would copy it.
+        wide.nodes.reserve_exact(src.len() / 2);
         wide.nodes.push(WideNode::empty());
         // (binary interior node, wide node to fill)
         let mut work = vec![(0usize, 0usize)];
