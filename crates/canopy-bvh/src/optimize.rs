@@ -26,8 +26,8 @@ use std::time::{Duration, Instant};
 pub enum OptimizeBudget {
     /// At most this many passes over all nodes (stops early when a pass gains < 0.1%).
     Passes(u32),
-    /// Passes until this much time has gone (checked between nodes), or until a pass
-    /// gains < 0.1%.
+    /// Passes until this much time has gone (checked between batches of 256 subtrees), or
+    /// until a pass gains < 0.1%.
     Time(Duration),
 }
 

@@ -132,9 +132,8 @@ impl PrimRef {
 
     /// Twice the box's centre (`min + max`, the centre without its halving, which is exact
     /// and so changes no split); the origin on an axis where the box is empty (a NaN
-    /// centre), so that binning and partitioning, which compare centroids differently,
-    /// always agree. The index lane is zeroed first: as a float it is denormal, which
-    /// some CPUs add slowly.
+    /// centre), so that centroid bounds stay finite. The index lane is zeroed first: as a
+    /// float it is denormal, which some CPUs add slowly.
     #[inline(always)]
     fn centroid(&self) -> Vec3A {
         let c = xyz(self.min) + Vec3A::from_vec4(self.max);
