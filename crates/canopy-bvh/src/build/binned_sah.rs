@@ -259,63 +259,46 @@ fn partition(prims: &mut [PrimRef], split: &Split) -> (usize, Box4, Box4) {
     (left_count, sides[1], sides[0])
 }
 
+/// Bins `prims` on all three axes at once into the slots of `out` that `binning` defines.
+fn bin<const B: usize>(prims: &[PrimRef], binning: &Binning, out: &mut AxisBins<B>) {
+    for p in prims {
+        let b = p.bounds();
+        let index = binning.bins(p.centroid());
+        for (axis, axis_bins) in out.iter_mut().enumerate() {
+            // Bin indices are below `bins` <= B, a power of two: the mask changes nothing
+            // but spares a bounds check.
+            let bin = &mut axis_bins[index[axis] as usize & (B - 1)];
+            bin.bounds = bin.bounds.union(b);
+            bin.count += 1;
+        }
+    }
+}
+
+/// [`bin`], over chunks in parallel for large nodes.
+fn bin_all<const B: usize>(prims: &[PrimRef], binning: &Binning, out: &mut AxisBins<B>) {
+    if prims.len() < 2 * PARALLEL_BINNING {
+        return bin(prims, binning, out);
+    }
+    *out = prims
+        .par_chunks(PARALLEL_BINNING)
+        .map(|chunk| {
+            let mut bins_of_chunk = [[EMPTY_BIN; B]; 3];
+            bin(chunk, binning, &mut bins_of_chunk);
+            bins_of_chunk
+        })
+        .reduce(
+            || [[EMPTY_BIN; B]; 3],
+            |mut a, b| {
+                merge_bins(&mut a, &b);
+                a
+            },
+        );
+}
+
 impl BinnedSah<'_> {
     /// Slots per axis for a node of `n` primitives.
     fn bins_for(&self, n: usize) -> usize {
         (self.params.bins as usize).min(4 + n / 20)
-    }
-
-    /// Bins `prims` on all three axes at once into `bins` slots of `out`, which are
-    /// `lo + i / scale` wide.
-    fn bin<const B: usize>(
-        &self,
-        prims: &[PrimRef],
-        lo: Vec3A,
-        scale: Vec3A,
-        bins: usize,
-        out: &mut AxisBins<B>,
-    ) {
-        let binning = Binning::new(lo, scale, bins);
-        let add = |out: &mut AxisBins<B>, p: &PrimRef| {
-            let b = p.bounds();
-            let index = binning.bins(p.centroid());
-            for (axis, axis_bins) in out.iter_mut().enumerate() {
-                // Bin indices are below `bins` <= B, a power of two: the mask changes
-                // nothing but spares a bounds check.
-                let bin = &mut axis_bins[index[axis] as usize & (B - 1)];
-                bin.bounds = bin.bounds.union(b);
-                bin.count += 1;
-            }
-        };
-        prims.iter().for_each(|p| add(out, p));
-    }
-
-    /// [`Self::bin`], over chunks in parallel for large nodes.
-    fn bin_all<const B: usize>(
-        &self,
-        prims: &[PrimRef],
-        lo: Vec3A,
-        scale: Vec3A,
-        bins: usize,
-        out: &mut AxisBins<B>,
-    ) {
-        if prims.len() < 2 * PARALLEL_BINNING {
-            return self.bin(prims, lo, scale, bins, out);
-        }
-        *out = prims
-            .par_chunks(PARALLEL_BINNING)
-            .map(|chunk| {
-                let mut bins_of_chunk = [[EMPTY_BIN; B]; 3];
-                self.bin(chunk, lo, scale, bins, &mut bins_of_chunk);
-                bins_of_chunk
-            })
-            .reduce(
-                || [[EMPTY_BIN; B]; 3],
-                |mut a, b| {
-                    merge_bins(&mut a, &b);
-                    a
-                },
-            );
     }
 
     /// The cheapest SAH split over all axes, or `None` when all centroids coincide.
@@ -339,8 +322,9 @@ impl BinnedSah<'_> {
         let extent = Vec3::from(centroid_bounds.max - centroid_bounds.min);
         let lo = Vec3::from(centroid_bounds.min);
         let scale = Vec3::select(extent.cmpgt(Vec3::ZERO), bins as f32 / extent, Vec3::ZERO);
+        let binning = Binning::new(lo.into(), scale.into(), bins);
         let mut axis_bins = [[EMPTY_BIN; B]; 3];
-        self.bin_all(prims, lo.into(), scale.into(), bins, &mut axis_bins);
+        bin_all(prims, &binning, &mut axis_bins);
         let inv_area = 1.0 / bounds.surface_area().max(f32::MIN_POSITIVE);
         let sah = &self.params.sah;
         let tests = |n: u32| self.params.leaf_tests(n as usize);
@@ -383,7 +367,7 @@ impl BinnedSah<'_> {
         Some(Split {
             axis,
             bin,
-            binning: Binning::new(lo.into(), scale.into(), bins),
+            binning,
             cost,
             left: side(&axis_bins[axis][..bin]).aabb(),
             right: side(&axis_bins[axis][bin..bins]).aabb(),

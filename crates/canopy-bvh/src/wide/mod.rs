@@ -241,9 +241,9 @@ impl<const N: usize> BvhN<N> {
     /// between leaves, never inside one).
     /// A tree without triangles is left as it is.
     pub fn pack_triangles(&mut self, triangle: impl Fn(u32) -> Option<[Vec3; 3]> + Sync) {
-        // Which primitives are triangles, looked up in the caller's order (the leaf order
-        // scatters it, so lookups there are cache misses: each primitive's vertices are
-        // fetched only once, for its pack).
+        // Which primitives are triangles, asked in the caller's order, where lookups are
+        // cheap; the leaf order scatters them into cache misses, so there each triangle
+        // is looked up only once, for its vertices.
         let prims = self
             .prim_indices
             .iter()

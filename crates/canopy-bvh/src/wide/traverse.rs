@@ -205,14 +205,19 @@ impl<T: PackKernel, F: FnMut(u32, &Ray) -> bool> AnyLeaves for PackedLeaves<'_, 
 
 /// Starts loading a slot's node or leaf: it goes on the stack, and memory latency, not
 /// arithmetic, bounds incoherent rays in a large tree, so its loads overlap the work
-/// until it is popped. Trees that stay in the cache skip it (see `BvhN::prefetches`).
+/// until it is popped. Trees that stay in the cache skip it (`on` false, see
+/// `BvhN::prefetches`).
 #[inline(always)]
 fn prefetch_child<const N: usize, L: PrefetchLeaves>(
+    on: bool,
     nodes: &[WideNode<N>],
     leaves: &L,
     child: u32,
     count: u32,
 ) {
+    if !on {
+        return;
+    }
     if count == 0 {
         prefetch(&nodes[child as usize]);
     } else {
@@ -273,9 +278,7 @@ where
                     } else {
                         (first, second)
                     };
-                    if prefetch {
-                        prefetch_child(nodes, leaves, node.child[far], node.count[far]);
-                    }
+                    prefetch_child(prefetch, nodes, leaves, node.child[far], node.count[far]);
                     stack.push((node.child[far], node.count[far], t[far]));
                     (child, count) = (node.child[near], node.count[near]);
                     continue;
@@ -298,9 +301,7 @@ where
                     n += 1;
                 }
                 for &entry in &hits[..n - 1] {
-                    if prefetch {
-                        prefetch_child(nodes, leaves, entry.0, entry.1);
-                    }
+                    prefetch_child(prefetch, nodes, leaves, entry.0, entry.1);
                     stack.push(entry);
                 }
                 (child, count) = (hits[n - 1].0, hits[n - 1].1);
@@ -361,9 +362,7 @@ where
                     if t[i] < t[nearest] {
                         std::mem::swap(&mut i, &mut nearest);
                     }
-                    if prefetch {
-                        prefetch_child(nodes, leaves, node.child[i], node.count[i]);
-                    }
+                    prefetch_child(prefetch, nodes, leaves, node.child[i], node.count[i]);
                     stack.push((node.child[i], node.count[i]));
                 }
                 (child, count) = (node.child[nearest], node.count[nearest]);
