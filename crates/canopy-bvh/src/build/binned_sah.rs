@@ -193,11 +193,10 @@ impl Splitter for BinnedSah<'_> {
         centroids: Option<Aabb>,
         must_split: bool,
     ) -> Option<Cut> {
-        let leaf_cost = self.params.leaf_tests(prims.len()) * self.params.sah.intersection;
-        if !must_split && self.params.sah.traversal >= leaf_cost {
-            // No split costs less than its traversal: the leaf wins before binning.
+        if !must_split && self.params.leaf_beats_any_split(prims.len()) {
             return None;
         }
+        let leaf_cost = self.params.leaf_cost(prims.len());
         let centroids = centroids.map_or_else(|| centroid_bounds(prims), Box4::from);
         let split = self.find_split(prims, bounds, centroids)?;
         (split.cost < leaf_cost || must_split).then(|| {

@@ -222,6 +222,18 @@ impl BuildParams {
         Ok(())
     }
 
+    /// The SAH price of a leaf of `n` primitives: their tests, in blocks.
+    pub(crate) fn leaf_cost(&self, n: usize) -> f32 {
+        self.leaf_tests(n) * self.sah.intersection
+    }
+
+    /// Whether a leaf of `n` primitives costs no more than one traversal, which every
+    /// split pays before its children: then no split can win, and a builder may make the
+    /// leaf without pricing any.
+    pub(crate) fn leaf_beats_any_split(&self, n: usize) -> bool {
+        self.sah.traversal >= self.leaf_cost(n)
+    }
+
     /// The SAH price of testing `n` primitives in a leaf, in units of one test.
     #[inline]
     pub(crate) fn leaf_tests(&self, n: usize) -> f32 {

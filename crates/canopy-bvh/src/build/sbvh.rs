@@ -197,11 +197,10 @@ impl<C: Clipper + ?Sized> Sbvh<'_, C> {
         if n <= 1 {
             return Decision::Leaf(refs);
         }
-        let leaf_cost = self.params.leaf_tests(n) * self.params.sah.intersection;
-        if !must_split && self.params.sah.traversal >= leaf_cost {
-            // No split costs less than its traversal: the leaf wins before binning.
+        if !must_split && self.params.leaf_beats_any_split(n) {
             return Decision::Leaf(refs);
         }
+        let leaf_cost = self.params.leaf_cost(n);
         let object = self.object_split(&refs, bounds);
         let overlap = object.as_ref().map_or(f32::INFINITY, |o| {
             o.at.left.intersection(o.at.right).surface_area()

@@ -40,11 +40,10 @@ impl Splitter for SweepSah<'_> {
         must_split: bool,
     ) -> Option<Cut> {
         let n = prims.len();
-        let leaf_cost = self.params.leaf_tests(n) * self.params.sah.intersection;
-        // No split costs less than its traversal: then the leaf wins before sorting.
-        if n < 2 || (!must_split && self.params.sah.traversal >= leaf_cost) {
+        if n < 2 || (!must_split && self.params.leaf_beats_any_split(n)) {
             return None;
         }
+        let leaf_cost = self.params.leaf_cost(n);
         let inv_area = 1.0 / bounds.surface_area().max(f32::MIN_POSITIVE);
         let sah = &self.params.sah;
         let mut best: Option<(f32, usize, Vec<u32>)> = None;
