@@ -2,7 +2,7 @@
 
 use crate::Ray;
 use bytemuck::{Pod, Zeroable};
-use glam::Vec3;
+use glam::{BVec3, Vec3};
 
 /// An axis-aligned box. The empty box has `min = +inf`, `max = -inf`, so that growing it
 /// by anything yields that thing.
@@ -121,7 +121,8 @@ impl Aabb {
     }
 
     /// Branch-free slab test: entry distance, or `+inf` on a miss. A ray lying exactly in
-    /// the plane of a face (`0 * inf = NaN`) may be reported either way.
+    /// the plane of a face (`0 * inf = NaN`) counts as inside that slab, as in the
+    /// tree's node tests.
     #[inline(always)]
     pub fn ray_entry_or_inf(&self, ray: &Ray) -> f32 {
         SlabRay::new(ray).entry_or_inf(self.min, self.max)
@@ -133,6 +134,8 @@ impl Aabb {
 pub(crate) struct SlabRay {
     origin: Vec3,
     inv_dir: Vec3,
+    /// Axes the ray runs down (negative inverse direction): their near plane is the max.
+    down: BVec3,
     pub t_min: f32,
     pub t_max: f32,
 }
@@ -164,6 +167,7 @@ impl SlabRay {
         Self {
             origin: ray.origin,
             inv_dir: ray.inv_dir,
+            down: ray.inv_dir.cmplt(Vec3::ZERO),
             t_min: ray.t_min,
             t_max: ray.t_max,
         }
@@ -174,14 +178,16 @@ impl SlabRay {
     pub fn entry_or_inf(&self, min: Vec3, max: Vec3) -> f32 {
         let t0 = (min - self.origin) * self.inv_dir;
         let t1 = (max - self.origin) * self.inv_dir;
-        let near_x = fast_min(t0.x, t1.x);
-        let near_y = fast_min(t0.y, t1.y);
-        let near_z = fast_min(t0.z, t1.z);
-        let far_x = fast_max(t0.x, t1.x);
-        let far_y = fast_max(t0.y, t1.y);
-        let far_z = fast_max(t0.z, t1.z);
-        let enter = fast_max(fast_max(near_x, near_y), fast_max(near_z, self.t_min));
-        let exit = fast_min(fast_min(far_x, far_y), far_z) * FAR_SLACK;
+        // Near and far planes by the direction's sign, as the wide kernels pick them: a
+        // ray lying in a face's plane (zero direction component) gives `0 * inf = NaN`
+        // there, and ordering `t0` and `t1` by value would make that `+inf`, a miss.
+        // Each compare-and-select below returns its second argument when the first is
+        // NaN, and every second argument is a number, so such an axis is dropped: the
+        // ray counts as inside that slab, and the other axes still bound it.
+        let near = Vec3::select(self.down, t1, t0);
+        let far = Vec3::select(self.down, t0, t1);
+        let enter = fast_max(near.x, fast_max(near.y, fast_max(near.z, self.t_min)));
+        let exit = fast_min(far.x, fast_min(far.y, fast_min(far.z, f32::INFINITY))) * FAR_SLACK;
         let exit = fast_min(exit, self.t_max);
         if enter <= exit {
             enter
@@ -260,5 +266,18 @@ mod tests {
         let flat = Aabb::new(Vec3::new(0.0, 0.0, 1.0), Vec3::new(1.0, 1.0, 1.0));
         let ray = Ray::new(Vec3::new(0.5, 0.5, 0.0), Vec3::Z, 0.0, f32::INFINITY);
         assert_eq!(flat.ray_entry(&ray), Some(1.0));
+    }
+
+    /// A ray lying in the plane of a face (zero direction component, `0 * inf = NaN`)
+    /// touches the box: counted as a hit on either face, for either sign of zero, so a
+    /// tree never culls a node whose primitives such a ray can hit.
+    #[test]
+    fn ray_in_a_face_plane_hits() {
+        for y in [0.0, 1.0] {
+            for dir in [Vec3::new(1.0, 0.0, 0.0), Vec3::new(1.0, -0.0, 0.0)] {
+                let ray = Ray::new(Vec3::new(-1.0, y, 0.5), dir, 0.0, f32::INFINITY);
+                assert_eq!(unit_box().ray_entry(&ray), Some(1.0), "y = {y}, {dir:?}");
+            }
+        }
     }
 }

@@ -165,4 +165,52 @@ impl Tree {
             Tree::Gpu(t) => t.occluded(ray, hit_prim),
         }
     }
+
+    /// Closest hits of rays `0..count` on this thread: `ray(i)` makes ray `i`,
+    /// `answer(i, hit)` takes its hit, in order. The layout (and, for wide trees, the
+    /// instruction set) is chosen once for all the rays; see [`crate::BvhN::intersect_each`].
+    pub fn intersect_each<R, A, F, P>(
+        &self,
+        count: usize,
+        mut ray: R,
+        mut answer: A,
+        mut hit_prim: F,
+    ) where
+        R: FnMut(usize) -> Ray,
+        A: FnMut(usize, Option<Hit>),
+        F: FnMut(u32, &Ray) -> Option<P>,
+        P: Into<PrimHit>,
+    {
+        let mut each = |closest: &mut dyn FnMut(&Ray) -> Option<Hit>| {
+            for i in 0..count {
+                answer(i, closest(&ray(i)));
+            }
+        };
+        match self {
+            Tree::Binary(t) => each(&mut |r| t.intersect(r, &mut hit_prim)),
+            Tree::Gpu(t) => each(&mut |r| t.intersect(r, &mut hit_prim)),
+            Tree::Four(t) => t.intersect_each(count, ray, answer, hit_prim),
+            Tree::Eight(t) => t.intersect_each(count, ray, answer, hit_prim),
+        }
+    }
+
+    /// Occlusion of rays `0..count` on this thread, as [`Tree::intersect_each`].
+    pub fn occluded_each<R, A, F>(&self, count: usize, mut ray: R, mut answer: A, mut hit_prim: F)
+    where
+        R: FnMut(usize) -> Ray,
+        A: FnMut(usize, bool),
+        F: FnMut(u32, &Ray) -> bool,
+    {
+        let mut each = |occluded: &mut dyn FnMut(&Ray) -> bool| {
+            for i in 0..count {
+                answer(i, occluded(&ray(i)));
+            }
+        };
+        match self {
+            Tree::Binary(t) => each(&mut |r| t.occluded(r, &mut hit_prim)),
+            Tree::Gpu(t) => each(&mut |r| t.occluded(r, &mut hit_prim)),
+            Tree::Four(t) => t.occluded_each(count, ray, answer, hit_prim),
+            Tree::Eight(t) => t.occluded_each(count, ray, answer, hit_prim),
+        }
+    }
 }

@@ -5,7 +5,8 @@
 
 use canopy_bvh::{
     build, build_with_clipper, intersect_triangle, split_box, split_triangle, Aabb, BuildParams,
-    Builder, Bvh4, Bvh8, BvhN, Hit, Isa, PrimHit, Ray, ShearedRay, TreeView, PREFETCH_ABOVE_BYTES,
+    Builder, Bvh4, Bvh8, BvhN, BvhWidth, GpuBvh, Hit, Isa, PrimHit, Ray, ShearedRay, Tree,
+    TreeView, PREFETCH_ABOVE_BYTES,
 };
 use glam::Vec3;
 use proptest::prelude::*;
@@ -357,5 +358,83 @@ fn batch_calls_equal_single_ray_calls() {
     for (i, ray) in rays.iter().enumerate() {
         assert_eq!(bits(hits[i]), bits(wide.closest(&prims, ray)), "ray {i}");
         assert_eq!(blocked[i], hits[i].is_some(), "ray {i}");
+    }
+}
+
+/// `Tree::intersect_each` and `occluded_each` (one layout and kernel choice for many rays)
+/// answer each ray, in order, exactly as the single-ray calls and brute force do, in every
+/// layout, packed or not.
+#[test]
+fn each_calls_equal_single_ray_calls_in_every_layout() {
+    let prims: Vec<Prim> = (0..2000)
+        .map(|i| {
+            let a = Vec3::new((i % 13) as f32, (i / 13 % 11) as f32, (i / 143) as f32);
+            if i % 4 == 0 {
+                Prim::Box(Aabb::new(a, a + 0.4))
+            } else {
+                Prim::Triangle([a, a + Vec3::Y * 0.9, a + Vec3::new(0.7, 0.3, 0.5)])
+            }
+        })
+        .collect();
+    let boxes: Vec<Aabb> = prims.iter().map(Prim::bounds).collect();
+    let bvh = build(Builder::BinnedSah, &boxes, &BuildParams::default());
+    let rays: Vec<Ray> = (0..3000)
+        .map(|i| {
+            let o = Vec3::new((i % 50) as f32 * 0.3, -4.0, (i / 50) as f32 * 0.25);
+            let d = Vec3::new(((i * 5) % 9) as f32 * 0.04 - 0.16, 1.0, 0.05);
+            Ray::new(
+                o,
+                d.normalize(),
+                0.0,
+                if i % 7 == 0 { 6.0 } else { f32::INFINITY },
+            )
+        })
+        .collect();
+    let expected: Vec<Option<Hit>> = rays.iter().map(|r| brute_force(&prims, r)).collect();
+    assert!(expected.iter().filter(|h| h.is_some()).count() > 500);
+    let test = |p: u32, r: &Ray| prims[p as usize].hit(r);
+    let layouts = BvhWidth::ALL
+        .map(|width| (format!("{width:?}"), Tree::new(bvh.clone(), width)))
+        .into_iter()
+        .chain([("gpu".to_string(), Tree::Gpu(GpuBvh::from_bvh2(&bvh)))]);
+    for (layout, tree) in layouts {
+        for packed in [false, true] {
+            let mut tree = tree.clone();
+            if packed {
+                tree.pack_triangles(|p| match &prims[p as usize] {
+                    Prim::Triangle(v) => Some(*v),
+                    Prim::Box(_) => None,
+                });
+            }
+            let mut hits = vec![None; rays.len()];
+            let mut order = Vec::new();
+            tree.intersect_each(
+                rays.len(),
+                |i| rays[i],
+                |i, h| {
+                    order.push(i);
+                    hits[i] = h;
+                },
+                test,
+            );
+            assert!(order.iter().copied().eq(0..rays.len()), "answers in order");
+            let mut blocked = vec![false; rays.len()];
+            tree.occluded_each(
+                rays.len(),
+                |i| rays[i],
+                |i, b| blocked[i] = b,
+                |p, r| test(p, r).is_some(),
+            );
+            for (i, ray) in rays.iter().enumerate() {
+                let name = format!("{layout} packed {packed}, ray {i}");
+                assert_eq!(bits(hits[i]), bits(expected[i]), "{name}");
+                assert_eq!(
+                    bits(hits[i]),
+                    bits(tree.intersect_counted(ray, test, &mut ())),
+                    "{name}"
+                );
+                assert_eq!(blocked[i], expected[i].is_some(), "{name}");
+            }
+        }
     }
 }

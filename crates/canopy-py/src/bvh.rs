@@ -2,8 +2,8 @@
 
 use crate::arrays;
 use crate::pools;
-use canopy_bvh::Ray;
 use canopy_bvh::{Aabb, BuildParams, BvhWidth, SahCosts};
+use canopy_bvh::{Hit, Ray};
 use canopy_render::geometry::{Cuboid, Shape, Triangle};
 use canopy_render::scene::Primitive;
 use canopy_render::{Accel, AccelKind};
@@ -411,24 +411,22 @@ impl Bvh {
                     .zip(uv.par_chunks_mut(2 * CHUNK))
                     .enumerate()
                     .for_each(|(chunk, ((t, prim), uv))| {
-                        let first = chunk * CHUNK;
-                        for i in 0..t.len() {
-                            match self
-                                .accel
-                                .intersect(&self.primitives, &batch.ray(first + i))
-                            {
-                                Some(hit) => {
-                                    t[i] = hit.t;
-                                    prim[i] = hit.prim as i64;
-                                    uv[2 * i] = hit.u;
-                                    uv[2 * i + 1] = hit.v;
-                                }
-                                None => {
-                                    t[i] = f32::INFINITY;
-                                    prim[i] = -1;
-                                }
+                        let (first, count) = (chunk * CHUNK, t.len());
+                        let answer = |i: usize, hit: Option<Hit>| match hit {
+                            Some(hit) => {
+                                t[i] = hit.t;
+                                prim[i] = hit.prim as i64;
+                                uv[2 * i] = hit.u;
+                                uv[2 * i + 1] = hit.v;
                             }
-                        }
+                            None => {
+                                t[i] = f32::INFINITY;
+                                prim[i] = -1;
+                            }
+                        };
+                        let rays = |i: usize| batch.ray(first + i);
+                        self.accel
+                            .intersect_each(&self.primitives, count, rays, answer)
                     })
             })
         })?;
@@ -457,10 +455,11 @@ impl Bvh {
                     .par_chunks_mut(CHUNK)
                     .enumerate()
                     .for_each(|(chunk, out)| {
-                        for (i, o) in out.iter_mut().enumerate() {
-                            let ray = batch.ray(chunk * CHUNK + i);
-                            *o = self.accel.occluded(&self.primitives, &ray);
-                        }
+                        let count = out.len();
+                        let rays = |i: usize| batch.ray(chunk * CHUNK + i);
+                        let answer = |i: usize, blocked: bool| out[i] = blocked;
+                        self.accel
+                            .occluded_each(&self.primitives, count, rays, answer)
                     })
             })
         })?;

@@ -245,6 +245,50 @@ impl Accel {
         }
     }
 
+    /// Closest hits of rays `0..count` on this thread: `ray(i)` makes ray `i` and
+    /// `answer(i, hit)` takes its hit, in order. The hits of [`Accel::intersect`]; a tree
+    /// that tests its own triangles (or has none) chooses its layout and instruction set
+    /// once for all the rays ([`Tree::intersect_each`]), the others go ray by ray.
+    pub fn intersect_each(
+        &self,
+        primitives: &[Primitive],
+        count: usize,
+        mut ray: impl FnMut(usize) -> Ray,
+        mut answer: impl FnMut(usize, Option<Hit>),
+    ) {
+        match &self.tree {
+            Some(tree) if tree.has_triangle_packs() || !self.has_triangles => {
+                let test_other = |prim: u32, ray: &Ray| {
+                    primitives[prim as usize].shape.intersect_non_triangle(ray)
+                };
+                tree.intersect_each(count, ray, answer, test_other)
+            }
+            _ => (0..count).for_each(|i| answer(i, self.intersect(primitives, &ray(i)))),
+        }
+    }
+
+    /// Occlusion of rays `0..count` on this thread, as [`Accel::intersect_each`].
+    pub fn occluded_each(
+        &self,
+        primitives: &[Primitive],
+        count: usize,
+        mut ray: impl FnMut(usize) -> Ray,
+        mut answer: impl FnMut(usize, bool),
+    ) {
+        match &self.tree {
+            Some(tree) if tree.has_triangle_packs() || !self.has_triangles => {
+                let test_other = |prim: u32, ray: &Ray| {
+                    primitives[prim as usize]
+                        .shape
+                        .intersect_non_triangle(ray)
+                        .is_some()
+                };
+                tree.occluded_each(count, ray, answer, test_other)
+            }
+            _ => (0..count).for_each(|i| answer(i, self.occluded(primitives, &ray(i)))),
+        }
+    }
+
     /// The ray prepared for triangle tests, when there are triangles to test.
     #[inline]
     fn shear(&self, ray: &Ray) -> ShearedRay {

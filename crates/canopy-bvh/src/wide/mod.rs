@@ -440,9 +440,7 @@ where
         hits.par_chunks_mut(BATCH_CHUNK)
             .zip(rays.par_chunks(BATCH_CHUNK))
             .for_each(|(hits, rays)| {
-                for (hit, ray) in hits.iter_mut().zip(rays) {
-                    *hit = self.intersect(ray, &hit_prim);
-                }
+                self.intersect_each(rays.len(), |i| rays[i], |i, hit| hits[i] = hit, &hit_prim)
             });
     }
 
@@ -459,10 +457,122 @@ where
             .par_chunks_mut(BATCH_CHUNK)
             .zip(rays.par_chunks(BATCH_CHUNK))
             .for_each(|(out, rays)| {
-                for (o, ray) in out.iter_mut().zip(rays) {
-                    *o = self.occluded(ray, &hit_prim);
-                }
+                self.occluded_each(rays.len(), |i| rays[i], |i, o| out[i] = o, &hit_prim)
             });
+    }
+
+    /// Closest hits of rays `0..count` on this thread: `ray(i)` makes ray `i` and
+    /// `answer(i, hit)` takes its hit, in order. Answers are those of
+    /// [`BvhN::intersect`]; the instruction set is chosen once for all the rays, and the
+    /// callers' closures are compiled into the loop, so a batch pays no per-ray call.
+    pub fn intersect_each<R, A, F, P>(&self, count: usize, ray: R, answer: A, hit_prim: F)
+    where
+        R: FnMut(usize) -> Ray,
+        A: FnMut(usize, Option<Hit>),
+        F: FnMut(u32, &Ray) -> Option<P>,
+        P: Into<PrimHit>,
+    {
+        let each = ClosestEach {
+            bvh: self,
+            count,
+            ray,
+            answer,
+            test: hit_prim,
+        };
+        WideNode::<N>::dispatch(self.isa, each)
+    }
+
+    /// Occlusion of rays `0..count` on this thread, as [`BvhN::intersect_each`].
+    pub fn occluded_each<R, A, F>(&self, count: usize, ray: R, answer: A, hit_prim: F)
+    where
+        R: FnMut(usize) -> Ray,
+        A: FnMut(usize, bool),
+        F: FnMut(u32, &Ray) -> bool,
+    {
+        let each = AnyEach {
+            bvh: self,
+            count,
+            ray,
+            answer,
+            test: hit_prim,
+        };
+        WideNode::<N>::dispatch(self.isa, each)
+    }
+}
+
+/// Closest hits of `count` rays in one dispatch ([`BvhN::intersect_each`]).
+struct ClosestEach<'a, const N: usize, R, A, F> {
+    bvh: &'a BvhN<N>,
+    count: usize,
+    ray: R,
+    answer: A,
+    test: F,
+}
+
+impl<const N: usize, R, A, F, P> Query<N> for ClosestEach<'_, N, R, A, F>
+where
+    R: FnMut(usize) -> Ray,
+    A: FnMut(usize, Option<Hit>),
+    F: FnMut(u32, &Ray) -> Option<P>,
+    P: Into<PrimHit>,
+{
+    type Out = ();
+
+    #[inline(always)]
+    unsafe fn run<K: kernels::NodeKernel<N>, T: crate::triangle::PackKernel>(mut self) {
+        for i in 0..self.count {
+            let ray = (self.ray)(i);
+            let hit = match self.bvh.nodes.is_empty() {
+                true => None,
+                // SAFETY: the caller guarantees the instruction sets.
+                false => unsafe {
+                    ClosestQuery {
+                        bvh: self.bvh,
+                        ray: &ray,
+                        test: &mut self.test,
+                        counter: &mut (),
+                    }
+                    .run::<K, T>()
+                },
+            };
+            (self.answer)(i, hit);
+        }
+    }
+}
+
+/// Occlusion of `count` rays in one dispatch ([`BvhN::occluded_each`]).
+struct AnyEach<'a, const N: usize, R, A, F> {
+    bvh: &'a BvhN<N>,
+    count: usize,
+    ray: R,
+    answer: A,
+    test: F,
+}
+
+impl<const N: usize, R, A, F> Query<N> for AnyEach<'_, N, R, A, F>
+where
+    R: FnMut(usize) -> Ray,
+    A: FnMut(usize, bool),
+    F: FnMut(u32, &Ray) -> bool,
+{
+    type Out = ();
+
+    #[inline(always)]
+    unsafe fn run<K: kernels::NodeKernel<N>, T: crate::triangle::PackKernel>(mut self) {
+        for i in 0..self.count {
+            let ray = (self.ray)(i);
+            let blocked = !self.bvh.nodes.is_empty()
+                // SAFETY: the caller guarantees the instruction sets.
+                && unsafe {
+                    AnyQuery {
+                        bvh: self.bvh,
+                        ray: &ray,
+                        test: &mut self.test,
+                    }
+                    .run::<K, T>()
+                };
+            (self.answer)(i, blocked);
+        }
     }
 }
 
