@@ -166,6 +166,16 @@ impl Tree {
         }
     }
 
+    /// Whether batches over this tree are best traced in the order of their rays'
+    /// origins ([`crate::BvhN::orders_batches`]; never for the binary and GPU layouts).
+    pub fn orders_batches(&self) -> bool {
+        match self {
+            Tree::Binary(_) | Tree::Gpu(_) => false,
+            Tree::Four(t) => t.orders_batches(),
+            Tree::Eight(t) => t.orders_batches(),
+        }
+    }
+
     /// Closest hits of rays `0..count` on this thread: `ray(i)` makes ray `i`,
     /// `answer(i, hit)` takes its hit, in order. The layout (and, for wide trees, the
     /// instruction set) is chosen once for all the rays; see [`crate::BvhN::intersect_each`].

@@ -438,3 +438,70 @@ fn each_calls_equal_single_ray_calls_in_every_layout() {
         }
     }
 }
+
+/// Over a tree larger than the cache, batches of scattered rays are traced in the order of
+/// their origins: every answer still lands on its own ray, equal to the single-ray call's,
+/// and shuffling the batch shuffles the answers the same way.
+#[test]
+fn reordered_batches_answer_each_ray_in_place() {
+    let mut state = 777u32;
+    let mut next = move || {
+        state ^= state << 13;
+        state ^= state >> 17;
+        state ^= state << 5;
+        state as f32 / u32::MAX as f32
+    };
+    let prims: Vec<Prim> = (0..40_000)
+        .map(|i| {
+            let a = Vec3::new(next(), next(), next()) * 100.0;
+            if i % 10 == 0 {
+                Prim::Box(Aabb::new(a, a + 0.5))
+            } else {
+                Prim::Triangle([
+                    a,
+                    a + Vec3::new(2.0, 0.5, 0.2),
+                    a + Vec3::new(0.3, 2.0, 0.9),
+                ])
+            }
+        })
+        .collect();
+    let boxes: Vec<Aabb> = prims.iter().map(Prim::bounds).collect();
+    let mut wide = Bvh8::from_bvh2(&build(Builder::BinnedSah, &boxes, &BuildParams::default()));
+    wide.pack_triangles(|p| match &prims[p as usize] {
+        Prim::Triangle(v) => Some(*v),
+        Prim::Box(_) => None,
+    });
+    assert!(wide.orders_batches(), "a tree larger than the cache");
+    // Rays from scattered origins in all directions, some with a short range.
+    let rays: Vec<Ray> = (0..3 * canopy_bvh::RAY_ORDER_MIN)
+        .map(|i| {
+            let o = Vec3::new(next(), next(), next()) * 100.0;
+            let d = Vec3::new(next() - 0.5, next() - 0.5, next() - 0.5);
+            let t_max = if i % 5 == 0 { 3.0 } else { f32::INFINITY };
+            Ray::new(o, d.normalize(), 0.0, t_max)
+        })
+        .collect();
+    assert!(canopy_bvh::RayOrder::by_origin(rays.len(), |i| rays[i].origin).is_some());
+    let test = |p: u32, r: &Ray| prims[p as usize].hit(r);
+    let mut hits = vec![None; rays.len()];
+    let mut blocked = vec![false; rays.len()];
+    wide.intersect_batch(&rays, &mut hits, test);
+    wide.occluded_batch(&rays, &mut blocked, |p, r| test(p, r).is_some());
+    assert!(hits.iter().filter(|h| h.is_some()).count() > rays.len() / 10);
+    for (i, ray) in rays.iter().enumerate() {
+        assert_eq!(bits(hits[i]), bits(wide.intersect(ray, test)), "ray {i}");
+        assert_eq!(
+            blocked[i],
+            wide.occluded(ray, |p, r| test(p, r).is_some()),
+            "ray {i}"
+        );
+    }
+    let reversed: Vec<Ray> = rays.iter().rev().copied().collect();
+    let mut hits_reversed = vec![None; rays.len()];
+    wide.intersect_batch(&reversed, &mut hits_reversed, test);
+    assert!(hits_reversed
+        .iter()
+        .rev()
+        .map(|&h| bits(h))
+        .eq(hits.iter().map(|&h| bits(h))));
+}

@@ -3,7 +3,7 @@
 use crate::arrays;
 use crate::pools;
 use canopy_bvh::{Aabb, BuildParams, BvhWidth, SahCosts};
-use canopy_bvh::{Hit, Ray};
+use canopy_bvh::{Hit, Ray, RayOrder};
 use canopy_render::geometry::{Cuboid, Shape, Triangle};
 use canopy_render::scene::Primitive;
 use canopy_render::{Accel, AccelKind};
@@ -119,6 +119,14 @@ impl Bvh {
     fn name(&self) -> String {
         self.kind.to_string()
     }
+
+    /// The order to trace `batch` in, if not the caller's ([`Accel::orders_batches`]).
+    fn batch_order(&self, batch: &Batch<'_>) -> Option<RayOrder> {
+        self.accel
+            .orders_batches()
+            .then(|| RayOrder::by_origin(batch.len(), |i| Vec3::from(batch.origins[i])))
+            .flatten()
+    }
 }
 
 /// `tnear` or `tfar`: one value for every ray, or one each.
@@ -136,6 +144,28 @@ impl PerRay<'_> {
             PerRay::Each(values) => values[i],
         }
     }
+}
+
+/// Writes ray `i`'s closest hit into the output arrays (t = inf, prim = -1 on a miss).
+#[inline]
+fn write_hit(t: &mut [f32], prim: &mut [i64], uv: &mut [f32], i: usize, hit: Option<Hit>) {
+    match hit {
+        Some(hit) => {
+            t[i] = hit.t;
+            prim[i] = hit.prim as i64;
+            uv[2 * i] = hit.u;
+            uv[2 * i + 1] = hit.v;
+        }
+        None => {
+            t[i] = f32::INFINITY;
+            prim[i] = -1;
+        }
+    }
+}
+
+/// The rays `indices` of `batch`, in that order.
+fn gather(batch: &Batch<'_>, indices: &[u32]) -> Vec<Ray> {
+    indices.iter().map(|&i| batch.ray(i as usize)).collect()
 }
 
 /// A batch of rays as the caller's arrays, checked; rays are made from them on the fly,
@@ -406,27 +436,46 @@ impl Bvh {
         };
         py.detach(|| {
             pools::install(threads, || {
+                // Scattered rays (from surfaces, in any order) are traced by where they start.
+                let Some(order) = self.batch_order(&batch) else {
+                    return t
+                        .par_chunks_mut(CHUNK)
+                        .zip(prim.par_chunks_mut(CHUNK))
+                        .zip(uv.par_chunks_mut(2 * CHUNK))
+                        .enumerate()
+                        .for_each(|(chunk, ((t, prim), uv))| {
+                            let (first, count) = (chunk * CHUNK, t.len());
+                            let answer =
+                                |i: usize, hit: Option<Hit>| write_hit(t, prim, uv, i, hit);
+                            let rays = |i: usize| batch.ray(first + i);
+                            self.accel
+                                .intersect_each(&self.primitives, count, rays, answer)
+                        });
+                };
+                let indices = order.indices();
+                let mut traced = vec![None; n];
+                traced
+                    .par_chunks_mut(CHUNK)
+                    .enumerate()
+                    .for_each(|(chunk, out)| {
+                        // Gathered first: a tight loop overlaps the scattered reads
+                        // that the traversal would wait on one by one.
+                        let rays = gather(&batch, &indices[chunk * CHUNK..][..out.len()]);
+                        let (rays, count) = (|i: usize| rays[i], out.len());
+                        let answer = |i: usize, hit: Option<Hit>| out[i] = hit;
+                        self.accel
+                            .intersect_each(&self.primitives, count, rays, answer)
+                    });
+                let ranks = order.ranks();
                 t.par_chunks_mut(CHUNK)
                     .zip(prim.par_chunks_mut(CHUNK))
                     .zip(uv.par_chunks_mut(2 * CHUNK))
                     .enumerate()
                     .for_each(|(chunk, ((t, prim), uv))| {
-                        let (first, count) = (chunk * CHUNK, t.len());
-                        let answer = |i: usize, hit: Option<Hit>| match hit {
-                            Some(hit) => {
-                                t[i] = hit.t;
-                                prim[i] = hit.prim as i64;
-                                uv[2 * i] = hit.u;
-                                uv[2 * i + 1] = hit.v;
-                            }
-                            None => {
-                                t[i] = f32::INFINITY;
-                                prim[i] = -1;
-                            }
-                        };
-                        let rays = |i: usize| batch.ray(first + i);
-                        self.accel
-                            .intersect_each(&self.primitives, count, rays, answer)
+                        for i in 0..t.len() {
+                            let hit = traced[ranks[chunk * CHUNK + i] as usize];
+                            write_hit(t, prim, uv, i, hit);
+                        }
                     })
             })
         })?;
@@ -451,16 +500,32 @@ impl Bvh {
         let blocked = unsafe { out.as_slice_mut().expect("contiguous") };
         py.detach(|| {
             pools::install(threads, || {
-                blocked
+                let n = batch.len();
+                let Some(order) = self.batch_order(&batch) else {
+                    return blocked
+                        .par_chunks_mut(CHUNK)
+                        .enumerate()
+                        .for_each(|(chunk, out)| {
+                            let count = out.len();
+                            let rays = |i: usize| batch.ray(chunk * CHUNK + i);
+                            let answer = |i: usize, blocked: bool| out[i] = blocked;
+                            self.accel
+                                .occluded_each(&self.primitives, count, rays, answer)
+                        });
+                };
+                let indices = order.indices();
+                let mut traced = vec![false; n];
+                traced
                     .par_chunks_mut(CHUNK)
                     .enumerate()
                     .for_each(|(chunk, out)| {
-                        let count = out.len();
-                        let rays = |i: usize| batch.ray(chunk * CHUNK + i);
+                        let rays = gather(&batch, &indices[chunk * CHUNK..][..out.len()]);
+                        let (rays, count) = (|i: usize| rays[i], out.len());
                         let answer = |i: usize, blocked: bool| out[i] = blocked;
                         self.accel
                             .occluded_each(&self.primitives, count, rays, answer)
-                    })
+                    });
+                order.unsort_into(&traced, blocked);
             })
         })?;
         Ok(out)

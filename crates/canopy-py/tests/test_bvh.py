@@ -240,6 +240,31 @@ def test_bad_rays_raise_value_errors(origins, directions, kwargs, words):
         assert words in str(e.value), str(e.value)
 
 
+def test_scattered_batches_over_a_large_tree_answer_each_ray_in_place():
+    """A tree larger than the cache traces scattered rays in the order of their origins:
+    the answers still land on their own rays (reversing the batch reverses them), and equal
+    those of small batches, which are traced in the caller's order."""
+    vertices, faces = random_soup(60_000, seed=3)
+    bvh = canopy.Bvh(vertices, faces)
+    assert bvh.stats()["memory_bytes"] > 2 << 20
+    rng = np.random.default_rng(11)
+    n = 20_000
+    origins = rng.random((n, 3)).astype(np.float32)
+    directions = rng.normal(size=(n, 3)).astype(np.float32)
+    t, prim, uv = bvh.intersect(origins, directions)
+    blocked = bvh.occluded(origins, directions, tfar=0.05)
+    assert 0.3 < (prim >= 0).mean() < 1.0
+    rt, rprim, ruv = bvh.intersect(origins[::-1].copy(), directions[::-1].copy())
+    assert np.array_equal(rprim[::-1], prim) and np.array_equal(rt[::-1], t)
+    assert np.array_equal(ruv[::-1], uv)
+    # Batches of 1000 (below the size worth reordering) give the same answers.
+    for lo in range(0, n, 1000):
+        st, sprim, _ = bvh.intersect(origins[lo : lo + 1000], directions[lo : lo + 1000])
+        assert np.array_equal(sprim, prim[lo : lo + 1000]) and np.array_equal(st, t[lo : lo + 1000])
+        sblocked = bvh.occluded(origins[lo : lo + 1000], directions[lo : lo + 1000], tfar=0.05)
+        assert np.array_equal(sblocked, blocked[lo : lo + 1000])
+
+
 def big_scene():
     vertices, faces = canopy.load_mesh(MESHES / "bunny.ply")
     lo, hi = vertices.min(axis=0), vertices.max(axis=0)

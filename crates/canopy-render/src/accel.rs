@@ -245,6 +245,12 @@ impl Accel {
         }
     }
 
+    /// Whether batches are best traced in the order of their rays' origins
+    /// ([`Tree::orders_batches`]; see [`canopy_bvh::RayOrder`]).
+    pub fn orders_batches(&self) -> bool {
+        self.tree.as_ref().is_some_and(Tree::orders_batches)
+    }
+
     /// Closest hits of rays `0..count` on this thread: `ray(i)` makes ray `i` and
     /// `answer(i, hit)` takes its hit, in order. The hits of [`Accel::intersect`]; a tree
     /// that tests its own triangles (or has none) chooses its layout and instruction set

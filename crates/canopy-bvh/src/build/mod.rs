@@ -8,7 +8,7 @@ mod clip;
 mod lbvh;
 mod median;
 mod merge_tree;
-mod morton;
+pub(crate) mod morton;
 mod ploc;
 mod presets;
 mod sbvh;

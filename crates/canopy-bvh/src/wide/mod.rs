@@ -14,7 +14,9 @@ mod traverse;
 use crate::traverse::TraversalCounter;
 use crate::triangle::{TrianglePack, NO_PRIM, PACK_LANES};
 use crate::view::{Child, ChildKind, TreeView};
-use crate::{Aabb, Bvh2, BvhError, Hit, Isa, IsaError, PrimHit, Ray, SahCosts, TreeStats};
+use crate::{
+    Aabb, Bvh2, BvhError, Hit, Isa, IsaError, PrimHit, Ray, RayOrder, SahCosts, TreeStats,
+};
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
 use rayon::prelude::*;
@@ -160,6 +162,21 @@ impl<const N: usize> BvhN<N> {
 }
 
 impl<const N: usize> BvhN<N> {
+    /// Whether batches are traced in the order of their rays' origins ([`RayOrder`]):
+    /// for trees larger than a core's cache ([`PREFETCH_ABOVE_BYTES`]), where rays that
+    /// start near each other share the nodes and leaves they load. A tree that stays in
+    /// the cache gains less than the reordering costs.
+    pub fn orders_batches(&self) -> bool {
+        self.prefetches()
+    }
+
+    /// The order to trace `rays` in, if not theirs ([`BvhN::orders_batches`]).
+    fn batch_order(&self, rays: &[Ray]) -> Option<RayOrder> {
+        self.orders_batches()
+            .then(|| RayOrder::by_origin(rays.len(), |i| rays[i].origin))
+            .flatten()
+    }
+
     /// Whether traversal prefetches stacked children ([`PREFETCH_ABOVE_BYTES`]).
     #[inline(always)]
     fn prefetches(&self) -> bool {
@@ -427,7 +444,9 @@ where
 {
     /// Closest hits of many rays, in parallel over chunks (rayon's current pool):
     /// `hits[i]` answers `rays[i]`. `hit_prim` tests non-triangle primitives as in
-    /// [`BvhN::intersect`], from several threads at once.
+    /// [`BvhN::intersect`], from several threads at once. Large batches over large trees
+    /// are traced in the order of their origins ([`BvhN::orders_batches`]); the answers
+    /// are the same.
     ///
     /// # Panics
     /// If `rays` and `hits` differ in length.
@@ -437,14 +456,28 @@ where
         P: Into<PrimHit>,
     {
         assert_eq!(rays.len(), hits.len(), "one hit slot per ray");
-        hits.par_chunks_mut(BATCH_CHUNK)
-            .zip(rays.par_chunks(BATCH_CHUNK))
-            .for_each(|(hits, rays)| {
-                self.intersect_each(rays.len(), |i| rays[i], |i, hit| hits[i] = hit, &hit_prim)
-            });
+        let trace = |indices: Option<&[u32]>, hits: &mut [Option<Hit>]| {
+            hits.par_chunks_mut(BATCH_CHUNK)
+                .enumerate()
+                .for_each(|(chunk, hits)| {
+                    let chunk = gather(rays, indices, chunk * BATCH_CHUNK, hits.len());
+                    let ray = |i: usize| chunk[i];
+                    self.intersect_each(hits.len(), ray, |i, hit| hits[i] = hit, &hit_prim)
+                })
+        };
+        match self.batch_order(rays) {
+            None => trace(None, hits),
+            Some(order) => {
+                let mut traced = vec![None; rays.len()];
+                trace(Some(order.indices()), &mut traced);
+                order.unsort_into(&traced, hits);
+            }
+        }
     }
 
     /// Occlusion of many rays, in parallel over chunks: `occluded[i]` answers `rays[i]`.
+    /// Large batches are traced in the order of their origins, as in
+    /// [`BvhN::intersect_batch`].
     ///
     /// # Panics
     /// If `rays` and `occluded` differ in length.
@@ -453,12 +486,23 @@ where
         F: Fn(u32, &Ray) -> bool + Sync,
     {
         assert_eq!(rays.len(), occluded.len(), "one answer per ray");
-        occluded
-            .par_chunks_mut(BATCH_CHUNK)
-            .zip(rays.par_chunks(BATCH_CHUNK))
-            .for_each(|(out, rays)| {
-                self.occluded_each(rays.len(), |i| rays[i], |i, o| out[i] = o, &hit_prim)
-            });
+        let trace = |indices: Option<&[u32]>, out: &mut [bool]| {
+            out.par_chunks_mut(BATCH_CHUNK)
+                .enumerate()
+                .for_each(|(chunk, out)| {
+                    let chunk = gather(rays, indices, chunk * BATCH_CHUNK, out.len());
+                    let ray = |i: usize| chunk[i];
+                    self.occluded_each(out.len(), ray, |i, blocked| out[i] = blocked, &hit_prim)
+                })
+        };
+        match self.batch_order(rays) {
+            None => trace(None, occluded),
+            Some(order) => {
+                let mut traced = vec![false; rays.len()];
+                trace(Some(order.indices()), &mut traced);
+                order.unsort_into(&traced, occluded);
+            }
+        }
     }
 
     /// Closest hits of rays `0..count` on this thread: `ray(i)` makes ray `i` and
@@ -573,6 +617,25 @@ where
                 };
             (self.answer)(i, blocked);
         }
+    }
+}
+
+/// Rays `first..first + count` of the trace order (`indices`, else the slice's own), as
+/// one slice: borrowed when in order; else gathered in a tight loop, which overlaps the
+/// scattered reads that the traversal would wait on one by one.
+fn gather<'a>(
+    rays: &'a [Ray],
+    indices: Option<&[u32]>,
+    first: usize,
+    count: usize,
+) -> std::borrow::Cow<'a, [Ray]> {
+    match indices {
+        None => rays[first..first + count].into(),
+        Some(order) => order[first..first + count]
+            .iter()
+            .map(|&i| rays[i as usize])
+            .collect::<Vec<Ray>>()
+            .into(),
     }
 }
 
