@@ -456,23 +456,9 @@ where
         P: Into<PrimHit>,
     {
         assert_eq!(rays.len(), hits.len(), "one hit slot per ray");
-        let trace = |indices: Option<&[u32]>, hits: &mut [Option<Hit>]| {
-            hits.par_chunks_mut(BATCH_CHUNK)
-                .enumerate()
-                .for_each(|(chunk, hits)| {
-                    let chunk = gather(rays, indices, chunk * BATCH_CHUNK, hits.len());
-                    let ray = |i: usize| chunk[i];
-                    self.intersect_each(hits.len(), ray, |i, hit| hits[i] = hit, &hit_prim)
-                })
-        };
-        match self.batch_order(rays) {
-            None => trace(None, hits),
-            Some(order) => {
-                let mut traced = vec![None; rays.len()];
-                trace(Some(order.indices()), &mut traced);
-                order.unsort_into(&traced, hits);
-            }
-        }
+        self.batch(rays, hits, |rays, hits| {
+            self.intersect_each(rays.len(), |i| rays[i], |i, hit| hits[i] = hit, &hit_prim)
+        });
     }
 
     /// Occlusion of many rays, in parallel over chunks: `occluded[i]` answers `rays[i]`.
@@ -486,21 +472,33 @@ where
         F: Fn(u32, &Ray) -> bool + Sync,
     {
         assert_eq!(rays.len(), occluded.len(), "one answer per ray");
-        let trace = |indices: Option<&[u32]>, out: &mut [bool]| {
+        self.batch(rays, occluded, |rays, out| {
+            self.occluded_each(rays.len(), |i| rays[i], |i, o| out[i] = o, &hit_prim)
+        });
+    }
+
+    /// Answers of many rays in parallel over chunks of [`BATCH_CHUNK`]: `each(rays, out)`
+    /// answers a chunk on one thread. Traced in [`RayOrder`] where the tree orders
+    /// batches, the answers then put back in the callers' order.
+    fn batch<T: Copy + Default + Send + Sync>(
+        &self,
+        rays: &[Ray],
+        out: &mut [T],
+        each: impl Fn(&[Ray], &mut [T]) + Sync,
+    ) {
+        let trace = |indices: Option<&[u32]>, out: &mut [T]| {
             out.par_chunks_mut(BATCH_CHUNK)
                 .enumerate()
                 .for_each(|(chunk, out)| {
-                    let chunk = gather(rays, indices, chunk * BATCH_CHUNK, out.len());
-                    let ray = |i: usize| chunk[i];
-                    self.occluded_each(out.len(), ray, |i, blocked| out[i] = blocked, &hit_prim)
+                    each(&gather(rays, indices, chunk * BATCH_CHUNK, out.len()), out)
                 })
         };
         match self.batch_order(rays) {
-            None => trace(None, occluded),
+            None => trace(None, out),
             Some(order) => {
-                let mut traced = vec![false; rays.len()];
+                let mut traced = vec![T::default(); rays.len()];
                 trace(Some(order.indices()), &mut traced);
-                order.unsort_into(&traced, occluded);
+                order.unsort_into(&traced, out);
             }
         }
     }
