@@ -25,11 +25,28 @@ impl Prim {
         }
     }
 
+    fn triangle(&self) -> Option<[Vec3; 3]> {
+        match self {
+            Prim::Triangle(v) => Some(*v),
+            Prim::Box(_) => None,
+        }
+    }
+
     fn hit(&self, ray: &Ray) -> Option<PrimHit> {
         match self {
             Prim::Triangle(v) => intersect_triangle(v, ray, &ShearedRay::new(ray)),
             Prim::Box(b) => b.ray_entry(ray).map(PrimHit::from),
         }
+    }
+}
+
+/// A xorshift stream of numbers in [0, 1] from `seed`.
+fn uniform(mut state: u32) -> impl FnMut() -> f32 {
+    move || {
+        state ^= state << 13;
+        state ^= state >> 17;
+        state ^= state << 5;
+        state as f32 / u32::MAX as f32
     }
 }
 
@@ -55,10 +72,7 @@ fn check_tree<const N: usize>(name: &str, mut wide: BvhN<N>, prims: &[Prim], ray
 where
     BvhN<N>: Queries,
 {
-    wide.pack_triangles(|p| match &prims[p as usize] {
-        Prim::Triangle(v) => Some(*v),
-        Prim::Box(_) => None,
-    });
+    wide.pack_triangles(|p| prims[p as usize].triangle());
     let boxes: Vec<Aabb> = prims.iter().map(Prim::bounds).collect();
     wide.validate(&boxes)
         .unwrap_or_else(|e| panic!("{name}: {e}"));
@@ -227,13 +241,7 @@ fn grid_rays_through_shared_vertices_hit_in_every_kernel() {
 /// for rays at vertices, edge midpoints and centroids and for axis-aligned rays.
 #[test]
 fn clipped_slivers_match_brute_force_in_every_kernel() {
-    let mut state = 777u32;
-    let mut next = move || {
-        state ^= state << 13;
-        state ^= state >> 17;
-        state ^= state << 5;
-        state as f32 / u32::MAX as f32
-    };
+    let mut next = uniform(777);
     let mut point = || Vec3::new(next(), next(), next()) * 20.0 - Vec3::splat(10.0);
     let prims: Vec<Prim> = (0..400)
         .map(|_| {
@@ -270,13 +278,7 @@ fn clipped_slivers_match_brute_force_in_every_kernel() {
 /// prefetches).
 #[test]
 fn large_builds_validate_and_match_brute_force() {
-    let mut state = 12345u32;
-    let mut next = move || {
-        state ^= state << 13;
-        state ^= state >> 17;
-        state ^= state << 5;
-        state as f32 / u32::MAX as f32
-    };
+    let mut next = uniform(12345);
     let mut point = || Vec3::new(next(), next(), next()) * 100.0;
     let prims: Vec<Prim> = (0..40_000)
         .map(|_| {
@@ -304,10 +306,7 @@ fn large_builds_validate_and_match_brute_force() {
             .unwrap_or_else(|e| panic!("{builder}: {e}"));
         // Large enough that traversal prefetches stacked children.
         let mut packed = Bvh8::from_bvh2(&bvh);
-        packed.pack_triangles(|p| match &prims[p as usize] {
-            Prim::Triangle(v) => Some(*v),
-            Prim::Box(_) => None,
-        });
+        packed.pack_triangles(|p| prims[p as usize].triangle());
         assert!(TreeView::memory_bytes(&packed) > 2 * PREFETCH_ABOVE_BYTES);
         check_tree(
             &format!("{builder} x8"),
@@ -334,10 +333,7 @@ fn batch_calls_equal_single_ray_calls() {
         .collect();
     let boxes: Vec<Aabb> = prims.iter().map(Prim::bounds).collect();
     let mut wide = Bvh8::from_bvh2(&build(Builder::BinnedSah, &boxes, &BuildParams::default()));
-    wide.pack_triangles(|p| match &prims[p as usize] {
-        Prim::Triangle(v) => Some(*v),
-        Prim::Box(_) => None,
-    });
+    wide.pack_triangles(|p| prims[p as usize].triangle());
     let rays: Vec<Ray> = (0..5000)
         .map(|i| {
             let o = Vec3::new(-5.0, (i % 70) as f32 * 0.2, (i / 70) as f32 * 0.2);
@@ -401,10 +397,7 @@ fn each_calls_equal_single_ray_calls_in_every_layout() {
         for packed in [false, true] {
             let mut tree = tree.clone();
             if packed {
-                tree.pack_triangles(|p| match &prims[p as usize] {
-                    Prim::Triangle(v) => Some(*v),
-                    Prim::Box(_) => None,
-                });
+                tree.pack_triangles(|p| prims[p as usize].triangle());
             }
             let mut hits = vec![None; rays.len()];
             let mut order = Vec::new();
@@ -444,13 +437,7 @@ fn each_calls_equal_single_ray_calls_in_every_layout() {
 /// and shuffling the batch shuffles the answers the same way.
 #[test]
 fn reordered_batches_answer_each_ray_in_place() {
-    let mut state = 777u32;
-    let mut next = move || {
-        state ^= state << 13;
-        state ^= state >> 17;
-        state ^= state << 5;
-        state as f32 / u32::MAX as f32
-    };
+    let mut next = uniform(777);
     let prims: Vec<Prim> = (0..40_000)
         .map(|i| {
             let a = Vec3::new(next(), next(), next()) * 100.0;
@@ -467,10 +454,7 @@ fn reordered_batches_answer_each_ray_in_place() {
         .collect();
     let boxes: Vec<Aabb> = prims.iter().map(Prim::bounds).collect();
     let mut wide = Bvh8::from_bvh2(&build(Builder::BinnedSah, &boxes, &BuildParams::default()));
-    wide.pack_triangles(|p| match &prims[p as usize] {
-        Prim::Triangle(v) => Some(*v),
-        Prim::Box(_) => None,
-    });
+    wide.pack_triangles(|p| prims[p as usize].triangle());
     assert!(wide.orders_batches(), "a tree larger than the cache");
     // Rays from scattered origins in all directions, some with a short range.
     let rays: Vec<Ray> = (0..3 * canopy_bvh::RAY_ORDER_MIN)

@@ -163,9 +163,23 @@ fn write_hit(t: &mut [f32], prim: &mut [i64], uv: &mut [f32], i: usize, hit: Opt
     }
 }
 
-/// The rays `indices` of `batch`, in that order.
-fn gather(batch: &Batch<'_>, indices: &[u32]) -> Vec<Ray> {
-    indices.iter().map(|&i| batch.ray(i as usize)).collect()
+/// Answers of `batch` in the trace order `order`, in parallel over chunks: `each(rays,
+/// out)` answers a chunk. Each chunk's rays are gathered first: a tight loop overlaps the
+/// scattered reads that the traversal would wait on one by one.
+fn traced_in_order<T: Copy + Default + Send + Sync>(
+    batch: &Batch<'_>,
+    order: &RayOrder,
+    each: impl Fn(&[Ray], &mut [T]) + Sync,
+) -> Vec<T> {
+    let mut traced = vec![T::default(); batch.len()];
+    traced
+        .par_chunks_mut(CHUNK)
+        .zip(order.indices().par_chunks(CHUNK))
+        .for_each(|(out, indices)| {
+            let rays: Vec<Ray> = indices.iter().map(|&i| batch.ray(i as usize)).collect();
+            each(&rays, out)
+        });
+    traced
 }
 
 /// A batch of rays as the caller's arrays, checked; rays are made from them on the fly,
@@ -452,20 +466,11 @@ impl Bvh {
                                 .intersect_each(&self.primitives, count, rays, answer)
                         });
                 };
-                let indices = order.indices();
-                let mut traced = vec![None; n];
-                traced
-                    .par_chunks_mut(CHUNK)
-                    .enumerate()
-                    .for_each(|(chunk, out)| {
-                        // Gathered first: a tight loop overlaps the scattered reads
-                        // that the traversal would wait on one by one.
-                        let rays = gather(&batch, &indices[chunk * CHUNK..][..out.len()]);
-                        let (rays, count) = (|i: usize| rays[i], out.len());
-                        let answer = |i: usize, hit: Option<Hit>| out[i] = hit;
-                        self.accel
-                            .intersect_each(&self.primitives, count, rays, answer)
-                    });
+                let traced = traced_in_order(&batch, &order, |rays, out| {
+                    let answer = |i: usize, hit: Option<Hit>| out[i] = hit;
+                    self.accel
+                        .intersect_each(&self.primitives, rays.len(), |i| rays[i], answer)
+                });
                 let ranks = order.ranks();
                 t.par_chunks_mut(CHUNK)
                     .zip(prim.par_chunks_mut(CHUNK))
@@ -500,7 +505,6 @@ impl Bvh {
         let blocked = unsafe { out.as_slice_mut().expect("contiguous") };
         py.detach(|| {
             pools::install(threads, || {
-                let n = batch.len();
                 let Some(order) = self.batch_order(&batch) else {
                     return blocked
                         .par_chunks_mut(CHUNK)
@@ -513,18 +517,11 @@ impl Bvh {
                                 .occluded_each(&self.primitives, count, rays, answer)
                         });
                 };
-                let indices = order.indices();
-                let mut traced = vec![false; n];
-                traced
-                    .par_chunks_mut(CHUNK)
-                    .enumerate()
-                    .for_each(|(chunk, out)| {
-                        let rays = gather(&batch, &indices[chunk * CHUNK..][..out.len()]);
-                        let (rays, count) = (|i: usize| rays[i], out.len());
-                        let answer = |i: usize, blocked: bool| out[i] = blocked;
-                        self.accel
-                            .occluded_each(&self.primitives, count, rays, answer)
-                    });
+                let traced = traced_in_order(&batch, &order, |rays, out| {
+                    let answer = |i: usize, blocked: bool| out[i] = blocked;
+                    self.accel
+                        .occluded_each(&self.primitives, rays.len(), |i| rays[i], answer)
+                });
                 order.unsort_into(&traced, blocked);
             })
         })?;

@@ -188,11 +188,10 @@ impl Accel {
         // Trees with triangle packs test triangles themselves; the closure sees the rest.
         let test_other =
             |prim: u32, ray: &Ray| primitives[prim as usize].shape.intersect_non_triangle(ray);
+        if let Some(tree) = self.tree_without_triangle_closure() {
+            return tree.intersect_counted(ray, test_other, counter);
+        }
         match &self.tree {
-            // No triangle reaches the closure: there are none, or the tree tests them.
-            Some(tree) if tree.has_triangle_packs() || !self.has_triangles => {
-                tree.intersect_counted(ray, test_other, counter)
-            }
             Some(tree) => {
                 // The shear depends on the direction only: it stays valid as t_max shrinks.
                 let sheared = ShearedRay::new(ray);
@@ -222,10 +221,10 @@ impl Accel {
                 .intersect_non_triangle(ray)
                 .is_some()
         };
+        if let Some(tree) = self.tree_without_triangle_closure() {
+            return tree.occluded(ray, test_other);
+        }
         match &self.tree {
-            Some(tree) if tree.has_triangle_packs() || !self.has_triangles => {
-                tree.occluded(ray, test_other)
-            }
             Some(tree) => {
                 let sheared = ShearedRay::new(ray);
                 let test = |prim: u32, ray: &Ray| {
@@ -262,14 +261,14 @@ impl Accel {
         mut ray: impl FnMut(usize) -> Ray,
         mut answer: impl FnMut(usize, Option<Hit>),
     ) {
-        match &self.tree {
-            Some(tree) if tree.has_triangle_packs() || !self.has_triangles => {
+        match self.tree_without_triangle_closure() {
+            Some(tree) => {
                 let test_other = |prim: u32, ray: &Ray| {
                     primitives[prim as usize].shape.intersect_non_triangle(ray)
                 };
                 tree.intersect_each(count, ray, answer, test_other)
             }
-            _ => (0..count).for_each(|i| answer(i, self.intersect(primitives, &ray(i)))),
+            None => (0..count).for_each(|i| answer(i, self.intersect(primitives, &ray(i)))),
         }
     }
 
@@ -281,8 +280,8 @@ impl Accel {
         mut ray: impl FnMut(usize) -> Ray,
         mut answer: impl FnMut(usize, bool),
     ) {
-        match &self.tree {
-            Some(tree) if tree.has_triangle_packs() || !self.has_triangles => {
+        match self.tree_without_triangle_closure() {
+            Some(tree) => {
                 let test_other = |prim: u32, ray: &Ray| {
                     primitives[prim as usize]
                         .shape
@@ -291,8 +290,17 @@ impl Accel {
                 };
                 tree.occluded_each(count, ray, answer, test_other)
             }
-            _ => (0..count).for_each(|i| answer(i, self.occluded(primitives, &ray(i)))),
+            None => (0..count).for_each(|i| answer(i, self.occluded(primitives, &ray(i)))),
         }
+    }
+
+    /// The tree, when no triangle reaches its closure: there are none, or the tree tests
+    /// them itself from its packs. Its queries then need no sheared ray.
+    #[inline]
+    fn tree_without_triangle_closure(&self) -> Option<&Tree> {
+        self.tree
+            .as_ref()
+            .filter(|tree| tree.has_triangle_packs() || !self.has_triangles)
     }
 
     /// The ray prepared for triangle tests, when there are triangles to test.
