@@ -204,10 +204,14 @@ impl PackRay {
     }
 }
 
-/// Hits of one pack: lanes in `mask`, with distance and barycentrics per lane.
+/// Distance and barycentrics of each lane of one pack, valid in the lanes of the mask
+/// that [`PackKernel::test`] returns. The caller owns it and passes it to every test, so
+/// a pack that is missed (most are) writes nothing, and the mask comes back in a register:
+/// returning the whole record by value made each test store it in pieces and reload it
+/// whole, a load no store can forward, which stalled every pack test.
+#[repr(C, align(16))]
 #[derive(Clone, Copy, Debug, Default)]
 pub struct PackHits {
-    pub mask: u32,
     pub t: [f32; PACK_LANES],
     pub u: [f32; PACK_LANES],
     pub v: [f32; PACK_LANES],
@@ -215,13 +219,23 @@ pub struct PackHits {
 
 impl PackHits {
     fn set(&mut self, lane: usize, hit: PrimHit) {
-        self.mask |= 1 << lane;
         self.t[lane] = hit.t;
         self.u[lane] = hit.u;
         self.v[lane] = hit.v;
     }
 
-    /// Tests the `lanes` of `pack` one by one in the scalar core, adding their hits.
+    /// The hit in `lane`, which must be in the mask of the last test.
+    #[inline(always)]
+    pub fn lane(&self, lane: usize) -> PrimHit {
+        PrimHit {
+            t: self.t[lane],
+            u: self.u[lane],
+            v: self.v[lane],
+        }
+    }
+
+    /// Tests the `lanes` of `pack` one by one in the scalar core, adding their hits;
+    /// returns the lanes hit.
     #[inline(always)]
     fn add_scalar_lanes(
         &mut self,
@@ -230,24 +244,35 @@ impl PackHits {
         mut lanes: u32,
         t_min: f32,
         t_max: f32,
-    ) {
+    ) -> u32 {
+        let mut mask = 0;
         while lanes != 0 {
             let lane = lanes.trailing_zeros() as usize;
             lanes &= lanes - 1;
             if let Some(hit) = pack.lane_edges(lane, ray).hit(ray.shear, t_min, t_max) {
                 self.set(lane, hit);
+                mask |= 1 << lane;
             }
         }
+        mask
     }
 }
 
 /// A 4-lane triangle test: [`Scalar`] or [`Sse2`], identical in every bit.
 pub trait PackKernel {
-    /// Hits of the pack's triangle lanes within `[t_min, t_max]`.
+    /// The pack's triangle lanes hit within `[t_min, t_max]` (bit `i` for lane `i`).
+    /// With `HITS`, their hits are written to `hits` (other lanes are left as they were);
+    /// without (any-hit queries), `hits` is scratch space.
     ///
     /// # Safety
     /// The kernel's instruction set must be available.
-    unsafe fn test(pack: &TrianglePack, ray: &PackRay, t_min: f32, t_max: f32) -> PackHits;
+    unsafe fn test<const HITS: bool>(
+        pack: &TrianglePack,
+        ray: &PackRay,
+        t_min: f32,
+        t_max: f32,
+        hits: &mut PackHits,
+    ) -> u32;
 }
 
 /// The portable twin: the scalar core lane by lane.
@@ -255,10 +280,14 @@ pub(crate) struct ScalarPack;
 
 impl PackKernel for ScalarPack {
     #[inline(always)]
-    unsafe fn test(pack: &TrianglePack, ray: &PackRay, t_min: f32, t_max: f32) -> PackHits {
-        let mut hits = PackHits::default();
-        hits.add_scalar_lanes(pack, ray, pack.triangles, t_min, t_max);
-        hits
+    unsafe fn test<const HITS: bool>(
+        pack: &TrianglePack,
+        ray: &PackRay,
+        t_min: f32,
+        t_max: f32,
+        hits: &mut PackHits,
+    ) -> u32 {
+        hits.add_scalar_lanes(pack, ray, pack.triangles, t_min, t_max)
     }
 }
 
@@ -277,7 +306,13 @@ mod sse2 {
 
     impl PackKernel for Sse2Pack {
         #[inline(always)]
-        unsafe fn test(pack: &TrianglePack, ray: &PackRay, t_min: f32, t_max: f32) -> PackHits {
+        unsafe fn test<const HITS: bool>(
+            pack: &TrianglePack,
+            ray: &PackRay,
+            t_min: f32,
+            t_max: f32,
+            hits: &mut PackHits,
+        ) -> u32 {
             // SAFETY (whole block): SSE2 is part of x86-64; loads are from 16-aligned
             // `[f32; 4]` arrays.
             unsafe {
@@ -327,7 +362,7 @@ mod sse2 {
                 // Inside: no edge function of each sign (or all zero, sent to `redo`).
                 let straddles = _mm_movemask_ps(_mm_and_ps(negative, positive)) as u32;
                 let inside = lanes & !straddles & !redo;
-                let mut hits = PackHits::default();
+                let mut mask = 0;
                 // Most packs a ray reaches it misses: skip the division unless a lane
                 // is inside all three edges.
                 if inside != 0 {
@@ -350,8 +385,8 @@ mod sse2 {
                         _mm_cmpge_ps(t, _mm_set1_ps(t_min)),
                         _mm_cmple_ps(t, _mm_set1_ps(t_max)),
                     );
-                    hits.mask = _mm_movemask_ps(_mm_and_ps(det_ok, in_range)) as u32 & inside;
-                    if hits.mask != 0 {
+                    mask = _mm_movemask_ps(_mm_and_ps(det_ok, in_range)) as u32 & inside;
+                    if HITS && mask != 0 {
                         _mm_storeu_ps(hits.t.as_mut_ptr(), t);
                         _mm_storeu_ps(hits.u.as_mut_ptr(), _mm_div_ps(v, det));
                         _mm_storeu_ps(hits.v.as_mut_ptr(), _mm_div_ps(w, det));
@@ -359,8 +394,10 @@ mod sse2 {
                 }
                 // Lanes with an exactly-zero edge function go to the scalar core's
                 // f64 fallback.
-                hits.add_scalar_lanes(pack, ray, redo, t_min, t_max);
-                hits
+                if redo != 0 {
+                    mask |= hits.add_scalar_lanes(pack, ray, redo, t_min, t_max);
+                }
+                mask
             }
         }
     }
@@ -412,25 +449,25 @@ mod tests {
 
     fn kernels_agree(ray: &Ray) {
         let pr = PackRay::new(ray);
-        let scalar = unsafe { ScalarPack::test(&pack(), &pr, ray.t_min, ray.t_max) };
+        let mut scalar = PackHits::default();
+        let scalar_mask =
+            unsafe { ScalarPack::test::<true>(&pack(), &pr, ray.t_min, ray.t_max, &mut scalar) };
         for lane in 0..PACK_LANES {
             let shift = Vec3::new(0.0, 0.0, lane as f32);
             let expect = (lane < 3)
                 .then(|| intersect_triangle(&tri().map(|v| v - shift), ray, &ShearedRay::new(ray)))
                 .flatten();
-            let got = (scalar.mask & (1 << lane) != 0).then(|| PrimHit {
-                t: scalar.t[lane],
-                u: scalar.u[lane],
-                v: scalar.v[lane],
-            });
+            let got = (scalar_mask & (1 << lane) != 0).then(|| scalar.lane(lane));
             assert_eq!(got, expect, "lane {lane}");
         }
         #[cfg(target_arch = "x86_64")]
         {
-            let simd = unsafe { Sse2Pack::test(&pack(), &pr, ray.t_min, ray.t_max) };
-            assert_eq!(simd.mask, scalar.mask);
+            let mut simd = PackHits::default();
+            let simd_mask =
+                unsafe { Sse2Pack::test::<true>(&pack(), &pr, ray.t_min, ray.t_max, &mut simd) };
+            assert_eq!(simd_mask, scalar_mask);
             for lane in 0..PACK_LANES {
-                if scalar.mask & (1 << lane) != 0 {
+                if scalar_mask & (1 << lane) != 0 {
                     assert_eq!(simd.t[lane].to_bits(), scalar.t[lane].to_bits());
                     assert_eq!(simd.u[lane].to_bits(), scalar.u[lane].to_bits());
                     assert_eq!(simd.v[lane].to_bits(), scalar.v[lane].to_bits());

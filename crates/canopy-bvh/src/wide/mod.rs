@@ -12,7 +12,7 @@ mod kernels;
 mod traverse;
 
 use crate::traverse::TraversalCounter;
-use crate::triangle::{TrianglePack, NO_PRIM, PACK_LANES};
+use crate::triangle::{PackHits, TrianglePack, NO_PRIM, PACK_LANES};
 use crate::view::{Child, ChildKind, TreeView};
 use crate::{
     Aabb, Bvh2, BvhError, Hit, Isa, IsaError, PrimHit, Ray, RayOrder, SahCosts, TreeStats,
@@ -673,6 +673,7 @@ where
             let mut leaves = PackedLeaves::<T, F> {
                 packs: &bvh.packs,
                 ray: None,
+                hits: PackHits::default(),
                 test,
                 kernel: PhantomData,
             };
@@ -706,6 +707,7 @@ impl<const N: usize, F: FnMut(u32, &Ray) -> bool> Query<N> for AnyQuery<'_, N, F
             let mut leaves = PackedLeaves::<T, F> {
                 packs: &bvh.packs,
                 ray: None,
+                hits: PackHits::default(),
                 test,
                 kernel: PhantomData,
             };

@@ -6,7 +6,7 @@
 use super::kernels::{NodeKernel, OctRay, ScalarNode};
 use super::WideNode;
 use crate::traverse::{TraversalCounter, TraversalStack};
-use crate::triangle::{PackKernel, PackRay, ScalarPack, TrianglePack, PACK_LANES};
+use crate::triangle::{PackHits, PackKernel, PackRay, ScalarPack, TrianglePack, PACK_LANES};
 use crate::{Hit, Isa, PrimHit, Ray};
 use std::marker::PhantomData;
 
@@ -119,6 +119,8 @@ pub(crate) struct PackedLeaves<'a, T, F> {
     /// The ray prepared for pack tests, made at the first leaf: a ray that misses every
     /// leaf (most rays past a mesh's silhouette) never pays for it.
     pub ray: Option<PackRay>,
+    /// Where pack tests write their hits (see [`PackHits`]).
+    pub hits: PackHits,
     pub test: F,
     pub kernel: PhantomData<T>,
 }
@@ -163,14 +165,11 @@ where
                     c.test_primitive();
                 }
                 // SAFETY: `dispatch` runs this only where `T`'s instruction set exists.
-                let hits = unsafe { T::test(pack, &pack_ray, s.ray.t_min, s.ray.t_max) };
-                for lane in lanes(hits.mask) {
-                    let hit = PrimHit {
-                        t: hits.t[lane],
-                        u: hits.u[lane],
-                        v: hits.v[lane],
-                    };
-                    s.offer(Hit::new(pack.prim[lane], hit));
+                let hits = &mut self.hits;
+                let mask =
+                    unsafe { T::test::<true>(pack, &pack_ray, s.ray.t_min, s.ray.t_max, hits) };
+                for lane in lanes(mask) {
+                    s.offer(Hit::new(pack.prim[lane], hits.lane(lane)));
                 }
             }
             for lane in lanes(pack.others) {
@@ -188,10 +187,12 @@ impl<T: PackKernel, F: FnMut(u32, &Ray) -> bool> AnyLeaves for PackedLeaves<'_, 
     #[inline(always)]
     fn any(&mut self, first: u32, count: u32, ray: &Ray) -> bool {
         let pack_ray = self.pack_ray(ray);
+        let mut scratch = PackHits::default();
         for pack in leaf_packs(self.packs, first, count) {
             // SAFETY: as above.
             if pack.triangles != 0
-                && unsafe { T::test(pack, &pack_ray, ray.t_min, ray.t_max) }.mask != 0
+                && unsafe { T::test::<false>(pack, &pack_ray, ray.t_min, ray.t_max, &mut scratch) }
+                    != 0
             {
                 return true;
             }
