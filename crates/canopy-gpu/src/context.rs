@@ -19,6 +19,13 @@ pub enum GpuError {
         limit: u64,
         limit_name: &'static str,
     },
+    #[error("{what} needs {bytes} bytes, more than {chunks} storage bindings hold on this adapter ({binding} bytes each, its max_storage_buffer_binding_size)")]
+    TooLargeToSplit {
+        what: &'static str,
+        bytes: u64,
+        chunks: usize,
+        binding: u64,
+    },
     #[error("the BVH is {depth} levels deep; the GPU traversal stack holds {max}")]
     TooDeep { depth: usize, max: usize },
     #[error("reading results back from the GPU failed: {0}")]
@@ -31,6 +38,9 @@ pub struct Gpu {
     pub(crate) queue: wgpu::Queue,
     info: wgpu::AdapterInfo,
     limits: wgpu::Limits,
+    /// The largest storage binding canopy uses: the adapter's, or less (see
+    /// [`Gpu::cap_binding_bytes`]).
+    max_binding: u64,
     /// The first error wgpu reported since the last check (it would panic otherwise).
     reported: Arc<Mutex<Option<String>>>,
 }
@@ -74,6 +84,9 @@ impl Gpu {
             device,
             queue,
             info,
+            max_binding: limits
+                .max_storage_buffer_binding_size
+                .min(limits.max_buffer_size),
             limits,
             reported,
         })
@@ -124,12 +137,15 @@ impl Gpu {
         }
     }
 
-    /// A compute pipeline from WGSL sources joined in order, entry point `entry`.
+    /// A compute pipeline from WGSL sources joined in order, entry point `entry`, with
+    /// values for the shader's overridable `constants`.
     pub(crate) fn pipeline(
         &self,
         entry: &str,
         sources: &[&str],
+        constants: &[(String, f64)],
     ) -> Result<wgpu::ComputePipeline, GpuError> {
+        let constants: Vec<(&str, f64)> = constants.iter().map(|(k, v)| (k.as_str(), *v)).collect();
         let module = self
             .device
             .create_shader_module(wgpu::ShaderModuleDescriptor {
@@ -143,7 +159,10 @@ impl Gpu {
                 layout: None,
                 module: &module,
                 entry_point: Some(entry),
-                compilation_options: Default::default(),
+                compilation_options: wgpu::PipelineCompilationOptions {
+                    constants: &constants,
+                    ..Default::default()
+                },
                 cache: None,
             });
         self.check()?;
@@ -189,13 +208,23 @@ impl Gpu {
         &self.limits
     }
 
+    /// Bytes one storage binding may hold.
+    pub(crate) fn max_binding_bytes(&self) -> u64 {
+        self.max_binding
+    }
+
+    /// Treats storage bindings as holding at most `bytes` (never more than the adapter
+    /// allows), so that small scenes take the paths of large ones: arrays split over
+    /// several bindings, and the errors of scenes that do not fit. For tests and for
+    /// trying a smaller GPU's limits.
+    pub fn cap_binding_bytes(&mut self, bytes: u64) {
+        self.max_binding = self.max_binding.min(bytes);
+    }
+
     /// Refuses a buffer larger than one storage binding may be.
     pub(crate) fn check_size(&self, what: &'static str, bytes: u64) -> Result<(), GpuError> {
         let checks = [
-            (
-                self.limits.max_storage_buffer_binding_size,
-                "max_storage_buffer_binding_size",
-            ),
+            (self.max_binding, "max_storage_buffer_binding_size"),
             (self.limits.max_buffer_size, "max_buffer_size"),
         ];
         for (limit, limit_name) in checks {
@@ -236,13 +265,14 @@ mod tests {
             Ok(gpu) => gpu,
             Err(e) => return eprintln!("SKIPPED: no GPU adapter: {e}"),
         };
-        let Err(err) = gpu.pipeline("broken", &["@compute @workgroup_size(1) fn broken( {"]) else {
+        let Err(err) = gpu.pipeline("broken", &["@compute @workgroup_size(1) fn broken( {"], &[])
+        else {
             panic!("a broken shader compiled");
         };
         assert!(matches!(err, GpuError::Reported(_)), "{err}");
         // The error was taken: the device goes on working.
         assert!(gpu.check().is_ok());
-        gpu.pipeline("fine", &["@compute @workgroup_size(1) fn fine() {}"])
+        gpu.pipeline("fine", &["@compute @workgroup_size(1) fn fine() {}"], &[])
             .unwrap();
     }
 }

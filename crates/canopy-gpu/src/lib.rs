@@ -18,12 +18,14 @@
 //! # Ok(()) }
 //! ```
 
+mod chunked;
 mod context;
 mod render;
 mod rng_check;
 mod scene;
 mod trace;
 
+pub use chunked::CHUNKS;
 pub use context::{adapters, Gpu, GpuError};
 pub use render::{DispatchStats, GpuMaterial, Renderer};
 pub use rng_check::first_words;

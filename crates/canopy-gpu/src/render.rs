@@ -2,7 +2,8 @@
 //! Russian roulette) and the report's `bsdf` — one invocation per pixel, samples added
 //! to a CPU [`Accumulator`] dispatch by dispatch.
 
-use crate::scene::GpuScene;
+use crate::chunked::ChunkedBuffer;
+use crate::scene::{GpuScene, NODE_BINDINGS, PRIM_BINDINGS};
 use crate::{Gpu, GpuError};
 use bytemuck::{Pod, Zeroable};
 use canopy_bvh::Bvh2;
@@ -179,17 +180,13 @@ impl<'g> Renderer<'g> {
         let pixels = width as u64 * height as u64;
         let storage = |label, bytes: &[u8], extra| gpu.storage(label, bytes, extra);
         let none = wgpu::BufferUsages::empty();
-        let nodes = storage(
-            "BVH nodes",
-            bytemuck::cast_slice(&flat.upload_nodes()),
-            none,
-        )?;
+        let nodes = ChunkedBuffer::new(gpu, "NODE", "BVH nodes", &flat.upload_nodes())?;
         let indices = storage(
             "primitive indices",
             bytemuck::cast_slice(flat.bvh.prim_indices()),
             none,
         )?;
-        let primitives = storage("primitives", bytemuck::cast_slice(&flat.primitives), none)?;
+        let primitives = ChunkedBuffer::new(gpu, "PRIM", "primitives", &flat.primitives)?;
         let materials: Vec<GpuMaterial> = scene.materials.iter().map(GpuMaterial::new).collect();
         let materials = storage("materials", bytemuck::cast_slice(&materials), none)?;
         let normals: Vec<[f32; 4]> = scene
@@ -197,7 +194,7 @@ impl<'g> Renderer<'g> {
             .iter()
             .flat_map(|n| n.map(|v| vec4(v, 0.0)))
             .collect();
-        let normals = storage("vertex normals", bytemuck::cast_slice(&normals), none)?;
+        let normals = ChunkedBuffer::new(gpu, "NORMAL", "vertex normals", &normals)?;
         let (light_table, light_of_prim) = gpu_lights(scene);
         let lights = storage("lights", bytemuck::cast_slice(&light_table), none)?;
         let light_of_prim = storage(
@@ -273,19 +270,22 @@ impl<'g> Renderer<'g> {
                 include_str!("shaders/path.wgsl"),
                 include_str!("shaders/environment.wgsl"),
             ],
+            &[
+                nodes.constants(),
+                primitives.constants(),
+                normals.constants(),
+            ]
+            .concat(),
         )?;
         let layout = pipeline.get_bind_group_layout(0);
         let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("render"),
             layout: &layout,
             entries: &[
-                (0, &nodes),
                 (1, &indices),
-                (2, &primitives),
                 (3, &materials),
                 (4, &frame_buffer),
                 (5, &accum),
-                (6, &normals),
                 (7, &ray_count),
                 (8, &lights),
                 (9, &light_of_prim),
@@ -293,10 +293,15 @@ impl<'g> Renderer<'g> {
                 (11, &env_cells),
                 (12, &env_rows),
             ]
+            .into_iter()
+            .chain(nodes.entries(NODE_BINDINGS))
+            .chain(primitives.entries(PRIM_BINDINGS))
+            .chain(normals.entries([6, 19, 20, 21]))
             .map(|(binding, buffer)| wgpu::BindGroupEntry {
                 binding,
                 resource: buffer.as_entire_binding(),
-            }),
+            })
+            .collect::<Vec<_>>(),
         });
         Ok(Self {
             gpu,

@@ -47,6 +47,7 @@ pub fn first_words(
             include_str!("shaders/rng.wgsl"),
             include_str!("shaders/rng_test.wgsl"),
         ],
+        &[],
     )?;
     let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
         label: Some("first_words"),

@@ -1,6 +1,7 @@
 //! A scene flattened into GPU buffers: primitives as tagged records, rays, and the BVH in
 //! the GPU layout ([`GpuBvh`]).
 
+use crate::chunked::CHUNKS;
 use crate::GpuError;
 use bytemuck::{Pod, Zeroable};
 use canopy_bvh::{
@@ -9,6 +10,10 @@ use canopy_bvh::{
 use canopy_render::geometry::Shape;
 use canopy_render::scene::Primitive;
 use std::borrow::Cow;
+
+/// The bindings of the chunks of the nodes and of the primitives (common.wgsl).
+pub(crate) const NODE_BINDINGS: [u32; CHUNKS] = [0, 13, 14, 15];
+pub(crate) const PRIM_BINDINGS: [u32; CHUNKS] = [2, 16, 17, 18];
 
 /// Deepest tree the GPU traversal's stack of pending nodes can walk.
 pub const MAX_TREE_DEPTH: usize = 64;

@@ -1,6 +1,7 @@
 //! The ray-tracing kernel: closest hits of a batch of rays.
 
-use crate::scene::{GpuRay, GpuScene};
+use crate::chunked::ChunkedBuffer;
+use crate::scene::{GpuRay, GpuScene, NODE_BINDINGS, PRIM_BINDINGS};
 use crate::{Gpu, GpuError};
 use canopy_bvh::{Hit, Ray};
 use wgpu::util::DeviceExt;
@@ -22,26 +23,27 @@ struct GpuHit {
 pub struct Tracer<'g> {
     gpu: &'g Gpu,
     pipeline: wgpu::ComputePipeline,
-    nodes: wgpu::Buffer,
+    nodes: ChunkedBuffer,
     prim_indices: wgpu::Buffer,
-    primitives: wgpu::Buffer,
+    primitives: ChunkedBuffer,
 }
 
 impl<'g> Tracer<'g> {
     pub fn new(gpu: &'g Gpu, scene: &GpuScene) -> Result<Self, GpuError> {
-        let storage = |label, bytes: &[u8]| gpu.storage(label, bytes, wgpu::BufferUsages::empty());
-        let nodes = storage("BVH nodes", bytemuck::cast_slice(&scene.upload_nodes()))?;
-        let prim_indices = storage(
+        let nodes = ChunkedBuffer::new(gpu, "NODE", "BVH nodes", &scene.upload_nodes())?;
+        let prim_indices = gpu.storage(
             "primitive indices",
             bytemuck::cast_slice(scene.bvh.prim_indices()),
+            wgpu::BufferUsages::empty(),
         )?;
-        let primitives = storage("primitives", bytemuck::cast_slice(&scene.primitives))?;
+        let primitives = ChunkedBuffer::new(gpu, "PRIM", "primitives", &scene.primitives)?;
         let pipeline = gpu.pipeline(
             "trace",
             &[
                 include_str!("shaders/common.wgsl"),
                 include_str!("shaders/trace.wgsl"),
             ],
+            &[nodes.constants(), primitives.constants()].concat(),
         )?;
         Ok(Self {
             gpu,
@@ -53,10 +55,14 @@ impl<'g> Tracer<'g> {
     }
 
     /// The closest hit of each ray (ties to the lower primitive index), in dispatches
-    /// of at most a million rays.
+    /// of at most a million rays, fewer where the adapter's bindings cannot hold their
+    /// rays.
     pub fn closest(&self, rays: &[Ray]) -> Result<Vec<Option<Hit>>, GpuError> {
+        let binding = self.gpu.max_binding_bytes() as usize;
         let per_dispatch = RAYS_PER_DISPATCH
-            .min(self.gpu.limits().max_compute_workgroups_per_dimension as usize * 64);
+            .min(self.gpu.limits().max_compute_workgroups_per_dimension as usize * 64)
+            .min(binding / std::mem::size_of::<GpuRay>())
+            .max(1);
         let mut hits = Vec::with_capacity(rays.len());
         for chunk in rays.chunks(per_dispatch) {
             hits.extend(self.closest_chunk(chunk)?);
@@ -95,17 +101,19 @@ impl<'g> Tracer<'g> {
             label: Some("trace"),
             layout: &layout,
             entries: &[
-                (0, &self.nodes),
                 (1, &self.prim_indices),
-                (2, &self.primitives),
                 (3, &ray_buffer),
                 (4, &hit_buffer),
                 (5, &params),
             ]
+            .into_iter()
+            .chain(self.nodes.entries(NODE_BINDINGS))
+            .chain(self.primitives.entries(PRIM_BINDINGS))
             .map(|(binding, buffer)| wgpu::BindGroupEntry {
                 binding,
                 resource: buffer.as_entire_binding(),
-            }),
+            })
+            .collect::<Vec<_>>(),
         });
         let mut encoder = device.create_command_encoder(&Default::default());
         {

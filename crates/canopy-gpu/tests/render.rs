@@ -7,7 +7,7 @@
 //! with a message only when no adapter can be created at all.
 
 use canopy_bvh::{BuildParams, Builder};
-use canopy_gpu::{Gpu, GpuError, Renderer};
+use canopy_gpu::{Gpu, GpuError, GpuPrimitive, Renderer, CHUNKS};
 use canopy_render::rng::Rng;
 use canopy_render::{render, Accel, AccelKind, Accumulator, BvhWidth, Film, Integrator, Scene};
 
@@ -200,9 +200,8 @@ fn spheres_of_every_material_render_alike_on_cpu_and_gpu() {
     assert_devices_agree("spheres", &gpu, &scene_from("spheres", SPHERES), 10);
 }
 
-#[test]
-fn a_smooth_mesh_and_rotated_boxes_render_alike_on_cpu_and_gpu() {
-    let Some(gpu) = gpu() else { return };
+/// A smooth teapot (vertex normals), rotated boxes and an emitter.
+fn teapot_scene() -> Scene {
     let teapot = concat!(
         env!("CARGO_MANIFEST_DIR"),
         "/../../scenes/meshes/teapot.ply"
@@ -249,7 +248,60 @@ material = {{ type = "emissive", radiance = [6, 6, 6] }}
         !scene.vertex_normals.is_empty(),
         "the teapot should be smooth"
     );
-    assert_devices_agree("mesh", &gpu, &scene, 10);
+    scene
+}
+
+#[test]
+fn a_smooth_mesh_and_rotated_boxes_render_alike_on_cpu_and_gpu() {
+    let Some(gpu) = gpu() else { return };
+    assert_devices_agree("mesh", &gpu, &teapot_scene(), 10);
+}
+
+/// The GPU image of `scene`, rendered in one dispatch.
+fn gpu_film(gpu: &Gpu, scene: &Scene, bvh: &canopy_bvh::Bvh2) -> Film {
+    let renderer = Renderer::new(gpu, scene, bvh).unwrap();
+    let mut acc = Accumulator::new(scene.settings.width, scene.settings.height);
+    renderer
+        .render_samples(&mut acc, scene.settings.spp)
+        .unwrap();
+    acc.film()
+}
+
+#[test]
+fn arrays_split_over_several_bindings_render_the_same_image() {
+    let Some(gpu) = gpu() else { return };
+    let mut scene = teapot_scene();
+    scene.settings.spp = 4;
+    let boxes: Vec<_> = scene.primitives.iter().map(|p| p.shape.bounds()).collect();
+    let bvh = canopy_bvh::build(Builder::BinnedSah, &boxes, &BuildParams::default());
+    let whole = gpu_film(&gpu, &scene, &bvh);
+
+    // Bindings that hold a quarter of the primitives (rounded up to a power of two):
+    // primitives, nodes and vertex normals each come in two to four chunks.
+    let mut split = Gpu::new().unwrap();
+    let per_chunk = scene.primitives.len().div_ceil(CHUNKS).next_power_of_two();
+    let cap = (per_chunk * std::mem::size_of::<GpuPrimitive>()) as u64;
+    assert!(scene.primitives.len() * std::mem::size_of::<GpuPrimitive>() > 2 * cap as usize);
+    assert!(scene.vertex_normals.len() * 48 > cap as usize);
+    split.cap_binding_bytes(cap);
+    let parts = gpu_film(&split, &scene, &bvh);
+    assert!(
+        whole.pixels.iter().any(|p| p.length() > 0.0),
+        "a black image"
+    );
+    assert_eq!(whole.pixels, parts.pixels);
+
+    // Bindings too small for four chunks: a clear error, not a panic.
+    split.cap_binding_bytes(cap / 4);
+    let Err(err) = Renderer::new(&split, &scene, &bvh) else {
+        panic!("a scene larger than four bindings was accepted");
+    };
+    let message = err.to_string();
+    assert!(
+        message.contains("4 storage bindings")
+            && message.contains("max_storage_buffer_binding_size"),
+        "{message}"
+    );
 }
 
 #[test]

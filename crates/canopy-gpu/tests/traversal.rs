@@ -6,7 +6,7 @@
 //! with a message only when no adapter can be created at all.
 
 use canopy_bvh::{BuildParams, Builder, Hit, Ray};
-use canopy_gpu::{Gpu, GpuError, GpuScene, Tracer};
+use canopy_gpu::{Gpu, GpuError, GpuPrimitive, GpuScene, Tracer};
 use canopy_render::geometry::{Cuboid, Shape, Sphere, Triangle};
 use canopy_render::scene::Primitive;
 use canopy_render::{Accel, AccelKind, BvhWidth};
@@ -138,6 +138,24 @@ fn gpu_closest_hits_equal_the_cpu_ones() {
             "{builder}: {differing} rays hit on one side and missed on the other"
         );
     }
+}
+
+#[test]
+fn nodes_and_primitives_split_over_several_bindings_give_the_same_hits() {
+    let Some(gpu) = gpu() else { return };
+    let prims = scene(3000);
+    let rays = rays(5000);
+    let flat = GpuScene::new(&prims, &BuildParams::default()).unwrap();
+    let whole = Tracer::new(&gpu, &flat).unwrap().closest(&rays).unwrap();
+    // Bindings of 1024 primitives (96 bytes each) or 1024 nodes (64 bytes each, as 2048
+    // would not fit): three chunks of primitives, and three of this tree's nodes.
+    let mut split = Gpu::new().unwrap();
+    split.cap_binding_bytes(1024 * std::mem::size_of::<GpuPrimitive>() as u64);
+    let nodes = flat.bvh().nodes().len();
+    assert!((2049..=3072).contains(&nodes), "{nodes} nodes");
+    let parts = Tracer::new(&split, &flat).unwrap().closest(&rays).unwrap();
+    assert!(whole.iter().filter(|h| h.is_some()).count() > rays.len() / 10);
+    assert_eq!(whole, parts);
 }
 
 #[test]

@@ -48,9 +48,49 @@ const STACK: u32 = 64u;
 const FAR_SLACK: f32 = 1.0000003576;
 const INF: f32 = 0x1p+127;
 
+// Nodes and primitives may each come in up to four bindings of 2^<NAME>_BITS elements
+// (chunked.rs), read through node_at and prim_at; the constants are set per scene when
+// the pipeline is made, so a scene in one binding reads the plain array.
+override NODE_BITS: u32 = 31u;
+override NODE_CHUNKS: u32 = 1u;
+override PRIM_BITS: u32 = 31u;
+override PRIM_CHUNKS: u32 = 1u;
+
 @group(0) @binding(0) var<storage, read> nodes: array<Node>;
+@group(0) @binding(13) var<storage, read> nodes1: array<Node>;
+@group(0) @binding(14) var<storage, read> nodes2: array<Node>;
+@group(0) @binding(15) var<storage, read> nodes3: array<Node>;
 @group(0) @binding(1) var<storage, read> prim_indices: array<u32>;
 @group(0) @binding(2) var<storage, read> prims: array<Primitive>;
+@group(0) @binding(16) var<storage, read> prims1: array<Primitive>;
+@group(0) @binding(17) var<storage, read> prims2: array<Primitive>;
+@group(0) @binding(18) var<storage, read> prims3: array<Primitive>;
+
+fn node_at(i: u32) -> Node {
+    if (NODE_CHUNKS == 1u) {
+        return nodes[i];
+    }
+    let local = i & ((1u << NODE_BITS) - 1u);
+    switch (i >> NODE_BITS) {
+        case 0u: { return nodes[local]; }
+        case 1u: { return nodes1[local]; }
+        case 2u: { return nodes2[local]; }
+        default: { return nodes3[local]; }
+    }
+}
+
+fn prim_at(i: u32) -> Primitive {
+    if (PRIM_CHUNKS == 1u) {
+        return prims[i];
+    }
+    let local = i & ((1u << PRIM_BITS) - 1u);
+    switch (i >> PRIM_BITS) {
+        case 0u: { return prims[local]; }
+        case 1u: { return prims1[local]; }
+        case 2u: { return prims2[local]; }
+        default: { return prims3[local]; }
+    }
+}
 
 
 struct Query {
@@ -200,7 +240,7 @@ fn hit_cuboid(p: Primitive, q: Query, t_max: f32) -> f32 {
 
 // (t, u, v) of primitive `index`, or t < 0.
 fn hit_primitive(index: u32, q: Query, t_max: f32) -> vec3<f32> {
-    let p = prims[index];
+    let p = prim_at(index);
     switch p.header.x {
         case 0u: {
             return hit_triangle(p, q, t_max);
@@ -223,7 +263,7 @@ fn walk(r: RayIn, first_ends: bool) -> HitOut {
     var sp = 0u;
     var node = 0u;
     loop {
-        let n = nodes[node];
+        let n = node_at(node);
         var children = array<vec3<u32>, 2>(
             vec3<u32>(n.left, n.left_count, 0u),
             vec3<u32>(n.right, n.right_count, 0u),

@@ -107,7 +107,7 @@ fn cone_of(p: Primitive, reference: vec3<f32>) -> vec2<f32> {
 // A point on primitive `index` for light arriving at `reference`, drawn from `u`; a
 // zero pdf when there is none.
 fn sample_toward(index: u32, reference: vec3<f32>, u: vec2<f32>) -> LightPoint {
-    let p = prims[index];
+    let p = prim_at(index);
     var out = LightPoint(vec3<f32>(0.0), vec3<f32>(0.0, 1.0, 0.0), shape_error(p), 0.0);
     switch p.header.x {
         case 0u: {
@@ -201,7 +201,7 @@ fn sample_toward(index: u32, reference: vec3<f32>, u: vec2<f32>) -> LightPoint {
 }
 
 fn pdf_toward(index: u32, reference: vec3<f32>, point: vec3<f32>, normal: vec3<f32>) -> f32 {
-    let p = prims[index];
+    let p = prim_at(index);
     if (p.header.x == 1u) {
         let cone = cone_of(p, reference);
         if (cone.x >= 0.0) {
@@ -329,7 +329,7 @@ fn sample_lights(m: Material, dir: vec3<f32>, s: Surface, rng: ptr<function, Rng
                 let origin = offset_origin(s, wi);
                 *rays += vec2<u32>(1u, 1u);
                 if (!occluded(RayIn(origin, 0.0, aim - origin, 1.0 - SHADOW_SHORTENING))) {
-                    let radiance = emitted(materials[prims[light.prim].header.y]);
+                    let radiance = emitted(materials[prim_at(light.prim).header.y]);
                     let weight = power_heuristic(pdf, material_pdf(m, dir, s, wi));
                     direct += f * radiance * (weight / pdf);
                 }
@@ -374,7 +374,7 @@ fn radiance_path(camera_origin: vec3<f32>, camera_dir: vec3<f32>, rng: ptr<funct
             total += throughput * weight * background(dir);
             break;
         }
-        let material = materials[prims[hit.prim].header.y];
+        let material = materials[prim_at(hit.prim).header.y];
         let s = surface_of(hit.prim, origin, dir, hit);
         let light = emitted(material);
         if (any(light != vec3<f32>(0.0))) {

@@ -37,8 +37,27 @@ struct Frame {
 @group(0) @binding(4) var<uniform> frame: Frame;
 // Per pixel: radiance sums (xyz) and samples that were not finite (w).
 @group(0) @binding(5) var<storage, read_write> accum: array<vec4<f32>>;
-// Three per smooth triangle (`header.z` indexes them; FLAT = none).
+// Three per smooth triangle (`header.z` indexes them; FLAT = none), in up to four
+// bindings as nodes and primitives are (common.wgsl).
+override NORMAL_BITS: u32 = 31u;
+override NORMAL_CHUNKS: u32 = 1u;
 @group(0) @binding(6) var<storage, read> vertex_normals: array<vec4<f32>>;
+@group(0) @binding(19) var<storage, read> vertex_normals1: array<vec4<f32>>;
+@group(0) @binding(20) var<storage, read> vertex_normals2: array<vec4<f32>>;
+@group(0) @binding(21) var<storage, read> vertex_normals3: array<vec4<f32>>;
+
+fn normal_at(i: u32) -> vec4<f32> {
+    if (NORMAL_CHUNKS == 1u) {
+        return vertex_normals[i];
+    }
+    let local = i & ((1u << NORMAL_BITS) - 1u);
+    switch (i >> NORMAL_BITS) {
+        case 0u: { return vertex_normals[local]; }
+        case 1u: { return vertex_normals1[local]; }
+        case 2u: { return vertex_normals2[local]; }
+        default: { return vertex_normals3[local]; }
+    }
+}
 @group(0) @binding(7) var<storage, read_write> ray_count: array<atomic<u32>>;
 
 const FLAT: u32 = 0xffffffffu;
@@ -67,7 +86,7 @@ fn normalize_or(v: vec3<f32>, fallback: vec3<f32>) -> vec3<f32> {
 }
 
 fn surface_of(index: u32, origin: vec3<f32>, dir: vec3<f32>, hit: HitOut) -> Surface {
-    let p = prims[index];
+    let p = prim_at(index);
     var s: Surface;
     switch p.header.x {
         case 0u: {
@@ -77,7 +96,7 @@ fn surface_of(index: u32, origin: vec3<f32>, dir: vec3<f32>, hit: HitOut) -> Sur
             s.shading = s.geometric;
             if (p.header.z != FLAT) {
                 let n = 3u * p.header.z;
-                let interpolated = w0 * vertex_normals[n].xyz + hit.u * vertex_normals[n + 1u].xyz + hit.v * vertex_normals[n + 2u].xyz;
+                let interpolated = w0 * normal_at(n).xyz + hit.u * normal_at(n + 1u).xyz + hit.v * normal_at(n + 2u).xyz;
                 s.shading = normalize_or(interpolated, s.geometric);
                 if (dot(s.shading, s.geometric) < 0.0) {
                     s.shading = -s.shading;
@@ -276,7 +295,7 @@ fn radiance_bsdf(camera_origin: vec3<f32>, camera_dir: vec3<f32>, rng: ptr<funct
             total += throughput * background(dir);
             break;
         }
-        let material = materials[prims[hit.prim].header.y];
+        let material = materials[prim_at(hit.prim).header.y];
         let s = surface_of(hit.prim, origin, dir, hit);
         total += throughput * emitted(material);
         let next = scatter(material, dir, s, rng);
