@@ -143,6 +143,7 @@ def test_tnear_and_tfar_limit_each_ray():
     hits = bvh.intersect(o, d, tnear=[0, 0, 1.5, 0.5], tfar=[np.inf, 0.5, np.inf, 1.0])
     np.testing.assert_array_equal(hits.prim, [0, -1, -1, 0])
     np.testing.assert_array_equal(hits.t, [1, np.inf, np.inf, 1])
+    np.testing.assert_allclose(hits.uv, [[0.2, 0.2], [0, 0], [0, 0], [0.2, 0.2]], rtol=1e-6)
     np.testing.assert_array_equal(bvh.occluded(o, d, tfar=0.99), [False] * 4)
     np.testing.assert_array_equal(bvh.occluded(o, d, tfar=1.0), [True] * 4)
 
