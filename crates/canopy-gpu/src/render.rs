@@ -51,7 +51,8 @@ struct Frame {
     v: [f32; 4],
     /// width, height, seed key, max depth.
     size: [u32; 4],
-    /// first sample, samples, background kind (0 sky, 1 constant), unused.
+    /// first sample, samples, background kind (0 sky, 1 constant, 2 map), first row of
+    /// the band being rendered.
     samples: [u32; 4],
     background: [f32; 4],
     /// lights, background is black (1), integrator (0 bsdf, 1 path), roulette (1).
@@ -164,6 +165,8 @@ pub struct Renderer<'g> {
     ray_count: wgpu::Buffer,
     width: u32,
     height: u32,
+    /// Rows rendered per dispatch (the whole image unless its sums exceed a binding).
+    band_rows: u32,
 }
 
 impl<'g> Renderer<'g> {
@@ -177,7 +180,6 @@ impl<'g> Renderer<'g> {
         let flat = GpuScene::with_bvh(&scene.primitives, bvh)?;
         let device = &gpu.device;
         let (width, height) = (scene.settings.width, scene.settings.height);
-        let pixels = width as u64 * height as u64;
         let storage = |label, bytes: &[u8], extra| gpu.storage(label, bytes, extra);
         let none = wgpu::BufferUsages::empty();
         let nodes = ChunkedBuffer::new(gpu, "NODE", "BVH nodes", &flat.upload_nodes())?;
@@ -213,8 +215,11 @@ impl<'g> Renderer<'g> {
             bytemuck::cast_slice(&env.rows),
             none,
         )?;
-        let accum_bytes = pixels * 16;
-        gpu.check_size("the image's sums", accum_bytes)?;
+        // The image is rendered in bands of rows, as many as one binding's sums hold.
+        let row_bytes = width as u64 * 16;
+        gpu.check_size("one row of the image's sums", row_bytes)?;
+        let band_rows = (gpu.max_binding_bytes() / row_bytes).min(height as u64) as u32;
+        let accum_bytes = band_rows as u64 * row_bytes;
         let accum = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("sums"),
             size: accum_bytes,
@@ -313,11 +318,13 @@ impl<'g> Renderer<'g> {
             ray_count,
             width,
             height,
+            band_rows,
         })
     }
 
-    /// Renders `count` more samples of every pixel in one dispatch (samples
-    /// `accumulator.samples..` of each pixel's streams) and adds them to `accumulator`.
+    /// Renders `count` more samples of every pixel (samples `accumulator.samples..` of
+    /// each pixel's streams) and adds them to `accumulator`: one dispatch, or one per band
+    /// of rows for an image whose sums exceed a storage binding.
     pub fn render_samples(
         &self,
         accumulator: &mut Accumulator,
@@ -330,29 +337,37 @@ impl<'g> Renderer<'g> {
         );
         let start = Instant::now();
         let gpu = self.gpu;
-        let frame = Frame {
-            samples: [accumulator.samples, count, self.frame.samples[2], 0],
-            ..self.frame
-        };
-        gpu.queue
-            .write_buffer(&self.frame_buffer, 0, bytemuck::bytes_of(&frame));
-        let mut encoder = gpu.device.create_command_encoder(&Default::default());
-        encoder.clear_buffer(&self.accum, 0, None);
-        encoder.clear_buffer(&self.ray_count, 0, None);
-        {
-            let mut pass = encoder.begin_compute_pass(&Default::default());
-            pass.set_pipeline(&self.pipeline);
-            pass.set_bind_group(0, &self.bind_group, &[]);
-            pass.dispatch_workgroups(self.width.div_ceil(8), self.height.div_ceil(8), 1);
-        }
-        gpu.queue.submit([encoder.finish()]);
-        let sums: Vec<[f32; 4]> = gpu.read_back(&self.accum)?;
-        let rays: Vec<u32> = gpu.read_back(&self.ray_count)?;
+        let width = self.width as usize;
         let mut invalid = 0u64;
-        for (total, s) in accumulator.sums.iter_mut().zip(&sums) {
-            *total += Vec3::new(s[0], s[1], s[2]);
-            invalid += s[3] as u64;
+        for first_row in (0..self.height).step_by(self.band_rows as usize) {
+            let rows = self.band_rows.min(self.height - first_row);
+            let frame = Frame {
+                samples: [accumulator.samples, count, self.frame.samples[2], first_row],
+                ..self.frame
+            };
+            // Each band is its own submission: the frame it reads is written before it.
+            gpu.queue
+                .write_buffer(&self.frame_buffer, 0, bytemuck::bytes_of(&frame));
+            let mut encoder = gpu.device.create_command_encoder(&Default::default());
+            encoder.clear_buffer(&self.accum, 0, None);
+            if first_row == 0 {
+                encoder.clear_buffer(&self.ray_count, 0, None);
+            }
+            {
+                let mut pass = encoder.begin_compute_pass(&Default::default());
+                pass.set_pipeline(&self.pipeline);
+                pass.set_bind_group(0, &self.bind_group, &[]);
+                pass.dispatch_workgroups(self.width.div_ceil(8), rows.div_ceil(8), 1);
+            }
+            gpu.queue.submit([encoder.finish()]);
+            let sums: Vec<[f32; 4]> = gpu.read_back(&self.accum)?;
+            let band = first_row as usize * width..(first_row + rows) as usize * width;
+            for (total, s) in accumulator.sums[band].iter_mut().zip(&sums) {
+                *total += Vec3::new(s[0], s[1], s[2]);
+                invalid += s[3] as u64;
+            }
         }
+        let rays: Vec<u32> = gpu.read_back(&self.ray_count)?;
         accumulator.samples += count;
         accumulator.rays += rays[0] as u64;
         accumulator.invalid_samples += invalid;

@@ -268,6 +268,26 @@ fn gpu_film(gpu: &Gpu, scene: &Scene, bvh: &canopy_bvh::Bvh2) -> Film {
 }
 
 #[test]
+fn images_larger_than_a_binding_render_in_bands_of_rows_with_the_same_result() {
+    let Some(gpu) = gpu() else { return };
+    let mut scene = scene_from("bands", SPHERES);
+    scene.settings.height = 37;
+    scene.settings.spp = 4;
+    let boxes: Vec<_> = scene.primitives.iter().map(|p| p.shape.bounds()).collect();
+    let bvh = canopy_bvh::build(Builder::BinnedSah, &boxes, &BuildParams::default());
+    let whole = gpu_film(&gpu, &scene, &bvh);
+    // Sums of five rows to a binding: eight bands, the last of two rows.
+    let mut banded = Gpu::new().unwrap();
+    banded.cap_binding_bytes(5 * 16 * scene.settings.width as u64);
+    let bands = gpu_film(&banded, &scene, &bvh);
+    assert!(
+        whole.pixels.iter().all(|p| p.length() > 0.0),
+        "black pixels"
+    );
+    assert_eq!(whole.pixels, bands.pixels);
+}
+
+#[test]
 fn arrays_split_over_several_bindings_render_the_same_image() {
     let Some(gpu) = gpu() else { return };
     let mut scene = teapot_scene();

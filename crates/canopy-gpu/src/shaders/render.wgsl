@@ -21,7 +21,7 @@ struct Frame {
     v: vec4<f32>,
     // width, height, seed key, max depth
     size: vec4<u32>,
-    // first sample, samples, background kind (0 sky, 1 constant, 2 map), unused
+    // first sample, samples, background kind (0 sky, 1 constant, 2 map), first row
     samples: vec4<u32>,
     background: vec4<f32>,
     // lights, background is black (1), integrator (0 bsdf, 1 path), Russian roulette (1)
@@ -35,7 +35,8 @@ struct Frame {
 
 @group(0) @binding(3) var<storage, read> materials: array<Material>;
 @group(0) @binding(4) var<uniform> frame: Frame;
-// Per pixel: radiance sums (xyz) and samples that were not finite (w).
+// Per pixel of the band being rendered: radiance sums (xyz) and samples that were not
+// finite (w).
 @group(0) @binding(5) var<storage, read_write> accum: array<vec4<f32>>;
 // Three per smooth triangle (`header.z` indexes them; FLAT = none), in up to four
 // bindings as nodes and primitives are (common.wgsl).
@@ -316,16 +317,21 @@ fn radiance_bsdf(camera_origin: vec3<f32>, camera_dir: vec3<f32>, rng: ptr<funct
 fn render(@builtin(global_invocation_id) id: vec3<u32>) {
     let width = frame.size.x;
     let height = frame.size.y;
-    if (id.x >= width || id.y >= height) {
+    // This dispatch renders a band of rows from frame.samples.w, as many as `accum`
+    // holds (large images come in several bands: render.rs).
+    let x = id.x;
+    let y = id.y + frame.samples.w;
+    let local = id.y * width + x;
+    if (x >= width || y >= height || local >= arrayLength(&accum)) {
         return;
     }
-    let pixel = id.y * width + id.x;
-    var sum = accum[pixel];
+    let pixel = y * width + x;
+    var sum = accum[local];
     var rays = vec2<u32>(0u);
     for (var sample = frame.samples.x; sample < frame.samples.x + frame.samples.y; sample++) {
         var rng = rng_for_sample(frame.size.z, pixel, sample);
-        let s = (f32(id.x) + next_f32(&rng)) / f32(width);
-        let t = (f32(id.y) + next_f32(&rng)) / f32(height);
+        let s = (f32(x) + next_f32(&rng)) / f32(width);
+        let t = (f32(y) + next_f32(&rng)) / f32(height);
         var origin = frame.origin.xyz;
         if (frame.origin.w > 0.0) {
             let disk = frame.origin.w * in_unit_disk(&rng);
@@ -345,7 +351,7 @@ fn render(@builtin(global_invocation_id) id: vec3<u32>) {
             sum.w += 1.0;
         }
     }
-    accum[pixel] = sum;
+    accum[local] = sum;
     atomicAdd(&ray_count[0], rays.x);
     atomicAdd(&ray_count[1], rays.y);
 }
