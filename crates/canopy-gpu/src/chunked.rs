@@ -63,12 +63,7 @@ impl ChunkedBuffer {
     /// Bind group entries for the chunks at `bindings` (the shader's order); bindings
     /// past the last chunk repeat the first buffer, which the shader never reads there.
     pub fn entries(&self, bindings: [u32; CHUNKS]) -> [(u32, &wgpu::Buffer); CHUNKS] {
-        let mut c = 0;
-        bindings.map(|binding| {
-            let buffer = self.buffers.get(c).unwrap_or(&self.buffers[0]);
-            c += 1;
-            (binding, buffer)
-        })
+        std::array::from_fn(|c| (bindings[c], self.buffers.get(c).unwrap_or(&self.buffers[0])))
     }
 
     /// The pipeline constants that tell the shader this array's chunking.
