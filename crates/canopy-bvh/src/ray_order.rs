@@ -3,7 +3,7 @@
 //! (ray reordering for coherence, in the manner of Pharr et al. 1997 and Moon et al.
 //! 2010). Answers come back in the caller's order; they do not depend on the order.
 
-use crate::Aabb;
+use crate::{Aabb, Ray};
 use glam::Vec3;
 use rayon::prelude::*;
 
@@ -187,6 +187,28 @@ impl RayOrder {
     /// caller's ray `i` in [`RayOrder::indices`].
     pub fn ranks(&self) -> &[u32] {
         &self.rank
+    }
+
+    /// Answers of every ray in this order, in parallel over chunks of `chunk` rays:
+    /// `each(rays, out)` answers one chunk on one thread. Each chunk's rays are gathered
+    /// first (`ray(i)` makes the caller's ray `i`): a tight loop overlaps the scattered
+    /// reads that the traversal would wait on one by one. `traced[k]` answers ray
+    /// `indices()[k]`; [`RayOrder::unsort_into`] puts them in the caller's order.
+    pub fn trace<T: Copy + Default + Send + Sync>(
+        &self,
+        chunk: usize,
+        ray: impl Fn(usize) -> Ray + Sync,
+        each: impl Fn(&[Ray], &mut [T]) + Sync,
+    ) -> Vec<T> {
+        let mut traced = vec![T::default(); self.order.len()];
+        traced
+            .par_chunks_mut(chunk)
+            .zip(self.order.par_chunks(chunk))
+            .for_each(|(out, indices)| {
+                let rays: Vec<Ray> = indices.iter().map(|&i| ray(i as usize)).collect();
+                each(&rays, out)
+            });
+        traced
     }
 
     /// Puts answers traced in this order (`traced[k]` for ray `indices()[k]`) in the

@@ -166,25 +166,6 @@ fn write_hit(t: &mut [f32], prim: &mut [i64], uv: &mut [f32], i: usize, hit: Opt
     }
 }
 
-/// Answers of `batch` in the trace order `order`, in parallel over chunks: `each(rays,
-/// out)` answers a chunk. Each chunk's rays are gathered first: a tight loop overlaps the
-/// scattered reads that the traversal would wait on one by one.
-fn traced_in_order<T: Copy + Default + Send + Sync>(
-    batch: &Batch<'_>,
-    order: &RayOrder,
-    each: impl Fn(&[Ray], &mut [T]) + Sync,
-) -> Vec<T> {
-    let mut traced = vec![T::default(); batch.len()];
-    traced
-        .par_chunks_mut(CHUNK)
-        .zip(order.indices().par_chunks(CHUNK))
-        .for_each(|(out, indices)| {
-            let rays: Vec<Ray> = indices.iter().map(|&i| batch.ray(i as usize)).collect();
-            each(&rays, out)
-        });
-    traced
-}
-
 /// A batch of rays as the caller's arrays, checked; rays are made from them on the fly,
 /// in parallel.
 #[derive(Clone, Copy)]
@@ -477,11 +458,15 @@ impl Bvh {
                                 .intersect_each(&self.primitives, count, rays, answer)
                         });
                 };
-                let traced = traced_in_order(&batch, &order, |rays, out| {
-                    let answer = |i: usize, hit: Option<Hit>| out[i] = hit;
-                    self.accel
-                        .intersect_each(&self.primitives, rays.len(), |i| rays[i], answer)
-                });
+                let traced = order.trace(
+                    CHUNK,
+                    |i| batch.ray(i),
+                    |rays, out| {
+                        let answer = |i: usize, hit: Option<Hit>| out[i] = hit;
+                        self.accel
+                            .intersect_each(&self.primitives, rays.len(), |i| rays[i], answer)
+                    },
+                );
                 let ranks = order.ranks();
                 t.par_chunks_mut(CHUNK)
                     .zip(prim.par_chunks_mut(CHUNK))
@@ -528,11 +513,15 @@ impl Bvh {
                                 .occluded_each(&self.primitives, count, rays, answer)
                         });
                 };
-                let traced = traced_in_order(&batch, &order, |rays, out| {
-                    let answer = |i: usize, blocked: bool| out[i] = blocked;
-                    self.accel
-                        .occluded_each(&self.primitives, rays.len(), |i| rays[i], answer)
-                });
+                let traced = order.trace(
+                    CHUNK,
+                    |i| batch.ray(i),
+                    |rays, out| {
+                        let answer = |i: usize, blocked: bool| out[i] = blocked;
+                        self.accel
+                            .occluded_each(&self.primitives, rays.len(), |i| rays[i], answer)
+                    },
+                );
                 order.unsort_into(&traced, blocked);
             })
         })?;

@@ -486,18 +486,13 @@ where
         out: &mut [T],
         each: impl Fn(&[Ray], &mut [T]) + Sync,
     ) {
-        let trace = |indices: Option<&[u32]>, out: &mut [T]| {
-            out.par_chunks_mut(BATCH_CHUNK)
-                .enumerate()
-                .for_each(|(chunk, out)| {
-                    each(&gather(rays, indices, chunk * BATCH_CHUNK, out.len()), out)
-                })
-        };
         match self.batch_order(rays) {
-            None => trace(None, out),
+            None => out
+                .par_chunks_mut(BATCH_CHUNK)
+                .zip(rays.par_chunks(BATCH_CHUNK))
+                .for_each(|(out, rays)| each(rays, out)),
             Some(order) => {
-                let mut traced = vec![T::default(); rays.len()];
-                trace(Some(order.indices()), &mut traced);
+                let traced = order.trace(BATCH_CHUNK, |i| rays[i], each);
                 order.unsort_into(&traced, out);
             }
         }
@@ -615,25 +610,6 @@ where
                 };
             (self.answer)(i, blocked);
         }
-    }
-}
-
-/// Rays `first..first + count` of the trace order (`indices`, else the slice's own), as
-/// one slice: borrowed when in order; else gathered in a tight loop, which overlaps the
-/// scattered reads that the traversal would wait on one by one.
-fn gather<'a>(
-    rays: &'a [Ray],
-    indices: Option<&[u32]>,
-    first: usize,
-    count: usize,
-) -> std::borrow::Cow<'a, [Ray]> {
-    match indices {
-        None => rays[first..first + count].into(),
-        Some(order) => order[first..first + count]
-            .iter()
-            .map(|&i| rays[i as usize])
-            .collect::<Vec<Ray>>()
-            .into(),
     }
 }
 

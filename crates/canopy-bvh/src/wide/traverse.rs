@@ -119,7 +119,8 @@ pub(crate) struct PackedLeaves<'a, T, F> {
     /// The ray prepared for pack tests, made at the first leaf: a ray that misses every
     /// leaf (most rays past a mesh's silhouette) never pays for it.
     pub ray: Option<PackRay>,
-    /// Where pack tests write their hits (see [`PackHits`]).
+    /// Where closest-hit pack tests write their hits (see [`PackHits`]); any-hit tests
+    /// use a scratch record of their own, which measured faster.
     pub hits: PackHits,
     pub test: F,
     pub kernel: PhantomData<T>,
