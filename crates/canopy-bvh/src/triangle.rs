@@ -2,8 +2,9 @@
 //! test (Woop, Benthin and Wald, "Watertight Ray/Triangle Intersection", JCGT 2013), and
 //! packs of four triangles stored by lanes in a wide tree's leaves.
 //!
-//! The scalar test and the 4-lane kernels perform the same IEEE operations in the same
-//! order (no fused multiply-add), so every kernel returns bit-identical hits.
+//! The scalar test and the SIMD kernels (4 lanes: one pack; 8 lanes: two packs of a leaf
+//! at once) perform the same IEEE operations in the same order (no fused multiply-add), so
+//! every kernel returns bit-identical hits.
 
 use crate::{PrimHit, Ray};
 use bytemuck::{Pod, Zeroable};
@@ -204,17 +205,21 @@ impl PackRay {
     }
 }
 
-/// Distance and barycentrics of each lane of one pack, valid in the lanes of the mask
-/// that [`PackKernel::test`] returns. The caller owns it and passes it to every test, so
-/// a pack that is missed (most are) writes nothing, and the mask comes back in a register:
-/// returning the whole record by value made each test store it in pieces and reload it
-/// whole, a load no store can forward, which stalled every pack test.
+/// Lanes of a [`PackHits`]: two packs, tested together by the 8-lane kernel.
+pub const PAIR_LANES: usize = 2 * PACK_LANES;
+
+/// Distance and barycentrics of each lane of one pack (lanes 0..4) or of a pair of packs
+/// (lanes 0..8, the second pack's in 4..8), valid in the lanes of the mask that
+/// [`PackKernel::test`] or [`PackKernel::test_pair`] returns. The caller owns it and passes
+/// it to every test, so a pack that is missed (most are) writes nothing, and the mask comes
+/// back in a register: returning the whole record by value made each test store it in
+/// pieces and reload it whole, a load no store can forward, which stalled every pack test.
 #[repr(C, align(16))]
 #[derive(Clone, Copy, Debug, Default)]
 pub struct PackHits {
-    pub t: [f32; PACK_LANES],
-    pub u: [f32; PACK_LANES],
-    pub v: [f32; PACK_LANES],
+    pub t: [f32; PAIR_LANES],
+    pub u: [f32; PAIR_LANES],
+    pub v: [f32; PAIR_LANES],
 }
 
 impl PackHits {
@@ -234,12 +239,13 @@ impl PackHits {
         }
     }
 
-    /// Tests the `lanes` of `pack` one by one in the scalar core, adding their hits;
-    /// returns the lanes hit.
+    /// Tests the `lanes` of `pack` one by one in the scalar core, adding their hits at
+    /// lanes `base + lane`; returns the lanes hit (bit `lane`, not shifted by `base`).
     #[inline(always)]
     fn add_scalar_lanes(
         &mut self,
         pack: &TrianglePack,
+        base: usize,
         ray: &PackRay,
         mut lanes: u32,
         t_min: f32,
@@ -250,7 +256,7 @@ impl PackHits {
             let lane = lanes.trailing_zeros() as usize;
             lanes &= lanes - 1;
             if let Some(hit) = pack.lane_edges(lane, ray).hit(ray.shear, t_min, t_max) {
-                self.set(lane, hit);
+                self.set(base + lane, hit);
                 mask |= 1 << lane;
             }
         }
@@ -258,16 +264,33 @@ impl PackHits {
     }
 }
 
-/// A 4-lane triangle test: [`Scalar`] or [`Sse2`], identical in every bit.
+/// A triangle test of one pack (4 lanes) or a pair of packs (8 lanes): [`ScalarPack`],
+/// [`Sse2Pack`] or [`Avx2Pack`], identical in every bit.
 pub trait PackKernel {
+    /// Whether [`PackKernel::test_pair`] costs about one pack test (8-lane registers), so
+    /// a leaf's packs are best tested two at a time.
+    const PAIRS: bool;
+
     /// The pack's triangle lanes hit within `[t_min, t_max]` (bit `i` for lane `i`).
-    /// With `HITS`, their hits are written to `hits` (other lanes are left as they were);
-    /// without (any-hit queries), `hits` is scratch space.
+    /// With `HITS`, their hits are written to lanes 0..4 of `hits` (other lanes are left
+    /// as they were); without (any-hit queries), `hits` is scratch space.
     ///
     /// # Safety
     /// The kernel's instruction set must be available.
     unsafe fn test<const HITS: bool>(
         pack: &TrianglePack,
+        ray: &PackRay,
+        t_min: f32,
+        t_max: f32,
+        hits: &mut PackHits,
+    ) -> u32;
+
+    /// [`PackKernel::test`] of two packs, the second's lanes as bits and hit lanes 4..8.
+    ///
+    /// # Safety
+    /// As [`PackKernel::test`].
+    unsafe fn test_pair<const HITS: bool>(
+        packs: &[TrianglePack; 2],
         ray: &PackRay,
         t_min: f32,
         t_max: f32,
@@ -279,6 +302,8 @@ pub trait PackKernel {
 pub(crate) struct ScalarPack;
 
 impl PackKernel for ScalarPack {
+    const PAIRS: bool = false;
+
     #[inline(always)]
     unsafe fn test<const HITS: bool>(
         pack: &TrianglePack,
@@ -287,24 +312,236 @@ impl PackKernel for ScalarPack {
         t_max: f32,
         hits: &mut PackHits,
     ) -> u32 {
-        hits.add_scalar_lanes(pack, ray, pack.triangles, t_min, t_max)
+        hits.add_scalar_lanes(pack, 0, ray, pack.triangles, t_min, t_max)
+    }
+
+    #[inline(always)]
+    unsafe fn test_pair<const HITS: bool>(
+        packs: &[TrianglePack; 2],
+        ray: &PackRay,
+        t_min: f32,
+        t_max: f32,
+        hits: &mut PackHits,
+    ) -> u32 {
+        let [low, high] = packs;
+        let low = hits.add_scalar_lanes(low, 0, ray, low.triangles, t_min, t_max);
+        let high = hits.add_scalar_lanes(high, PACK_LANES, ray, high.triangles, t_min, t_max);
+        low | high << PACK_LANES
     }
 }
 
 #[cfg(target_arch = "x86_64")]
-pub(crate) use sse2::Sse2Pack;
+pub(crate) use simd::{Avx2Pack, Sse2Pack};
 
 #[cfg(target_arch = "x86_64")]
-mod sse2 {
+mod simd {
     use super::*;
     use std::arch::x86_64::*;
 
-    /// The SSE2 kernel (baseline x86-64): the scalar core on four lanes at once. Lanes
-    /// whose edge functions come out exactly zero go to the scalar core, which redoes
-    /// them in double precision.
+    /// A SIMD register of floats, one triangle per lane, holding one pack (4 lanes, SSE2)
+    /// or two (8 lanes, AVX): the operations the pack test needs, so that the test is
+    /// written once for both.
+    ///
+    /// # Safety
+    /// The methods use the register's instruction set (SSE2 is baseline x86-64; the
+    /// 8-lane one runs only inside functions compiled for AVX2).
+    trait Lanes: Copy {
+        /// Lanes per register: one pack's, or two packs'.
+        const PACKS: usize;
+        unsafe fn splat(x: f32) -> Self;
+        /// Coordinate `axis` of `vertex` of the first `PACKS` packs.
+        unsafe fn load(packs: &[TrianglePack], vertex: usize, axis: usize) -> Self;
+        unsafe fn add(self, b: Self) -> Self;
+        unsafe fn sub(self, b: Self) -> Self;
+        unsafe fn mul(self, b: Self) -> Self;
+        unsafe fn div(self, b: Self) -> Self;
+        unsafe fn and(self, b: Self) -> Self;
+        unsafe fn or(self, b: Self) -> Self;
+        unsafe fn eq(self, b: Self) -> Self;
+        unsafe fn ne(self, b: Self) -> Self;
+        unsafe fn lt(self, b: Self) -> Self;
+        unsafe fn gt(self, b: Self) -> Self;
+        unsafe fn ge(self, b: Self) -> Self;
+        unsafe fn le(self, b: Self) -> Self;
+        unsafe fn mask(self) -> u32;
+        unsafe fn store(self, to: &mut [f32; PAIR_LANES]);
+    }
+
+    /// Binary operations of a `Lanes` impl, each one intrinsic.
+    macro_rules! binary_ops {
+        ($($name:ident: $op:expr;)*) => {$(
+            #[inline(always)]
+            unsafe fn $name(self, b: Self) -> Self {
+                // SAFETY: as the trait says.
+                unsafe { $op(self, b) }
+            }
+        )*};
+    }
+
+    impl Lanes for __m128 {
+        const PACKS: usize = 1;
+
+        #[inline(always)]
+        unsafe fn splat(x: f32) -> Self {
+            // SAFETY: SSE2 is baseline x86-64.
+            unsafe { _mm_set1_ps(x) }
+        }
+
+        #[inline(always)]
+        unsafe fn load(packs: &[TrianglePack], vertex: usize, axis: usize) -> Self {
+            // SAFETY: SSE2 is baseline; the lanes are a 16-aligned `[f32; 4]`.
+            unsafe { _mm_load_ps(packs[0].v[vertex][axis].as_ptr()) }
+        }
+
+        binary_ops! {
+            add: _mm_add_ps; sub: _mm_sub_ps; mul: _mm_mul_ps; div: _mm_div_ps;
+            and: _mm_and_ps; or: _mm_or_ps;
+            eq: _mm_cmpeq_ps; ne: _mm_cmpneq_ps; lt: _mm_cmplt_ps; gt: _mm_cmpgt_ps;
+            ge: _mm_cmpge_ps; le: _mm_cmple_ps;
+        }
+
+        #[inline(always)]
+        unsafe fn mask(self) -> u32 {
+            // SAFETY: SSE2 is baseline x86-64.
+            unsafe { _mm_movemask_ps(self) as u32 }
+        }
+
+        #[inline(always)]
+        unsafe fn store(self, to: &mut [f32; PAIR_LANES]) {
+            // SAFETY: SSE2 is baseline; four floats fit in `to`.
+            unsafe { _mm_storeu_ps(to.as_mut_ptr(), self) }
+        }
+    }
+
+    impl Lanes for __m256 {
+        const PACKS: usize = 2;
+
+        #[inline(always)]
+        unsafe fn splat(x: f32) -> Self {
+            // SAFETY: the caller guarantees AVX.
+            unsafe { _mm256_set1_ps(x) }
+        }
+
+        #[inline(always)]
+        unsafe fn load(packs: &[TrianglePack], vertex: usize, axis: usize) -> Self {
+            // SAFETY: the caller guarantees AVX and two packs; lanes are 16-aligned.
+            unsafe {
+                let low = _mm_load_ps(packs[0].v[vertex][axis].as_ptr());
+                let high = _mm_load_ps(packs[1].v[vertex][axis].as_ptr());
+                _mm256_set_m128(high, low)
+            }
+        }
+
+        // The comparisons are those of the SSE2 intrinsics: ordered, except `ne`.
+        binary_ops! {
+            add: _mm256_add_ps; sub: _mm256_sub_ps; mul: _mm256_mul_ps; div: _mm256_div_ps;
+            and: _mm256_and_ps; or: _mm256_or_ps;
+            eq: _mm256_cmp_ps::<_CMP_EQ_OQ>; ne: _mm256_cmp_ps::<_CMP_NEQ_UQ>;
+            lt: _mm256_cmp_ps::<_CMP_LT_OQ>; gt: _mm256_cmp_ps::<_CMP_GT_OQ>;
+            ge: _mm256_cmp_ps::<_CMP_GE_OQ>; le: _mm256_cmp_ps::<_CMP_LE_OQ>;
+        }
+
+        #[inline(always)]
+        unsafe fn mask(self) -> u32 {
+            // SAFETY: the caller guarantees AVX.
+            unsafe { _mm256_movemask_ps(self) as u32 }
+        }
+
+        #[inline(always)]
+        unsafe fn store(self, to: &mut [f32; PAIR_LANES]) {
+            // SAFETY: the caller guarantees AVX; eight floats fit in `to`.
+            unsafe { _mm256_storeu_ps(to.as_mut_ptr(), self) }
+        }
+    }
+
+    /// The pack test on `V::PACKS` packs: the scalar core's operations in every lane.
+    /// Lanes whose edge functions come out exactly zero go to the scalar core, which
+    /// redoes them in double precision.
+    #[inline(always)]
+    unsafe fn test_lanes<V: Lanes, const HITS: bool>(
+        packs: &[TrianglePack],
+        ray: &PackRay,
+        t_min: f32,
+        t_max: f32,
+        hits: &mut PackHits,
+    ) -> u32 {
+        // SAFETY (whole block): the caller guarantees `V`'s instruction set.
+        unsafe {
+            // No closures here: a closure is not inlined for sure, and one compiled
+            // without AVX would take 8-lane registers through memory and call every
+            // intrinsic.
+            let [ox, oy, oz] = [V::splat(ray.o[0]), V::splat(ray.o[1]), V::splat(ray.o[2])];
+            let sx = V::splat(ray.shear.x);
+            let sy = V::splat(ray.shear.y);
+            let sz = V::splat(ray.shear.z);
+            let [k0, k1, k2] = ray.k;
+            let a0 = V::load(packs, 0, k0).sub(ox);
+            let a1 = V::load(packs, 0, k1).sub(oy);
+            let a2 = V::load(packs, 0, k2).sub(oz);
+            let b0 = V::load(packs, 1, k0).sub(ox);
+            let b1 = V::load(packs, 1, k1).sub(oy);
+            let b2 = V::load(packs, 1, k2).sub(oz);
+            let c0 = V::load(packs, 2, k0).sub(ox);
+            let c1 = V::load(packs, 2, k1).sub(oy);
+            let c2 = V::load(packs, 2, k2).sub(oz);
+            let (ax, ay) = (a0.sub(sx.mul(a2)), a1.sub(sy.mul(a2)));
+            let (bx, by) = (b0.sub(sx.mul(b2)), b1.sub(sy.mul(b2)));
+            let (cx, cy) = (c0.sub(sx.mul(c2)), c1.sub(sy.mul(c2)));
+            let u = cx.mul(by).sub(cy.mul(bx));
+            let v = ax.mul(cy).sub(ay.mul(cx));
+            let w = bx.mul(ay).sub(by.mul(ax));
+            let zero = V::splat(0.0);
+            let any_zero = u.eq(zero).or(v.eq(zero)).or(w.eq(zero));
+            let negative = u.lt(zero).or(v.lt(zero)).or(w.lt(zero));
+            let positive = u.gt(zero).or(v.gt(zero)).or(w.gt(zero));
+            let mut lanes = 0;
+            for (i, pack) in packs[..V::PACKS].iter().enumerate() {
+                lanes |= pack.triangles << (i * PACK_LANES);
+            }
+            let redo = any_zero.mask() & lanes;
+            // Inside: no edge function of each sign (or all zero, sent to `redo`).
+            let straddles = negative.and(positive).mask();
+            let inside = lanes & !straddles & !redo;
+            let mut mask = 0;
+            // Most packs a ray reaches it misses: skip the division unless a lane is
+            // inside all three edges.
+            if inside != 0 {
+                let det = u.add(v).add(w);
+                let det_ok = det.ne(zero).and(det.sub(det).eq(zero));
+                let t = u
+                    .mul(sz.mul(a2))
+                    .add(v.mul(sz.mul(b2)))
+                    .add(w.mul(sz.mul(c2)))
+                    .div(det);
+                let in_range = t.ge(V::splat(t_min)).and(t.le(V::splat(t_max)));
+                mask = det_ok.and(in_range).mask() & inside;
+                if HITS && mask != 0 {
+                    t.store(&mut hits.t);
+                    v.div(det).store(&mut hits.u);
+                    w.div(det).store(&mut hits.v);
+                }
+            }
+            // Lanes with an exactly-zero edge function go to the scalar core's f64
+            // fallback.
+            let mut redo = redo;
+            for (i, pack) in packs[..V::PACKS].iter().enumerate() {
+                let base = i * PACK_LANES;
+                let lanes = (redo >> base) & ((1 << PACK_LANES) - 1);
+                if lanes != 0 {
+                    mask |= hits.add_scalar_lanes(pack, base, ray, lanes, t_min, t_max) << base;
+                }
+                redo &= !(((1 << PACK_LANES) - 1) << base);
+            }
+            mask
+        }
+    }
+
+    /// The SSE2 kernel (baseline x86-64): four lanes, one pack at a time.
     pub(crate) struct Sse2Pack;
 
     impl PackKernel for Sse2Pack {
+        const PAIRS: bool = false;
+
         #[inline(always)]
         unsafe fn test<const HITS: bool>(
             pack: &TrianglePack,
@@ -313,92 +550,64 @@ mod sse2 {
             t_max: f32,
             hits: &mut PackHits,
         ) -> u32 {
-            // SAFETY (whole block): SSE2 is part of x86-64; loads are from 16-aligned
-            // `[f32; 4]` arrays.
+            // SAFETY: SSE2 is baseline x86-64.
             unsafe {
-                let load =
-                    |vertex: usize, axis: usize| _mm_load_ps(pack.v[vertex][ray.k[axis]].as_ptr());
-                let [ox, oy, oz] = ray.o.map(|c| _mm_set1_ps(c));
-                let sx = _mm_set1_ps(ray.shear.x);
-                let sy = _mm_set1_ps(ray.shear.y);
-                let sz = _mm_set1_ps(ray.shear.z);
-                let rel = |vertex: usize| {
-                    (
-                        _mm_sub_ps(load(vertex, 0), ox),
-                        _mm_sub_ps(load(vertex, 1), oy),
-                        _mm_sub_ps(load(vertex, 2), oz),
-                    )
-                };
-                let (a0, a1, a2) = rel(0);
-                let (b0, b1, b2) = rel(1);
-                let (c0, c1, c2) = rel(2);
-                let shear_xy = |p0: __m128, p1: __m128, p2: __m128| {
-                    (
-                        _mm_sub_ps(p0, _mm_mul_ps(sx, p2)),
-                        _mm_sub_ps(p1, _mm_mul_ps(sy, p2)),
-                    )
-                };
-                let (ax, ay) = shear_xy(a0, a1, a2);
-                let (bx, by) = shear_xy(b0, b1, b2);
-                let (cx, cy) = shear_xy(c0, c1, c2);
-                let u = _mm_sub_ps(_mm_mul_ps(cx, by), _mm_mul_ps(cy, bx));
-                let v = _mm_sub_ps(_mm_mul_ps(ax, cy), _mm_mul_ps(ay, cx));
-                let w = _mm_sub_ps(_mm_mul_ps(bx, ay), _mm_mul_ps(by, ax));
-                let zero = _mm_setzero_ps();
-                let any_zero = _mm_or_ps(
-                    _mm_or_ps(_mm_cmpeq_ps(u, zero), _mm_cmpeq_ps(v, zero)),
-                    _mm_cmpeq_ps(w, zero),
-                );
-                let negative = _mm_or_ps(
-                    _mm_or_ps(_mm_cmplt_ps(u, zero), _mm_cmplt_ps(v, zero)),
-                    _mm_cmplt_ps(w, zero),
-                );
-                let positive = _mm_or_ps(
-                    _mm_or_ps(_mm_cmpgt_ps(u, zero), _mm_cmpgt_ps(v, zero)),
-                    _mm_cmpgt_ps(w, zero),
-                );
-                let lanes = pack.triangles;
-                let redo = _mm_movemask_ps(any_zero) as u32 & lanes;
-                // Inside: no edge function of each sign (or all zero, sent to `redo`).
-                let straddles = _mm_movemask_ps(_mm_and_ps(negative, positive)) as u32;
-                let inside = lanes & !straddles & !redo;
-                let mut mask = 0;
-                // Most packs a ray reaches it misses: skip the division unless a lane
-                // is inside all three edges.
-                if inside != 0 {
-                    let det = _mm_add_ps(_mm_add_ps(u, v), w);
-                    let det_ok = _mm_and_ps(
-                        _mm_cmpneq_ps(det, zero),
-                        _mm_cmpeq_ps(_mm_sub_ps(det, det), zero),
-                    );
-                    let t = _mm_div_ps(
-                        _mm_add_ps(
-                            _mm_add_ps(
-                                _mm_mul_ps(u, _mm_mul_ps(sz, a2)),
-                                _mm_mul_ps(v, _mm_mul_ps(sz, b2)),
-                            ),
-                            _mm_mul_ps(w, _mm_mul_ps(sz, c2)),
-                        ),
-                        det,
-                    );
-                    let in_range = _mm_and_ps(
-                        _mm_cmpge_ps(t, _mm_set1_ps(t_min)),
-                        _mm_cmple_ps(t, _mm_set1_ps(t_max)),
-                    );
-                    mask = _mm_movemask_ps(_mm_and_ps(det_ok, in_range)) as u32 & inside;
-                    if HITS && mask != 0 {
-                        _mm_storeu_ps(hits.t.as_mut_ptr(), t);
-                        _mm_storeu_ps(hits.u.as_mut_ptr(), _mm_div_ps(v, det));
-                        _mm_storeu_ps(hits.v.as_mut_ptr(), _mm_div_ps(w, det));
-                    }
-                }
-                // Lanes with an exactly-zero edge function go to the scalar core's
-                // f64 fallback.
-                if redo != 0 {
-                    mask |= hits.add_scalar_lanes(pack, ray, redo, t_min, t_max);
-                }
-                mask
+                test_lanes::<__m128, HITS>(std::slice::from_ref(pack), ray, t_min, t_max, hits)
             }
+        }
+
+        #[inline(always)]
+        unsafe fn test_pair<const HITS: bool>(
+            packs: &[TrianglePack; 2],
+            ray: &PackRay,
+            t_min: f32,
+            t_max: f32,
+            hits: &mut PackHits,
+        ) -> u32 {
+            // SAFETY: SSE2 is baseline x86-64. The second pack's hits land in lanes 0..4
+            // of a second record, then move up.
+            unsafe {
+                let low = test_lanes::<__m128, HITS>(&packs[..1], ray, t_min, t_max, hits);
+                let mut upper = PackHits::default();
+                let high = test_lanes::<__m128, HITS>(&packs[1..], ray, t_min, t_max, &mut upper);
+                for lane in 0..PACK_LANES {
+                    hits.t[PACK_LANES + lane] = upper.t[lane];
+                    hits.u[PACK_LANES + lane] = upper.u[lane];
+                    hits.v[PACK_LANES + lane] = upper.v[lane];
+                }
+                low | high << PACK_LANES
+            }
+        }
+    }
+
+    /// The AVX2 kernel: single packs as SSE2 does, pairs of packs in eight lanes.
+    pub(crate) struct Avx2Pack;
+
+    impl PackKernel for Avx2Pack {
+        const PAIRS: bool = true;
+
+        #[inline(always)]
+        unsafe fn test<const HITS: bool>(
+            pack: &TrianglePack,
+            ray: &PackRay,
+            t_min: f32,
+            t_max: f32,
+            hits: &mut PackHits,
+        ) -> u32 {
+            // SAFETY: SSE2 is baseline x86-64.
+            unsafe { Sse2Pack::test::<HITS>(pack, ray, t_min, t_max, hits) }
+        }
+
+        #[inline(always)]
+        unsafe fn test_pair<const HITS: bool>(
+            packs: &[TrianglePack; 2],
+            ray: &PackRay,
+            t_min: f32,
+            t_max: f32,
+            hits: &mut PackHits,
+        ) -> u32 {
+            // SAFETY: the caller guarantees AVX2.
+            unsafe { test_lanes::<__m256, HITS>(packs, ray, t_min, t_max, hits) }
         }
     }
 }
@@ -476,11 +685,77 @@ mod tests {
         }
     }
 
-    #[test]
-    fn pack_kernels_match_the_scalar_test_lane_by_lane() {
-        let rays = [
+    /// Two packs: `pack()` and, in the second, two more triangles further down z.
+    fn pair() -> [TrianglePack; 2] {
+        let mut high = TrianglePack::EMPTY;
+        for lane in 0..2 {
+            let shift = Vec3::new(0.0, 0.0, 3.0 + lane as f32);
+            high.set_triangle(lane, 3 + lane as u32, tri().map(|v| v - shift));
+        }
+        [pack(), high]
+    }
+
+    fn expected_pair_lane(lane: usize, ray: &Ray) -> Option<PrimHit> {
+        // Lane 3 and lanes 6 and 7 are empty; the others lie `depth` down z.
+        let depth = match lane {
+            3 | 6 | 7 => return None,
+            0..=2 => lane,
+            _ => lane - 1,
+        };
+        let shift = Vec3::new(0.0, 0.0, depth as f32);
+        intersect_triangle(&tri().map(|v| v - shift), ray, &ShearedRay::new(ray))
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn avx2_pair(packs: &[TrianglePack; 2], ray: &Ray, hits: &mut PackHits) -> u32 {
+        let pr = PackRay::new(ray);
+        unsafe { Avx2Pack::test_pair::<true>(packs, &pr, ray.t_min, ray.t_max, hits) }
+    }
+
+    /// Every kernel's pair test (two packs, lanes 0..8) gives the scalar test's hits bit
+    /// for bit, the 8-lane AVX2 one included where the CPU has it.
+    fn pair_kernels_agree(ray: &Ray) {
+        let pr = PackRay::new(ray);
+        let mut scalar = PackHits::default();
+        let scalar_mask = unsafe {
+            ScalarPack::test_pair::<true>(&pair(), &pr, ray.t_min, ray.t_max, &mut scalar)
+        };
+        for lane in 0..PAIR_LANES {
+            let got = (scalar_mask & (1 << lane) != 0).then(|| scalar.lane(lane));
+            assert_eq!(got, expected_pair_lane(lane, ray), "lane {lane}");
+        }
+        #[cfg(target_arch = "x86_64")]
+        {
+            let same = |mask: u32, hits: &PackHits, kernel: &str| {
+                assert_eq!(mask, scalar_mask, "{kernel}");
+                for lane in 0..PAIR_LANES {
+                    if mask & (1 << lane) != 0 {
+                        let bits = |h: PrimHit| (h.t.to_bits(), h.u.to_bits(), h.v.to_bits());
+                        assert_eq!(bits(hits.lane(lane)), bits(scalar.lane(lane)), "{kernel}");
+                    }
+                }
+            };
+            let mut sse2 = PackHits::default();
+            let mask = unsafe {
+                Sse2Pack::test_pair::<true>(&pair(), &pr, ray.t_min, ray.t_max, &mut sse2)
+            };
+            same(mask, &sse2, "sse2");
+            if std::arch::is_x86_feature_detected!("avx2") {
+                let mut avx2 = PackHits::default();
+                // SAFETY: AVX2 was just detected.
+                let mask = unsafe { avx2_pair(&pair(), ray, &mut avx2) };
+                same(mask, &avx2, "avx2");
+            }
+        }
+    }
+
+    fn kernel_test_rays() -> [Ray; 6] {
+        [
             Ray::new(Vec3::new(0.2, 0.3, 5.0), -Vec3::Z, 0.0, f32::INFINITY),
             Ray::new(Vec3::new(0.2, 0.3, 5.0), -Vec3::Z, 0.0, 5.5),
+            Ray::new(Vec3::new(0.2, 0.3, 5.0), -Vec3::Z, 6.5, 9.0),
+            // Through an edge: exactly-zero edge functions, redone in f64.
             Ray::new(Vec3::new(0.5, 0.0, 5.0), -Vec3::Z, 0.0, f32::INFINITY),
             Ray::new(
                 Vec3::new(0.0, 0.0, -5.0),
@@ -489,8 +764,19 @@ mod tests {
                 f32::INFINITY,
             ),
             Ray::new(Vec3::new(-1.0, 0.25, -1.0), Vec3::X, 0.0, f32::INFINITY),
-        ];
-        for ray in &rays {
+        ]
+    }
+
+    #[test]
+    fn pair_kernels_match_the_scalar_test_lane_by_lane() {
+        for ray in &kernel_test_rays() {
+            pair_kernels_agree(ray);
+        }
+    }
+
+    #[test]
+    fn pack_kernels_match_the_scalar_test_lane_by_lane() {
+        for ray in &kernel_test_rays() {
             kernels_agree(ray);
         }
     }

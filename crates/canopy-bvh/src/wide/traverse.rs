@@ -151,6 +151,42 @@ fn lanes(mut mask: u32) -> impl Iterator<Item = usize> {
     })
 }
 
+/// A leaf's packs as pairs tested together (kernels with 8-lane pair tests) and the packs
+/// left to test one at a time.
+#[inline(always)]
+fn pairs_and_rest<T: PackKernel>(
+    packs: &[TrianglePack],
+) -> (&[[TrianglePack; 2]], &[TrianglePack]) {
+    if T::PAIRS {
+        packs.as_chunks::<2>()
+    } else {
+        (&[], packs)
+    }
+}
+
+impl<T, F, P> PackedLeaves<'_, T, F>
+where
+    F: FnMut(u32, &Ray) -> Option<P>,
+    P: Into<PrimHit>,
+{
+    /// Offers the hits of `pack`'s other primitives, tested by the caller's closure.
+    #[inline(always)]
+    fn closest_others<C: TraversalCounter>(
+        &mut self,
+        pack: &TrianglePack,
+        s: &mut Closest,
+        c: &mut C,
+    ) {
+        for lane in lanes(pack.others) {
+            c.test_primitive();
+            let prim = pack.prim[lane];
+            if let Some(hit) = (self.test)(prim, &s.ray) {
+                s.offer(Hit::new(prim, hit.into()));
+            }
+        }
+    }
+}
+
 impl<T, F, P> ClosestLeaves for PackedLeaves<'_, T, F>
 where
     T: PackKernel,
@@ -160,26 +196,41 @@ where
     #[inline(always)]
     fn closest<C: TraversalCounter>(&mut self, first: u32, count: u32, s: &mut Closest, c: &mut C) {
         let pack_ray = self.pack_ray(&s.ray);
-        for pack in leaf_packs(self.packs, first, count) {
+        let (pairs, rest) = pairs_and_rest::<T>(leaf_packs(self.packs, first, count));
+        for pair in pairs {
+            let triangles = pair[0].triangles | pair[1].triangles << PACK_LANES;
+            if triangles != 0 {
+                for _ in 0..triangles.count_ones() {
+                    c.test_primitive();
+                }
+                let hits = &mut self.hits;
+                // SAFETY: `dispatch` runs this only where `T`'s instruction set exists.
+                let mask = unsafe {
+                    T::test_pair::<true>(pair, &pack_ray, s.ray.t_min, s.ray.t_max, hits)
+                };
+                for lane in lanes(mask) {
+                    let prim = pair[lane / PACK_LANES].prim[lane % PACK_LANES];
+                    s.offer(Hit::new(prim, hits.lane(lane)));
+                }
+            }
+            for pack in pair {
+                self.closest_others(pack, s, c);
+            }
+        }
+        for pack in rest {
             if pack.triangles != 0 {
                 for _ in 0..pack.triangles.count_ones() {
                     c.test_primitive();
                 }
-                // SAFETY: `dispatch` runs this only where `T`'s instruction set exists.
                 let hits = &mut self.hits;
+                // SAFETY: as above.
                 let mask =
                     unsafe { T::test::<true>(pack, &pack_ray, s.ray.t_min, s.ray.t_max, hits) };
                 for lane in lanes(mask) {
                     s.offer(Hit::new(pack.prim[lane], hits.lane(lane)));
                 }
             }
-            for lane in lanes(pack.others) {
-                c.test_primitive();
-                let prim = pack.prim[lane];
-                if let Some(hit) = (self.test)(prim, &s.ray) {
-                    s.offer(Hit::new(prim, hit.into()));
-                }
-            }
+            self.closest_others(pack, s, c);
         }
     }
 }
@@ -189,7 +240,25 @@ impl<T: PackKernel, F: FnMut(u32, &Ray) -> bool> AnyLeaves for PackedLeaves<'_, 
     fn any(&mut self, first: u32, count: u32, ray: &Ray) -> bool {
         let pack_ray = self.pack_ray(ray);
         let mut scratch = PackHits::default();
-        for pack in leaf_packs(self.packs, first, count) {
+        let (pairs, rest) = pairs_and_rest::<T>(leaf_packs(self.packs, first, count));
+        for pair in pairs {
+            // SAFETY: as above.
+            if (pair[0].triangles | pair[1].triangles) != 0
+                && unsafe {
+                    T::test_pair::<false>(pair, &pack_ray, ray.t_min, ray.t_max, &mut scratch)
+                } != 0
+            {
+                return true;
+            }
+            let test = &mut self.test;
+            if pair
+                .iter()
+                .any(|pack| lanes(pack.others).any(|lane| test(pack.prim[lane], ray)))
+            {
+                return true;
+            }
+        }
+        for pack in rest {
             // SAFETY: as above.
             if pack.triangles != 0
                 && unsafe { T::test::<false>(pack, &pack_ray, ray.t_min, ray.t_max, &mut scratch) }
@@ -397,19 +466,19 @@ pub trait Dispatch<const N: usize> {
 #[cfg(target_arch = "x86_64")]
 mod x86 {
     use super::*;
-    use crate::triangle::Sse2Pack;
+    use crate::triangle::{Avx2Pack, Sse2Pack};
     use crate::wide::kernels::{Avx2Node, Avx512Node, Sse2Node};
 
     #[target_feature(enable = "avx2")]
     unsafe fn with_avx2<const N: usize, K: NodeKernel<N>, Q: Query<N>>(q: Q) -> Q::Out {
         // SAFETY: this function is only called when AVX2 is available.
-        unsafe { q.run::<K, Sse2Pack>() }
+        unsafe { q.run::<K, Avx2Pack>() }
     }
 
     #[target_feature(enable = "avx512f,avx512vl,avx2")]
     unsafe fn with_avx512<const N: usize, K: NodeKernel<N>, Q: Query<N>>(q: Q) -> Q::Out {
         // SAFETY: this function is only called when AVX-512 F/VL are available.
-        unsafe { q.run::<K, Sse2Pack>() }
+        unsafe { q.run::<K, Avx2Pack>() }
     }
 
     impl Dispatch<4> for WideNode<4> {
