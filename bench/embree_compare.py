@@ -35,10 +35,15 @@ import tempfile
 import threading
 import time
 
-import canopy
-import numpy as np
-from embreex import rtcore_scene as rtcs
-from embreex.mesh_construction import TriangleMesh
+# numpy's BLAS threads spin on idle cores after a call: on a small machine they would
+# compete with the traced threads. Nothing here needs BLAS threads.
+for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(var, "1")
+
+import canopy  # noqa: E402
+import numpy as np  # noqa: E402
+from embreex import rtcore_scene as rtcs  # noqa: E402
+from embreex.mesh_construction import TriangleMesh  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SHARED = os.path.join(ROOT, "..", "shared", "assets", "meshes")
