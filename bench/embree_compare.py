@@ -193,20 +193,20 @@ def load_native():
     if not libs:
         print("note: embreex ships no libembree4 here; Embree's kernel figure is an estimate", file=sys.stderr)
         return None
-    out = os.path.join(tempfile.mkdtemp(prefix="canopy-bench-"), "embree_native.so")
     source = os.path.join(ROOT, "bench", "embree_native.c")
-    command = [os.environ.get("CC", "cc"), "-O2", "-shared", "-fPIC", source, "-o", out,
-               f"-L{os.path.dirname(libs[0])}", f"-l:{os.path.basename(libs[0])}",
-               f"-Wl,-rpath,{os.path.dirname(libs[0])}", "-lpthread"]
-    try:
-        subprocess.run(command, check=True, capture_output=True, text=True)
-    except (OSError, subprocess.CalledProcessError) as e:
-        print(f"note: could not compile {source} ({getattr(e, 'stderr', '') or e}); "
-              "Embree's kernel figure is an estimate", file=sys.stderr)
-        return None
-    lib = ctypes.CDLL(out)
-    os.remove(out)  # loaded: the file is no longer needed
-    os.rmdir(os.path.dirname(out))
+    # The library is loaded before its directory goes: a mapped file outlives its name.
+    with tempfile.TemporaryDirectory(prefix="canopy-bench-") as scratch:
+        out = os.path.join(scratch, "embree_native.so")
+        command = [os.environ.get("CC", "cc"), "-O2", "-shared", "-fPIC", source, "-o", out,
+                   f"-L{os.path.dirname(libs[0])}", f"-l:{os.path.basename(libs[0])}",
+                   f"-Wl,-rpath,{os.path.dirname(libs[0])}", "-lpthread"]
+        try:
+            subprocess.run(command, check=True, capture_output=True, text=True)
+        except (OSError, subprocess.CalledProcessError) as e:
+            print(f"note: could not compile {source} ({getattr(e, 'stderr', '') or e}); "
+                  "Embree's kernel figure is an estimate", file=sys.stderr)
+            return None
+        lib = ctypes.CDLL(out)
     lib.native_scene.restype = ctypes.c_void_p
     lib.native_scene.argtypes = [ctypes.c_void_p, ctypes.c_size_t, ctypes.c_void_p, ctypes.c_size_t]
     lib.native_release.argtypes = [ctypes.c_void_p]

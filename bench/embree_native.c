@@ -162,6 +162,8 @@ int native_trace(Native *native, const float *org, const float *dir, size_t coun
   Pass pass = {native->scene, org, dir, count, closest, t, prim, blocked, 0};
   pthread_t pool[64];
   int started = 0;
+  if (threads < 1)
+    threads = 1;
   if (threads > 64)
     threads = 64;
   for (; started < threads - 1; started++)
