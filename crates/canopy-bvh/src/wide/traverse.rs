@@ -164,24 +164,77 @@ fn pairs_and_rest<T: PackKernel>(
     }
 }
 
+/// The triangle lanes of one pack or a pair (the second pack's as bits 4..8).
+#[inline(always)]
+fn triangle_lanes<const PACKS: usize>(packs: &[TrianglePack; PACKS]) -> u32 {
+    let mut lanes = 0;
+    for (i, pack) in packs.iter().enumerate() {
+        lanes |= pack.triangles << (i * PACK_LANES);
+    }
+    lanes
+}
+
+/// The triangle lanes of `packs` hit within `[t_min, t_max]`: one pack by `T::test`, a
+/// pair by `T::test_pair` (with `HITS`, hits go to `hits`, as those tests say).
+///
+/// # Safety
+/// `T`'s instruction set must be available.
+#[inline(always)]
+unsafe fn test_packs<T: PackKernel, const HITS: bool, const PACKS: usize>(
+    packs: &[TrianglePack; PACKS],
+    ray: &PackRay,
+    t_min: f32,
+    t_max: f32,
+    hits: &mut PackHits,
+) -> u32 {
+    // SAFETY: the caller guarantees the instruction set. `PACKS` is a constant, so the
+    // branch is resolved at compile time.
+    unsafe {
+        match <&[TrianglePack; 2]>::try_from(packs.as_slice()) {
+            Ok(pair) => T::test_pair::<HITS>(pair, ray, t_min, t_max, hits),
+            Err(_) => T::test::<HITS>(&packs[0], ray, t_min, t_max, hits),
+        }
+    }
+}
+
 impl<T, F, P> PackedLeaves<'_, T, F>
 where
+    T: PackKernel,
     F: FnMut(u32, &Ray) -> Option<P>,
     P: Into<PrimHit>,
 {
-    /// Offers the hits of `pack`'s other primitives, tested by the caller's closure.
+    /// Offers the hits of one pack or a pair tested together: triangles by the kernel,
+    /// other primitives by the caller's closure.
     #[inline(always)]
-    fn closest_others<C: TraversalCounter>(
+    fn closest_packs<C: TraversalCounter, const PACKS: usize>(
         &mut self,
-        pack: &TrianglePack,
+        packs: &[TrianglePack; PACKS],
+        pack_ray: &PackRay,
         s: &mut Closest,
         c: &mut C,
     ) {
-        for lane in lanes(pack.others) {
-            c.test_primitive();
-            let prim = pack.prim[lane];
-            if let Some(hit) = (self.test)(prim, &s.ray) {
-                s.offer(Hit::new(prim, hit.into()));
+        let triangles = triangle_lanes(packs);
+        if triangles != 0 {
+            for _ in 0..triangles.count_ones() {
+                c.test_primitive();
+            }
+            let hits = &mut self.hits;
+            // SAFETY: `dispatch` runs this only where `T`'s instruction set exists.
+            let mask = unsafe {
+                test_packs::<T, true, PACKS>(packs, pack_ray, s.ray.t_min, s.ray.t_max, hits)
+            };
+            for lane in lanes(mask) {
+                let prim = packs[lane / PACK_LANES].prim[lane % PACK_LANES];
+                s.offer(Hit::new(prim, hits.lane(lane)));
+            }
+        }
+        for pack in packs {
+            for lane in lanes(pack.others) {
+                c.test_primitive();
+                let prim = pack.prim[lane];
+                if let Some(hit) = (self.test)(prim, &s.ray) {
+                    s.offer(Hit::new(prim, hit.into()));
+                }
             }
         }
     }
@@ -198,40 +251,38 @@ where
         let pack_ray = self.pack_ray(&s.ray);
         let (pairs, rest) = pairs_and_rest::<T>(leaf_packs(self.packs, first, count));
         for pair in pairs {
-            let triangles = pair[0].triangles | pair[1].triangles << PACK_LANES;
-            if triangles != 0 {
-                for _ in 0..triangles.count_ones() {
-                    c.test_primitive();
-                }
-                let hits = &mut self.hits;
-                // SAFETY: `dispatch` runs this only where `T`'s instruction set exists.
-                let mask = unsafe {
-                    T::test_pair::<true>(pair, &pack_ray, s.ray.t_min, s.ray.t_max, hits)
-                };
-                for lane in lanes(mask) {
-                    let prim = pair[lane / PACK_LANES].prim[lane % PACK_LANES];
-                    s.offer(Hit::new(prim, hits.lane(lane)));
-                }
-            }
-            for pack in pair {
-                self.closest_others(pack, s, c);
-            }
+            self.closest_packs(pair, &pack_ray, s, c);
         }
         for pack in rest {
-            if pack.triangles != 0 {
-                for _ in 0..pack.triangles.count_ones() {
-                    c.test_primitive();
-                }
-                let hits = &mut self.hits;
-                // SAFETY: as above.
-                let mask =
-                    unsafe { T::test::<true>(pack, &pack_ray, s.ray.t_min, s.ray.t_max, hits) };
-                for lane in lanes(mask) {
-                    s.offer(Hit::new(pack.prim[lane], hits.lane(lane)));
-                }
-            }
-            self.closest_others(pack, s, c);
+            self.closest_packs(std::array::from_ref(pack), &pack_ray, s, c);
         }
+    }
+}
+
+impl<T: PackKernel, F: FnMut(u32, &Ray) -> bool> PackedLeaves<'_, T, F> {
+    /// Whether anything in one pack or a pair tested together blocks `ray`.
+    #[inline(always)]
+    fn any_packs<const PACKS: usize>(
+        &mut self,
+        packs: &[TrianglePack; PACKS],
+        pack_ray: &PackRay,
+        ray: &Ray,
+        scratch: &mut PackHits,
+    ) -> bool {
+        // SAFETY: as above.
+        if triangle_lanes(packs) != 0
+            && unsafe {
+                test_packs::<T, false, PACKS>(packs, pack_ray, ray.t_min, ray.t_max, scratch)
+            } != 0
+        {
+            return true;
+        }
+        for pack in packs {
+            if lanes(pack.others).any(|lane| (self.test)(pack.prim[lane], ray)) {
+                return true;
+            }
+        }
+        false
     }
 }
 
@@ -241,32 +292,15 @@ impl<T: PackKernel, F: FnMut(u32, &Ray) -> bool> AnyLeaves for PackedLeaves<'_, 
         let pack_ray = self.pack_ray(ray);
         let mut scratch = PackHits::default();
         let (pairs, rest) = pairs_and_rest::<T>(leaf_packs(self.packs, first, count));
+        // Loops, not closures: a closure that holds an 8-lane test and is not inlined
+        // would be compiled without AVX and call every intrinsic.
         for pair in pairs {
-            // SAFETY: as above.
-            if (pair[0].triangles | pair[1].triangles) != 0
-                && unsafe {
-                    T::test_pair::<false>(pair, &pack_ray, ray.t_min, ray.t_max, &mut scratch)
-                } != 0
-            {
-                return true;
-            }
-            let test = &mut self.test;
-            if pair
-                .iter()
-                .any(|pack| lanes(pack.others).any(|lane| test(pack.prim[lane], ray)))
-            {
+            if self.any_packs(pair, &pack_ray, ray, &mut scratch) {
                 return true;
             }
         }
         for pack in rest {
-            // SAFETY: as above.
-            if pack.triangles != 0
-                && unsafe { T::test::<false>(pack, &pack_ray, ray.t_min, ray.t_max, &mut scratch) }
-                    != 0
-            {
-                return true;
-            }
-            if lanes(pack.others).any(|lane| (self.test)(pack.prim[lane], ray)) {
+            if self.any_packs(std::array::from_ref(pack), &pack_ray, ray, &mut scratch) {
                 return true;
             }
         }
