@@ -523,14 +523,12 @@ mod simd {
             }
             // Lanes with an exactly-zero edge function go to the scalar core's f64
             // fallback.
-            let mut redo = redo;
             for (i, pack) in packs[..V::PACKS].iter().enumerate() {
                 let base = i * PACK_LANES;
                 let lanes = (redo >> base) & ((1 << PACK_LANES) - 1);
                 if lanes != 0 {
                     mask |= hits.add_scalar_lanes(pack, base, ray, lanes, t_min, t_max) << base;
                 }
-                redo &= !(((1 << PACK_LANES) - 1) << base);
             }
             mask
         }
