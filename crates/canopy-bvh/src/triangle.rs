@@ -205,6 +205,17 @@ impl PackRay {
     }
 }
 
+/// The triangle lanes of consecutive packs as one mask: pack `i`'s lane `l` is bit
+/// `i * PACK_LANES + l` (one pack, or a pair tested together).
+#[inline(always)]
+pub(crate) fn triangle_lanes(packs: &[TrianglePack]) -> u32 {
+    let mut lanes = 0;
+    for (i, pack) in packs.iter().enumerate() {
+        lanes |= pack.triangles << (i * PACK_LANES);
+    }
+    lanes
+}
+
 /// Lanes of a [`PackHits`]: two packs, tested together by the 8-lane kernel.
 pub const PAIR_LANES: usize = 2 * PACK_LANES;
 
@@ -494,10 +505,7 @@ mod simd {
             let any_zero = u.eq(zero).or(v.eq(zero)).or(w.eq(zero));
             let negative = u.lt(zero).or(v.lt(zero)).or(w.lt(zero));
             let positive = u.gt(zero).or(v.gt(zero)).or(w.gt(zero));
-            let mut lanes = 0;
-            for (i, pack) in packs[..V::PACKS].iter().enumerate() {
-                lanes |= pack.triangles << (i * PACK_LANES);
-            }
+            let lanes = triangle_lanes(&packs[..V::PACKS]);
             let redo = any_zero.mask() & lanes;
             // Inside: no edge function of each sign (or all zero, sent to `redo`).
             let straddles = negative.and(positive).mask();

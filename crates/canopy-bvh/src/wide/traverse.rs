@@ -6,7 +6,9 @@
 use super::kernels::{NodeKernel, OctRay, ScalarNode};
 use super::WideNode;
 use crate::traverse::{TraversalCounter, TraversalStack};
-use crate::triangle::{PackHits, PackKernel, PackRay, ScalarPack, TrianglePack, PACK_LANES};
+use crate::triangle::{
+    triangle_lanes, PackHits, PackKernel, PackRay, ScalarPack, TrianglePack, PACK_LANES,
+};
 use crate::{Hit, Isa, PrimHit, Ray};
 use std::marker::PhantomData;
 
@@ -162,16 +164,6 @@ fn pairs_and_rest<T: PackKernel>(
     } else {
         (&[], packs)
     }
-}
-
-/// The triangle lanes of one pack or a pair (the second pack's as bits 4..8).
-#[inline(always)]
-fn triangle_lanes<const PACKS: usize>(packs: &[TrianglePack; PACKS]) -> u32 {
-    let mut lanes = 0;
-    for (i, pack) in packs.iter().enumerate() {
-        lanes |= pack.triangles << (i * PACK_LANES);
-    }
-    lanes
 }
 
 /// The triangle lanes of `packs` hit within `[t_min, t_max]`: one pack by `T::test`, a
