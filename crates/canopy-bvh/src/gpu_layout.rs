@@ -6,7 +6,7 @@
 
 use crate::aabb::SlabRay;
 use crate::view::{Child, ChildKind, TreeView};
-use crate::{Aabb, Bvh2, Hit, PrimHit, Ray, TraversalCounter};
+use crate::{Aabb, Bvh2, Hit, IntoHit, Ray, RefitError, TraversalCounter};
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
 
@@ -115,6 +115,34 @@ impl GpuBvh {
         out
     }
 
+    /// Recomputes every box from `boxes` (one per primitive), keeping the topology.
+    /// Refuses a tree with spatial splits, whose leaf boxes are parts of primitives.
+    pub fn refit(&mut self, boxes: &[Aabb]) -> Result<(), RefitError> {
+        if self.spatial_splits {
+            return Err(RefitError::SpatialSplits);
+        }
+        // Inner nodes keep the binary tree's order, children after parents, so a reverse
+        // sweep sees children first.
+        for i in (0..self.nodes.len()).rev() {
+            let node = self.nodes[i];
+            let slot = |(_, child, count): (Aabb, u32, u32)| match (child, count) {
+                (GPU_EMPTY, 0) => Aabb::EMPTY,
+                (_, 0) => {
+                    let c = &self.nodes[child as usize];
+                    c.slot(0).0.union(c.slot(1).0)
+                }
+                _ => self.prim_indices[child as usize..(child + count) as usize]
+                    .iter()
+                    .fold(Aabb::EMPTY, |b, &p| b.union(boxes[p as usize])),
+            };
+            let (left, right) = (slot(node.slot(0)), slot(node.slot(1)));
+            let n = &mut self.nodes[i];
+            (n.left_min, n.left_max) = (left.min, left.max);
+            (n.right_min, n.right_max) = (right.min, right.max);
+        }
+        Ok(())
+    }
+
     pub fn nodes(&self) -> &[GpuNode] {
         &self.nodes
     }
@@ -126,7 +154,7 @@ impl GpuBvh {
     /// Closest hit, walking the tree exactly as the GPU kernel does (both child boxes per
     /// node, leaves tested on entry, the farther inner child stacked): the CPU twin the
     /// GPU's answers are checked against. Ties go to the lower primitive index.
-    pub fn intersect<P: Into<PrimHit>>(
+    pub fn intersect<P: IntoHit>(
         &self,
         ray: &Ray,
         hit: impl FnMut(u32, &Ray) -> Option<P>,
@@ -135,7 +163,7 @@ impl GpuBvh {
     }
 
     /// [`GpuBvh::intersect`], reporting its work to `counter`.
-    pub fn intersect_counted<P: Into<PrimHit>>(
+    pub fn intersect_counted<P: IntoHit>(
         &self,
         ray: &Ray,
         mut hit: impl FnMut(u32, &Ray) -> Option<P>,
@@ -145,7 +173,7 @@ impl GpuBvh {
         let mut ray = *ray;
         self.walk(&mut ray, counter, |prim, ray| {
             if let Some(h) = hit(prim, ray) {
-                let h = Hit::new(prim, h.into());
+                let h = h.into_hit(prim);
                 if best.is_none_or(|b| h.is_before(&b)) {
                     best = Some(h);
                     ray.t_max = h.t;

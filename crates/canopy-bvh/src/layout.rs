@@ -4,7 +4,9 @@
 
 use crate::traverse::TraversalCounter;
 use crate::view::{self, TreeView};
-use crate::{Aabb, Bvh2, Bvh4, Bvh8, BvhError, GpuBvh, Hit, Isa, IsaError, PrimHit, Ray};
+use crate::{
+    Aabb, Bvh2, Bvh4, Bvh8, BvhError, GpuBvh, Hit, IntoHit, Isa, IsaError, Ray, RefitError,
+};
 use crate::{SahCosts, TreeStats};
 use glam::Vec3;
 use std::fmt;
@@ -94,6 +96,22 @@ impl Tree {
         }
     }
 
+    /// Recomputes every box from `boxes` (one per primitive) and the packed triangles
+    /// from `triangle`, keeping the topology (for primitives that moved). Refuses a tree
+    /// with spatial splits.
+    pub fn refit(
+        &mut self,
+        boxes: &[Aabb],
+        triangle: impl Fn(u32) -> Option<[Vec3; 3]> + Sync,
+    ) -> Result<(), RefitError> {
+        match self {
+            Tree::Binary(t) => t.refit(boxes),
+            Tree::Gpu(t) => t.refit(boxes),
+            Tree::Four(t) => t.refit(boxes, triangle),
+            Tree::Eight(t) => t.refit(boxes, triangle),
+        }
+    }
+
     /// Whether the tree tests triangles itself, from packs in its leaves.
     pub fn has_triangle_packs(&self) -> bool {
         match self {
@@ -141,7 +159,7 @@ impl Tree {
     pub fn intersect_counted<F, P, C>(&self, ray: &Ray, hit_prim: F, counter: &mut C) -> Option<Hit>
     where
         F: FnMut(u32, &Ray) -> Option<P>,
-        P: Into<PrimHit>,
+        P: IntoHit,
         C: TraversalCounter,
     {
         match self {
@@ -189,7 +207,7 @@ impl Tree {
         R: FnMut(usize) -> Ray,
         A: FnMut(usize, Option<Hit>),
         F: FnMut(u32, &Ray) -> Option<P>,
-        P: Into<PrimHit>,
+        P: IntoHit,
     {
         let mut each = |closest: &mut dyn FnMut(&Ray) -> Option<Hit>| {
             for i in 0..count {

@@ -21,35 +21,45 @@
 //! ```
 
 mod aabb;
+mod blas;
 pub mod build;
 mod bvh2;
 pub mod epo;
+mod geometry;
 mod gpu_layout;
+mod instance;
 mod isa;
 mod layout;
 pub mod optimize;
+mod query;
 mod ray;
 mod ray_order;
 mod stats;
+mod tlas;
 mod traverse;
 mod triangle;
 pub mod view;
 mod wide;
 
 pub use aabb::Aabb;
+pub use blas::{packed_params, Blas, BlasParams, PACKED_LEAF_PACKS};
 pub use build::{
     build, build_with_clipper, split_box, split_triangle, try_build, BuildParams, Builder, Clipper,
     ParamsError, Preset, SahCosts, SplitBoxes, UnknownBuilder,
 };
 pub use bvh2::{Bvh2, Bvh2Node, BvhError, RefitError};
 pub use epo::{epo, triangle_area_in_box};
+pub use geometry::{Boxes, Geometry, MeshError, TriangleMesh};
 pub use gpu_layout::{GpuBvh, GpuNode, GPU_EMPTY};
+pub use instance::{Instance, InstanceError, BOX_SLACK_ULPS, EVERY_RAY};
 pub use isa::{Isa, IsaError};
 pub use layout::{BvhWidth, Tree};
 pub use optimize::{optimize, OptimizeBudget, OptimizeReport};
-pub use ray::{Hit, PrimHit, Ray};
+pub use query::{trace_batch, RayQuery, ALL_MASKS, BATCH_CHUNK};
+pub use ray::{Hit, IntoHit, PrimHit, Ray};
 pub use ray_order::{RayOrder, RAY_ORDER_MIN};
 pub use stats::TreeStats;
+pub use tlas::Tlas;
 pub use traverse::{TraversalCounter, TraversalStats};
 pub use triangle::{intersect_triangle, ShearedRay, TrianglePack, NO_PRIM, PACK_LANES};
 pub use view::TreeView;

@@ -51,32 +51,69 @@ impl From<f32> for PrimHit {
     }
 }
 
-/// The closest hit found by a traversal: ray parameter, primitive index and the
-/// primitive's barycentrics there (see [`PrimHit`]); room for an instance id later.
+/// The closest hit found by a query: ray parameter, the instance and the primitive hit,
+/// and the primitive's barycentrics there (see [`PrimHit`]).
+///
+/// `inst` is the index of the instance in a [`crate::Tlas`]; a query of one structure on
+/// its own (a [`crate::Blas`], a tree with the caller's primitive test) reports 0.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Hit {
     pub t: f32,
+    pub inst: u32,
     pub prim: u32,
     pub u: f32,
     pub v: f32,
 }
 
 impl Hit {
-    /// A hit of primitive `prim` as its test reported it.
+    /// A hit of primitive `prim` (of instance 0) as its test reported it.
     #[inline]
     pub fn new(prim: u32, hit: PrimHit) -> Self {
         Self {
             t: hit.t,
+            inst: 0,
             prim,
             u: hit.u,
             v: hit.v,
         }
     }
 
-    /// Whether `self` is closer than `other`; equal distances go to the lower primitive
-    /// index, so every acceleration structure (and brute force) agrees on the answer.
+    /// Whether `self` is closer than `other`; equal distances go to the lower instance,
+    /// then the lower primitive index, so every acceleration structure (and brute force)
+    /// agrees on the answer.
     #[inline]
     pub fn is_before(&self, other: &Hit) -> bool {
-        self.t < other.t || (self.t == other.t && self.prim < other.prim)
+        self.t < other.t || (self.t == other.t && (self.inst, self.prim) < (other.inst, other.prim))
+    }
+}
+
+/// What a leaf entry's test reports, made into the [`Hit`] of that entry: a distance
+/// (`f32`) or a [`PrimHit`] is a hit of primitive `entry`; a [`Hit`] (what an instance's
+/// structure answers) is a hit of instance `entry`, keeping its primitive.
+pub trait IntoHit {
+    fn into_hit(self, entry: u32) -> Hit;
+}
+
+impl IntoHit for f32 {
+    #[inline(always)]
+    fn into_hit(self, entry: u32) -> Hit {
+        Hit::new(entry, PrimHit::from(self))
+    }
+}
+
+impl IntoHit for PrimHit {
+    #[inline(always)]
+    fn into_hit(self, entry: u32) -> Hit {
+        Hit::new(entry, self)
+    }
+}
+
+impl IntoHit for Hit {
+    #[inline(always)]
+    fn into_hit(self, entry: u32) -> Hit {
+        Hit {
+            inst: entry,
+            ..self
+        }
     }
 }

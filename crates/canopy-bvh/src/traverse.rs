@@ -1,7 +1,7 @@
 //! Closest-hit and any-hit traversal of a [`Bvh2`], generic over the primitive test.
 
 use crate::aabb::SlabRay;
-use crate::{Bvh2, Bvh2Node, Hit, PrimHit, Ray};
+use crate::{Bvh2, Bvh2Node, Hit, IntoHit, Ray};
 use std::mem::MaybeUninit;
 
 /// Entries a [`TraversalStack`] holds before it spills to the heap.
@@ -76,13 +76,13 @@ impl ClosestHitSearch {
     pub fn test_leaf<F, P, C>(&mut self, prims: &[u32], hit_prim: &mut F, counter: &mut C)
     where
         F: FnMut(u32, &Ray) -> Option<P>,
-        P: Into<PrimHit>,
+        P: IntoHit,
         C: TraversalCounter,
     {
         for &prim in prims {
             counter.test_primitive();
             if let Some(hit) = hit_prim(prim, &self.ray) {
-                self.offer(Hit::new(prim, hit.into()));
+                self.offer(hit.into_hit(prim));
             }
         }
     }
@@ -100,6 +100,8 @@ impl ClosestHitSearch {
 
 /// Receives traversal events; `()` ignores them and compiles to nothing.
 pub trait TraversalCounter {
+    /// Whether the counter keeps anything (queries may skip their counting then).
+    const COUNTS: bool = true;
     /// A node's children were box-tested (interior) or its primitives tested (leaf).
     #[inline(always)]
     fn visit_node(&mut self) {}
@@ -108,13 +110,27 @@ pub trait TraversalCounter {
     fn test_primitive(&mut self) {}
 }
 
-impl TraversalCounter for () {}
+impl TraversalCounter for () {
+    const COUNTS: bool = false;
+}
 
 /// Counts of traversal work, summed over any number of rays.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct TraversalStats {
     pub nodes_visited: u64,
     pub primitives_tested: u64,
+}
+
+impl TraversalStats {
+    /// Reports these counts to `counter`, event by event.
+    pub fn replay<C: TraversalCounter>(&self, counter: &mut C) {
+        for _ in 0..self.nodes_visited {
+            counter.visit_node();
+        }
+        for _ in 0..self.primitives_tested {
+            counter.test_primitive();
+        }
+    }
 }
 
 impl TraversalCounter for TraversalStats {
@@ -139,7 +155,7 @@ impl Bvh2 {
     pub fn intersect<F, P>(&self, ray: &Ray, hit_prim: F) -> Option<Hit>
     where
         F: FnMut(u32, &Ray) -> Option<P>,
-        P: Into<PrimHit>,
+        P: IntoHit,
     {
         self.intersect_counted(ray, hit_prim, &mut ())
     }
@@ -153,7 +169,7 @@ impl Bvh2 {
     ) -> Option<Hit>
     where
         F: FnMut(u32, &Ray) -> Option<P>,
-        P: Into<PrimHit>,
+        P: IntoHit,
         C: TraversalCounter,
     {
         let root = self.nodes.first()?;

@@ -4,9 +4,9 @@
 //! primitives (boxes, tested by the caller's closure), as a renderer's scenes do.
 
 use canopy_bvh::{
-    build, build_with_clipper, intersect_triangle, split_box, split_triangle, Aabb, BuildParams,
-    Builder, Bvh4, Bvh8, BvhN, BvhWidth, GpuBvh, Hit, Isa, PrimHit, Ray, ShearedRay, Tree,
-    TreeView, PREFETCH_ABOVE_BYTES,
+    build, build_with_clipper, intersect_triangle, split_box, split_triangle, Aabb, Blas,
+    BlasParams, BuildParams, Builder, Bvh4, Bvh8, BvhN, BvhWidth, Geometry, GpuBvh, Hit, Isa,
+    PrimHit, Ray, RayQuery, ShearedRay, Tree, TreeView, ALL_MASKS, PREFETCH_ABOVE_BYTES,
 };
 use glam::Vec3;
 use proptest::prelude::*;
@@ -37,6 +37,27 @@ impl Prim {
             Prim::Triangle(v) => intersect_triangle(v, ray, &ShearedRay::new(ray)),
             Prim::Box(b) => b.ray_entry(ray).map(PrimHit::from),
         }
+    }
+}
+
+/// A renderer's mixed primitives as geometry a [`Blas`] owns.
+struct Prims(Vec<Prim>);
+
+impl Geometry for Prims {
+    fn len(&self) -> usize {
+        self.0.len()
+    }
+    fn bounds(&self, prim: u32) -> Aabb {
+        self.0[prim as usize].bounds()
+    }
+    fn triangle(&self, prim: u32) -> Option<[Vec3; 3]> {
+        self.0[prim as usize].triangle()
+    }
+    fn has_triangles(&self) -> bool {
+        self.0.iter().any(|p| p.triangle().is_some())
+    }
+    fn intersect(&self, prim: u32, ray: &Ray, _: &ShearedRay) -> Option<PrimHit> {
+        self.0[prim as usize].hit(ray)
     }
 }
 
@@ -331,9 +352,12 @@ fn batch_calls_equal_single_ray_calls() {
             }
         })
         .collect();
-    let boxes: Vec<Aabb> = prims.iter().map(Prim::bounds).collect();
-    let mut wide = Bvh8::from_bvh2(&build(Builder::BinnedSah, &boxes, &BuildParams::default()));
-    wide.pack_triangles(|p| prims[p as usize].triangle());
+    let blas = Blas::build(Prims(prims), &BlasParams::default());
+    let wide = match blas.tree() {
+        Some(Tree::Eight(wide)) => wide,
+        _ => unreachable!("the default layout is 8-wide"),
+    };
+    let prims = &blas.geometry().0;
     let rays: Vec<Ray> = (0..5000)
         .map(|i| {
             let o = Vec3::new(-5.0, (i % 70) as f32 * 0.2, (i / 70) as f32 * 0.2);
@@ -343,16 +367,15 @@ fn batch_calls_equal_single_ray_calls() {
         .collect();
     let mut hits = vec![None; rays.len()];
     let mut blocked = vec![false; rays.len()];
-    wide.intersect_batch(&rays, &mut hits, |p, r| prims[p as usize].hit(r));
-    wide.occluded_batch(&rays, &mut blocked, |p, r| {
-        prims[p as usize].hit(r).is_some()
-    });
+    blas.intersect_batch(&rays, &mut hits, ALL_MASKS);
+    blas.occluded_batch(&rays, &mut blocked, ALL_MASKS);
     assert!(
         hits.iter().filter(|h| h.is_some()).count() > 1000,
         "the rays should mostly hit"
     );
     for (i, ray) in rays.iter().enumerate() {
-        assert_eq!(bits(hits[i]), bits(wide.closest(&prims, ray)), "ray {i}");
+        assert_eq!(bits(hits[i]), bits(wide.closest(prims, ray)), "ray {i}");
+        assert_eq!(bits(hits[i]), bits(blas.intersect(ray)), "ray {i}");
         assert_eq!(blocked[i], hits[i].is_some(), "ray {i}");
     }
 }
@@ -452,10 +475,9 @@ fn reordered_batches_answer_each_ray_in_place() {
             }
         })
         .collect();
-    let boxes: Vec<Aabb> = prims.iter().map(Prim::bounds).collect();
-    let mut wide = Bvh8::from_bvh2(&build(Builder::BinnedSah, &boxes, &BuildParams::default()));
-    wide.pack_triangles(|p| prims[p as usize].triangle());
-    assert!(wide.orders_batches(), "a tree larger than the cache");
+    let blas = Blas::build(Prims(prims), &BlasParams::default());
+    let prims = &blas.geometry().0;
+    assert!(blas.orders_batches(), "a tree larger than the cache");
     // Rays from scattered origins in all directions, some with a short range.
     let rays: Vec<Ray> = (0..3 * canopy_bvh::RAY_ORDER_MIN)
         .map(|i| {
@@ -469,20 +491,26 @@ fn reordered_batches_answer_each_ray_in_place() {
     let test = |p: u32, r: &Ray| prims[p as usize].hit(r);
     let mut hits = vec![None; rays.len()];
     let mut blocked = vec![false; rays.len()];
-    wide.intersect_batch(&rays, &mut hits, test);
-    wide.occluded_batch(&rays, &mut blocked, |p, r| test(p, r).is_some());
+    blas.intersect_batch(&rays, &mut hits, ALL_MASKS);
+    blas.occluded_batch(&rays, &mut blocked, ALL_MASKS);
     assert!(hits.iter().filter(|h| h.is_some()).count() > rays.len() / 10);
+    let tree = blas.tree().unwrap();
     for (i, ray) in rays.iter().enumerate() {
-        assert_eq!(bits(hits[i]), bits(wide.intersect(ray, test)), "ray {i}");
+        assert_eq!(bits(hits[i]), bits(blas.intersect(ray)), "ray {i}");
+        assert_eq!(
+            bits(hits[i]),
+            bits(tree.intersect_counted(ray, test, &mut ())),
+            "ray {i}"
+        );
         assert_eq!(
             blocked[i],
-            wide.occluded(ray, |p, r| test(p, r).is_some()),
+            tree.occluded(ray, |p, r| test(p, r).is_some()),
             "ray {i}"
         );
     }
     let reversed: Vec<Ray> = rays.iter().rev().copied().collect();
     let mut hits_reversed = vec![None; rays.len()];
-    wide.intersect_batch(&reversed, &mut hits_reversed, test);
+    blas.intersect_batch(&reversed, &mut hits_reversed, ALL_MASKS);
     assert!(hits_reversed
         .iter()
         .rev()

@@ -129,6 +129,7 @@ impl<'g> Tracer<'g> {
             .map(|h| {
                 (h.prim != canopy_bvh::NO_PRIM).then_some(Hit {
                     t: h.t,
+                    inst: 0,
                     prim: h.prim,
                     u: h.u,
                     v: h.v,

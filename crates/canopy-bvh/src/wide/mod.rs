@@ -9,14 +9,13 @@
 //! their triangles in packs of four ([`BvhN::pack_triangles`]) tested together.
 
 mod kernels;
+mod refit;
 mod traverse;
 
 use crate::traverse::TraversalCounter;
 use crate::triangle::{PackHits, TrianglePack, NO_PRIM, PACK_LANES};
 use crate::view::{Child, ChildKind, TreeView};
-use crate::{
-    Aabb, Bvh2, BvhError, Hit, Isa, IsaError, PrimHit, Ray, RayOrder, SahCosts, TreeStats,
-};
+use crate::{Aabb, Bvh2, BvhError, Hit, IntoHit, Isa, IsaError, Ray, SahCosts, TreeStats};
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
 use rayon::prelude::*;
@@ -168,13 +167,6 @@ impl<const N: usize> BvhN<N> {
     /// the cache gains less than the reordering costs.
     pub fn orders_batches(&self) -> bool {
         self.prefetches()
-    }
-
-    /// The order to trace `rays` in, if not theirs ([`BvhN::orders_batches`]).
-    fn batch_order(&self, rays: &[Ray]) -> Option<RayOrder> {
-        self.orders_batches()
-            .then(|| RayOrder::by_origin(rays.len(), |i| rays[i].origin))
-            .flatten()
     }
 
     /// Whether traversal prefetches stacked children ([`PREFETCH_ABOVE_BYTES`]).
@@ -391,7 +383,7 @@ where
     pub fn intersect<F, P>(&self, ray: &Ray, hit_prim: F) -> Option<Hit>
     where
         F: FnMut(u32, &Ray) -> Option<P>,
-        P: Into<PrimHit>,
+        P: IntoHit,
     {
         self.intersect_counted(ray, hit_prim, &mut ())
     }
@@ -401,7 +393,7 @@ where
     pub fn intersect_counted<F, P, C>(&self, ray: &Ray, hit_prim: F, counter: &mut C) -> Option<Hit>
     where
         F: FnMut(u32, &Ray) -> Option<P>,
-        P: Into<PrimHit>,
+        P: IntoHit,
         C: TraversalCounter,
     {
         if self.nodes.is_empty() {
@@ -434,70 +426,10 @@ where
     }
 }
 
-/// Rays per parallel task of the batch calls: large enough to amortise scheduling, small
-/// enough to balance two to a few dozen threads.
-const BATCH_CHUNK: usize = 512;
-
 impl<const N: usize> BvhN<N>
 where
     WideNode<N>: Dispatch<N>,
 {
-    /// Closest hits of many rays, in parallel over chunks (rayon's current pool):
-    /// `hits[i]` answers `rays[i]`. `hit_prim` tests non-triangle primitives as in
-    /// [`BvhN::intersect`], from several threads at once. Large batches over large trees
-    /// are traced in the order of their origins ([`BvhN::orders_batches`]); the answers
-    /// are the same.
-    ///
-    /// # Panics
-    /// If `rays` and `hits` differ in length.
-    pub fn intersect_batch<F, P>(&self, rays: &[Ray], hits: &mut [Option<Hit>], hit_prim: F)
-    where
-        F: Fn(u32, &Ray) -> Option<P> + Sync,
-        P: Into<PrimHit>,
-    {
-        assert_eq!(rays.len(), hits.len(), "one hit slot per ray");
-        self.batch(rays, hits, |rays, hits| {
-            self.intersect_each(rays.len(), |i| rays[i], |i, hit| hits[i] = hit, &hit_prim)
-        });
-    }
-
-    /// Occlusion of many rays, in parallel over chunks: `occluded[i]` answers `rays[i]`.
-    /// Large batches are traced in the order of their origins, as in
-    /// [`BvhN::intersect_batch`].
-    ///
-    /// # Panics
-    /// If `rays` and `occluded` differ in length.
-    pub fn occluded_batch<F>(&self, rays: &[Ray], occluded: &mut [bool], hit_prim: F)
-    where
-        F: Fn(u32, &Ray) -> bool + Sync,
-    {
-        assert_eq!(rays.len(), occluded.len(), "one answer per ray");
-        self.batch(rays, occluded, |rays, out| {
-            self.occluded_each(rays.len(), |i| rays[i], |i, o| out[i] = o, &hit_prim)
-        });
-    }
-
-    /// Answers of many rays in parallel over chunks of [`BATCH_CHUNK`]: `each(rays, out)`
-    /// answers a chunk on one thread. Traced in [`RayOrder`] where the tree orders
-    /// batches, the answers then put back in the callers' order.
-    fn batch<T: Copy + Default + Send + Sync>(
-        &self,
-        rays: &[Ray],
-        out: &mut [T],
-        each: impl Fn(&[Ray], &mut [T]) + Sync,
-    ) {
-        match self.batch_order(rays) {
-            None => out
-                .par_chunks_mut(BATCH_CHUNK)
-                .zip(rays.par_chunks(BATCH_CHUNK))
-                .for_each(|(out, rays)| each(rays, out)),
-            Some(order) => {
-                let traced = order.trace(BATCH_CHUNK, |i| rays[i], each);
-                order.unsort_into(&traced, out);
-            }
-        }
-    }
-
     /// Closest hits of rays `0..count` on this thread: `ray(i)` makes ray `i` and
     /// `answer(i, hit)` takes its hit, in order. Answers are those of
     /// [`BvhN::intersect`]; the instruction set is chosen once for all the rays, and the
@@ -507,7 +439,7 @@ where
         R: FnMut(usize) -> Ray,
         A: FnMut(usize, Option<Hit>),
         F: FnMut(u32, &Ray) -> Option<P>,
-        P: Into<PrimHit>,
+        P: IntoHit,
     {
         let each = ClosestEach {
             bvh: self,
@@ -551,7 +483,7 @@ where
     R: FnMut(usize) -> Ray,
     A: FnMut(usize, Option<Hit>),
     F: FnMut(u32, &Ray) -> Option<P>,
-    P: Into<PrimHit>,
+    P: IntoHit,
 {
     type Out = ();
 
@@ -623,7 +555,7 @@ struct ClosestQuery<'a, const N: usize, F, C> {
 impl<const N: usize, F, P, C> Query<N> for ClosestQuery<'_, N, F, C>
 where
     F: FnMut(u32, &Ray) -> Option<P>,
-    P: Into<PrimHit>,
+    P: IntoHit,
     C: TraversalCounter,
 {
     type Out = Option<Hit>;

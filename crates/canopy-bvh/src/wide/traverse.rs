@@ -9,7 +9,7 @@ use crate::traverse::{TraversalCounter, TraversalStack};
 use crate::triangle::{
     triangle_lanes, PackHits, PackKernel, PackRay, ScalarPack, TrianglePack, PACK_LANES,
 };
-use crate::{Hit, Isa, PrimHit, Ray};
+use crate::{Hit, IntoHit, Isa, Ray};
 use std::marker::PhantomData;
 
 /// The closest-hit search state: the ray, its `t_max` shrunk to the best hit so far.
@@ -90,7 +90,7 @@ pub(crate) struct ClosureLeaves<'a, F> {
 impl<F, P> ClosestLeaves for ClosureLeaves<'_, F>
 where
     F: FnMut(u32, &Ray) -> Option<P>,
-    P: Into<PrimHit>,
+    P: IntoHit,
 {
     #[inline(always)]
     fn closest<C: TraversalCounter>(&mut self, first: u32, count: u32, s: &mut Closest, c: &mut C) {
@@ -98,7 +98,7 @@ where
         for &prim in &self.prims[first..first + count as usize] {
             c.test_primitive();
             if let Some(hit) = (self.test)(prim, &s.ray) {
-                s.offer(Hit::new(prim, hit.into()));
+                s.offer(hit.into_hit(prim));
             }
         }
     }
@@ -193,7 +193,7 @@ impl<T, F, P> PackedLeaves<'_, T, F>
 where
     T: PackKernel,
     F: FnMut(u32, &Ray) -> Option<P>,
-    P: Into<PrimHit>,
+    P: IntoHit,
 {
     /// Offers the hits of one pack or a pair tested together: triangles by the kernel,
     /// other primitives by the caller's closure.
@@ -225,7 +225,7 @@ where
                 c.test_primitive();
                 let prim = pack.prim[lane];
                 if let Some(hit) = (self.test)(prim, &s.ray) {
-                    s.offer(Hit::new(prim, hit.into()));
+                    s.offer(hit.into_hit(prim));
                 }
             }
         }
@@ -236,7 +236,7 @@ impl<T, F, P> ClosestLeaves for PackedLeaves<'_, T, F>
 where
     T: PackKernel,
     F: FnMut(u32, &Ray) -> Option<P>,
-    P: Into<PrimHit>,
+    P: IntoHit,
 {
     #[inline(always)]
     fn closest<C: TraversalCounter>(&mut self, first: u32, count: u32, s: &mut Closest, c: &mut C) {

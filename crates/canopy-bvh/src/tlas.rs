@@ -1,0 +1,299 @@
+//! [`Tlas`]: a top-level structure over [`Instance`]s of bottom-level structures (Wald et
+//! al., "Ray tracing animated scenes using coherent grid traversal", and every production
+//! ray tracer since: Embree's and OptiX's instances, tinybvh's `BLASInstance`).
+//!
+//! The top tree is built by any builder over the instances' world boxes and walked like
+//! any tree; at a leaf, the ray is taken into the instance's space and handed to its
+//! structure, whose hit comes back with the instance's index. A structure placed many
+//! times is stored once.
+
+use crate::instance::InstanceError;
+use crate::query::RayQuery;
+use crate::{
+    build, Aabb, BlasParams, Hit, Instance, IntoHit, Ray, TraversalCounter, TraversalStats, Tree,
+};
+use glam::Affine3A;
+use rayon::prelude::*;
+use std::time::{Duration, Instant};
+
+/// Instances of structures `B` (one type for all; an enum serves mixed kinds) and the
+/// top tree over them.
+#[derive(Clone, Debug)]
+pub struct Tlas<B> {
+    blases: Vec<B>,
+    instances: Vec<Instance>,
+    /// Over the instances' world boxes; `None`: every instance is tested.
+    tree: Option<Tree>,
+    params: BlasParams,
+    bounds: Aabb,
+    build_time: Duration,
+}
+
+impl<B: RayQuery> Tlas<B> {
+    /// Places `instances` of `blases` and builds the top tree with `params` (its builder
+    /// and width; `builder: None` tests every instance). Refuses an instance whose
+    /// transform is not finite or cannot be inverted, or that names no structure.
+    pub fn build(
+        blases: Vec<B>,
+        instances: Vec<Instance>,
+        params: &BlasParams,
+    ) -> Result<Self, InstanceError> {
+        for (index, instance) in instances.iter().enumerate() {
+            if instance.blas as usize >= blases.len() {
+                return Err(InstanceError::NoSuchBlas {
+                    instance: index,
+                    blas: instance.blas,
+                    count: blases.len(),
+                });
+            }
+            instance.check(index)?;
+        }
+        let mut tlas = Self {
+            blases,
+            instances,
+            tree: None,
+            params: *params,
+            bounds: Aabb::EMPTY,
+            build_time: Duration::ZERO,
+        };
+        tlas.rebuild();
+        Ok(tlas)
+    }
+
+    /// Moves every instance (`transforms[i]` places instance `i`) and rebuilds the top
+    /// tree; the structures are untouched. Refuses, changing nothing, a transform that
+    /// [`Tlas::build`] would refuse.
+    pub fn set_transforms(&mut self, transforms: &[Affine3A]) -> Result<(), InstanceError> {
+        if transforms.len() != self.instances.len() {
+            return Err(InstanceError::TransformCount {
+                given: transforms.len(),
+                instances: self.instances.len(),
+            });
+        }
+        let moved: Vec<Instance> = self
+            .instances
+            .par_iter()
+            .zip(transforms)
+            .map(|(instance, &t)| instance.with_transform(t))
+            .collect();
+        for (index, instance) in moved.iter().enumerate() {
+            instance.check(index)?;
+        }
+        self.instances = moved;
+        self.rebuild();
+        Ok(())
+    }
+
+    /// Builds the top tree over the instances as they are placed now.
+    fn rebuild(&mut self) {
+        let start = Instant::now();
+        let boxes: Vec<Aabb> = self
+            .instances
+            .par_iter()
+            .map(|i| i.world_bounds(self.blases[i.blas as usize].bounds()))
+            .collect();
+        self.bounds = boxes.iter().copied().fold(Aabb::EMPTY, Aabb::union);
+        self.tree = self.params.builder.map(|builder| {
+            Tree::new(
+                build(builder, &boxes, &self.params.build),
+                self.params.width,
+            )
+        });
+        self.build_time = start.elapsed();
+    }
+
+    /// Uses the kernels of `isa` for the top tree (see [`Tree::set_isa`]).
+    pub fn set_isa(&mut self, isa: crate::Isa) -> Result<(), crate::IsaError> {
+        self.tree.as_mut().map_or(Ok(()), |t| t.set_isa(isa))
+    }
+
+    pub fn blases(&self) -> &[B] {
+        &self.blases
+    }
+
+    pub fn instances(&self) -> &[Instance] {
+        &self.instances
+    }
+
+    /// The top tree, unless every instance is tested.
+    pub fn tree(&self) -> Option<&Tree> {
+        self.tree.as_ref()
+    }
+
+    /// Wall-clock time of the last build of the top tree (world boxes included).
+    pub fn build_time(&self) -> Duration {
+        self.build_time
+    }
+
+    /// The one structure when the only instance is the untransformed whole: queries go
+    /// straight to it, at no extra cost.
+    #[inline(always)]
+    fn alone(&self) -> Option<(&B, u32)> {
+        match self.instances.as_slice() {
+            [only] if only.is_identity() => Some((&self.blases[only.blas as usize], only.mask)),
+            _ => None,
+        }
+    }
+
+    /// The hit of `ray` (world space, its `t_max` the best so far) on instance `index`.
+    #[inline(always)]
+    fn closest_in<C: FnMut(&B, &Ray) -> Option<Hit>>(
+        &self,
+        index: u32,
+        ray: &Ray,
+        mask: u32,
+        mut closest: C,
+    ) -> Option<Hit> {
+        let instance = &self.instances[index as usize];
+        if instance.mask & mask == 0 {
+            return None;
+        }
+        let blas = &self.blases[instance.blas as usize];
+        match instance.is_identity() {
+            true => closest(blas, ray),
+            false => closest(blas, &instance.ray_to_local(ray)),
+        }
+    }
+
+    #[inline(always)]
+    fn occluded_in(&self, index: u32, ray: &Ray, mask: u32) -> bool {
+        let instance = &self.instances[index as usize];
+        if instance.mask & mask == 0 {
+            return false;
+        }
+        let blas = &self.blases[instance.blas as usize];
+        match instance.is_identity() {
+            true => blas.occluded_masked(ray, mask),
+            false => blas.occluded_masked(&instance.ray_to_local(ray), mask),
+        }
+    }
+
+    /// Closest hit, each instance's structure queried by `closest`, the top tree's work
+    /// reported to `counter`.
+    #[inline(always)]
+    fn closest<C, Q>(&self, ray: &Ray, mask: u32, counter: &mut C, mut closest: Q) -> Option<Hit>
+    where
+        C: TraversalCounter,
+        Q: FnMut(&B, &Ray) -> Option<Hit>,
+    {
+        if let Some((blas, only)) = self.alone() {
+            return (only & mask != 0)
+                .then(|| closest(blas, ray))
+                .flatten()
+                .map(|h| h.into_hit(0));
+        }
+        let test = |i: u32, r: &Ray| self.closest_in(i, r, mask, &mut closest);
+        match &self.tree {
+            Some(tree) => tree.intersect_counted(ray, test, counter),
+            None => brute_force(self.instances.len(), ray, counter, test),
+        }
+    }
+}
+
+/// The closest hit by testing every instance (ties to the lower instance).
+fn brute_force<C, F>(count: usize, ray: &Ray, counter: &mut C, mut test: F) -> Option<Hit>
+where
+    C: TraversalCounter,
+    F: FnMut(u32, &Ray) -> Option<Hit>,
+{
+    let mut best: Option<Hit> = None;
+    let mut ray = *ray;
+    for index in 0..count as u32 {
+        counter.test_primitive();
+        if let Some(hit) = test(index, &ray).map(|h| h.into_hit(index)) {
+            if best.is_none_or(|b| hit.is_before(&b)) {
+                ray.t_max = hit.t;
+                best = Some(hit);
+            }
+        }
+    }
+    best
+}
+
+impl<B: RayQuery> RayQuery for Tlas<B> {
+    fn bounds(&self) -> Aabb {
+        self.bounds
+    }
+
+    #[inline]
+    fn intersect_masked(&self, ray: &Ray, mask: u32) -> Option<Hit> {
+        self.closest(ray, mask, &mut (), |blas, r| blas.intersect_masked(r, mask))
+    }
+
+    #[inline]
+    fn occluded_masked(&self, ray: &Ray, mask: u32) -> bool {
+        if let Some((blas, only)) = self.alone() {
+            return only & mask != 0 && blas.occluded_masked(ray, mask);
+        }
+        let test = |i: u32, r: &Ray| self.occluded_in(i, r, mask);
+        match &self.tree {
+            Some(tree) => tree.occluded(ray, test),
+            None => (0..self.instances.len() as u32).any(|i| test(i, ray)),
+        }
+    }
+
+    fn intersect_counted<C: TraversalCounter>(
+        &self,
+        ray: &Ray,
+        mask: u32,
+        counter: &mut C,
+    ) -> Option<Hit> {
+        if !C::COUNTS {
+            return self.intersect_masked(ray, mask);
+        }
+        // The structures' work goes to `counter` as it happens, the top tree's to `top`
+        // (both cannot borrow it at once), replayed after.
+        let mut top = TraversalStats::default();
+        let hit = self.closest(ray, mask, &mut top, |blas, r| {
+            blas.intersect_counted(r, mask, counter)
+        });
+        top.replay(counter);
+        hit
+    }
+
+    fn intersect_each<R, A>(&self, count: usize, mask: u32, mut ray: R, mut answer: A)
+    where
+        R: FnMut(usize) -> Ray,
+        A: FnMut(usize, Option<Hit>),
+    {
+        if let Some((blas, only)) = self.alone() {
+            if only & mask != 0 {
+                return blas
+                    .intersect_each(count, mask, ray, |i, h| answer(i, h.map(|h| h.into_hit(0))));
+            }
+        }
+        match &self.tree {
+            Some(tree) if self.alone().is_none() => {
+                let test = |i: u32, r: &Ray| {
+                    self.closest_in(i, r, mask, |blas, r| blas.intersect_masked(r, mask))
+                };
+                tree.intersect_each(count, ray, answer, test)
+            }
+            _ => (0..count).for_each(|i| answer(i, self.intersect_masked(&ray(i), mask))),
+        }
+    }
+
+    fn occluded_each<R, A>(&self, count: usize, mask: u32, mut ray: R, mut answer: A)
+    where
+        R: FnMut(usize) -> Ray,
+        A: FnMut(usize, bool),
+    {
+        if let Some((blas, only)) = self.alone() {
+            if only & mask != 0 {
+                return blas.occluded_each(count, mask, ray, answer);
+            }
+        }
+        match &self.tree {
+            Some(tree) if self.alone().is_none() => {
+                let test = |i: u32, r: &Ray| self.occluded_in(i, r, mask);
+                tree.occluded_each(count, ray, answer, test)
+            }
+            _ => (0..count).for_each(|i| answer(i, self.occluded_masked(&ray(i), mask))),
+        }
+    }
+
+    fn orders_batches(&self) -> bool {
+        self.tree.as_ref().is_some_and(Tree::orders_batches)
+            || self.blases.iter().any(RayQuery::orders_batches)
+    }
+}
