@@ -84,6 +84,8 @@ pub struct Blas<G> {
     /// Whether a query prepares its ray for triangle tests: there are triangles, and no
     /// triangle packs test them.
     shears: bool,
+    /// Whether any primitive is a triangle (brute force then prepares its rays).
+    triangles: bool,
     params: BlasParams,
     build_time: Duration,
 }
@@ -97,6 +99,7 @@ impl<G: Geometry> Blas<G> {
             tree: None,
             bounds: Aabb::EMPTY,
             shears: false,
+            triangles: false,
             params: *params,
             build_time: Duration::ZERO,
         };
@@ -130,8 +133,8 @@ impl<G: Geometry> Blas<G> {
             tree.pack_triangles(|p| geometry.triangle(p));
             tree
         });
-        self.shears =
-            geometry.has_triangles() && !self.tree.as_ref().is_some_and(Tree::has_triangle_packs);
+        self.triangles = geometry.has_triangles();
+        self.shears = self.triangles && !self.tree.as_ref().is_some_and(Tree::has_triangle_packs);
         self.build_time = start.elapsed();
     }
 
@@ -190,27 +193,39 @@ impl<G: Geometry> Blas<G> {
     #[inline(always)]
     fn closest<C: TraversalCounter>(&self, ray: &Ray, counter: &mut C) -> Option<Hit> {
         let g = &self.geometry;
-        let sheared = self.sheared(ray);
-        match &self.tree {
-            Some(tree) => tree.intersect_counted(ray, |p, r| g.intersect(p, r, &sheared), counter),
-            None => brute_force_closest(g, ray, &sheared, counter),
+        match (&self.tree, self.shears) {
+            (Some(tree), false) => {
+                tree.intersect_counted(ray, |p, r| g.intersect_other(p, r), counter)
+            }
+            (Some(tree), true) => {
+                // The shear depends on the direction only: valid as t_max shrinks.
+                let sheared = ShearedRay::new(ray);
+                tree.intersect_counted(ray, |p, r| g.intersect(p, r, &sheared), counter)
+            }
+            (None, _) => brute_force_closest(g, ray, &self.sheared(ray), counter),
         }
     }
 
     #[inline(always)]
     fn any(&self, ray: &Ray) -> bool {
         let g = &self.geometry;
-        let sheared = self.sheared(ray);
-        match &self.tree {
-            Some(tree) => tree.occluded(ray, |p, r| g.occludes(p, r, &sheared)),
-            None => (0..g.len() as u32).any(|p| g.occludes(p, ray, &sheared)),
+        match (&self.tree, self.shears) {
+            (Some(tree), false) => tree.occluded(ray, |p, r| g.occludes_other(p, r)),
+            (Some(tree), true) => {
+                let sheared = ShearedRay::new(ray);
+                tree.occluded(ray, |p, r| g.occludes(p, r, &sheared))
+            }
+            (None, _) => {
+                let sheared = self.sheared(ray);
+                (0..g.len() as u32).any(|p| g.occludes(p, ray, &sheared))
+            }
         }
     }
 
-    /// The ray prepared for the triangle tests the closure makes, if it makes any.
+    /// The ray prepared for the triangle tests of brute force, if it makes any.
     #[inline(always)]
     fn sheared(&self, ray: &Ray) -> ShearedRay {
-        match self.shears {
+        match self.triangles {
             true => ShearedRay::new(ray),
             false => ShearedRay::UNUSED,
         }
@@ -286,9 +301,7 @@ impl<G: Geometry> RayQuery for Blas<G> {
     {
         let g = &self.geometry;
         match self.tree_for_each() {
-            Some(tree) => tree.intersect_each(count, ray, answer, |p, r| {
-                g.intersect(p, r, &ShearedRay::UNUSED)
-            }),
+            Some(tree) => tree.intersect_each(count, ray, answer, |p, r| g.intersect_other(p, r)),
             None => (0..count).for_each(|i| answer(i, self.intersect_masked(&ray(i), mask))),
         }
     }
@@ -300,9 +313,7 @@ impl<G: Geometry> RayQuery for Blas<G> {
     {
         let g = &self.geometry;
         match self.tree_for_each() {
-            Some(tree) => tree.occluded_each(count, ray, answer, |p, r| {
-                g.occludes(p, r, &ShearedRay::UNUSED)
-            }),
+            Some(tree) => tree.occluded_each(count, ray, answer, |p, r| g.occludes_other(p, r)),
             None => (0..count).for_each(|i| answer(i, self.occluded_masked(&ray(i), mask))),
         }
     }

@@ -44,6 +44,20 @@ pub trait Geometry: Sync {
         self.intersect(prim, ray, sheared).is_some()
     }
 
+    /// [`Geometry::intersect`] of a primitive that is not a triangle (the only kind a
+    /// query's closure sees where triangles are packed or absent). Geometry that mixes
+    /// kinds can keep its triangle test out of this path, which the traversal inlines.
+    #[inline]
+    fn intersect_other(&self, prim: u32, ray: &Ray) -> Option<PrimHit> {
+        self.intersect(prim, ray, &ShearedRay::UNUSED)
+    }
+
+    /// [`Geometry::occludes`] of a primitive that is not a triangle.
+    #[inline]
+    fn occludes_other(&self, prim: u32, ray: &Ray) -> bool {
+        self.intersect_other(prim, ray).is_some()
+    }
+
     /// The part of `prim` inside `within` cut by the plane `point[axis] == position`, for
     /// builders with spatial splits (see [`crate::Clipper`]): triangles are clipped, any
     /// other primitive is cut as its box (conservative).
@@ -222,6 +236,16 @@ impl<G: Geometry + Send> Geometry for std::sync::Arc<G> {
     #[inline]
     fn occludes(&self, prim: u32, ray: &Ray, sheared: &ShearedRay) -> bool {
         (**self).occludes(prim, ray, sheared)
+    }
+
+    #[inline]
+    fn intersect_other(&self, prim: u32, ray: &Ray) -> Option<PrimHit> {
+        (**self).intersect_other(prim, ray)
+    }
+
+    #[inline]
+    fn occludes_other(&self, prim: u32, ray: &Ray) -> bool {
+        (**self).occludes_other(prim, ray)
     }
 
     fn split(&self, prim: u32, within: Aabb, axis: usize, position: f32) -> (Aabb, Aabb) {

@@ -276,9 +276,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     } else {
         args.width
     };
-    let accel = pool.install(|| {
-        Accel::build_optimized(args.bvh, width, &scene.primitives, &params, args.optimize)
-    });
+    let accel = pool.install(|| Accel::for_scene(scene, args.bvh, width, &params, args.optimize));
     if args.show_bvh && accel.tree().is_none() {
         bail!("--show-bvh needs a BVH; choose a builder with --bvh");
     }
@@ -308,9 +306,22 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     }
 
     let rows = scene.settings.height as u64;
-    let mut pass: Box<Pass> = match (&gpu, accel.tree()) {
+    // The GPU has no instancing yet: it renders the scene with its instances baked.
+    let baked = match (&gpu, scene.instances.is_empty()) {
+        (Some(_), false) => {
+            let baked = scene.with_instances_baked();
+            let accel = pool.install(|| Accel::build(args.bvh, width, &baked.primitives, &params));
+            Some((baked, accel))
+        }
+        _ => None,
+    };
+    let (gpu_scene, gpu_accel) = match &baked {
+        Some((scene, accel)) => (scene, accel),
+        None => (scene, &accel),
+    };
+    let mut pass: Box<Pass> = match (&gpu, gpu_accel.tree()) {
         (Some(gpu), Some(canopy_bvh::Tree::Binary(bvh))) => {
-            let renderer = canopy_gpu::Renderer::new(gpu, scene, bvh)?;
+            let renderer = canopy_gpu::Renderer::new(gpu, gpu_scene, bvh)?;
             Box::new(move |accumulator, progress| {
                 let done = renderer.render_samples(accumulator, 1)?;
                 progress.inc(rows);

@@ -30,6 +30,8 @@ pub enum GpuError {
     TooDeep { depth: usize, max: usize },
     #[error("reading results back from the GPU failed: {0}")]
     Readback(String),
+    #[error("the GPU renderer does not take {0}")]
+    Unsupported(&'static str),
 }
 
 /// A GPU device and its queue.

@@ -124,10 +124,10 @@ fn gpu_lights(scene: &Scene) -> (Vec<GpuLight>, Vec<u32>) {
         return (Vec::new(), light_of_prim);
     };
     let table = lights
-        .prims()
+        .emitters()
         .iter()
         .enumerate()
-        .map(|(light, &prim)| {
+        .map(|(light, &(_, prim))| {
             light_of_prim[prim as usize] = light as u32;
             GpuLight {
                 prim,
@@ -172,6 +172,13 @@ pub struct Renderer<'g> {
 impl<'g> Renderer<'g> {
     /// Uploads `scene` with the tree `bvh` built over its primitives.
     pub fn new(gpu: &'g Gpu, scene: &Scene, bvh: &Bvh2) -> Result<Self, GpuError> {
+        if !scene.instances.is_empty() {
+            // Two-level traversal in WGSL is still to come; callers bake instances
+            // (`Scene::with_instances_baked`) for the GPU until then.
+            return Err(GpuError::Unsupported(
+                "mesh instances (bake them into the scene's primitives first)",
+            ));
+        }
         let (background_kind, background, env) = match &scene.background {
             Background::Sky => (0, Vec3::ZERO, EnvironmentTables::default()),
             Background::Constant(c) => (1, *c, EnvironmentTables::default()),

@@ -5,6 +5,7 @@
 //! Runs on any adapter wgpu finds, the software Vulkan driver (lavapipe) included; skips
 //! with a message only when no adapter can be created at all.
 
+use canopy_bvh::RayQuery;
 use canopy_bvh::{BuildParams, Builder, Hit, Ray};
 use canopy_gpu::{Gpu, GpuError, GpuPrimitive, GpuScene, Tracer};
 use canopy_render::geometry::{Cuboid, Shape, Sphere, Triangle};
@@ -118,7 +119,7 @@ fn gpu_closest_hits_equal_the_cpu_ones() {
     let params = BuildParams::default();
     for builder in [Builder::BinnedSah, Builder::Sbvh, Builder::Lbvh] {
         let accel = Accel::build(AccelKind::Bvh(builder), BvhWidth::Two, &prims, &params);
-        let cpu: Vec<Option<Hit>> = rays.iter().map(|r| accel.intersect(&prims, r)).collect();
+        let cpu: Vec<Option<Hit>> = rays.iter().map(|r| accel.intersect(r)).collect();
         let boxes: Vec<_> = prims.iter().map(|p| p.shape.bounds()).collect();
         let bvh = canopy_bvh::build_with_clipper(
             builder,

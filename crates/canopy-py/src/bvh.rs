@@ -3,7 +3,7 @@
 use crate::arrays;
 use crate::pools;
 use canopy_bvh::{Aabb, BuildParams, BvhWidth, SahCosts};
-use canopy_bvh::{Hit, Ray, RayOrder};
+use canopy_bvh::{Hit, Ray, RayOrder, RayQuery, ALL_MASKS};
 use canopy_render::geometry::{Cuboid, Shape, Triangle};
 use canopy_render::scene::Primitive;
 use canopy_render::{Accel, AccelKind};
@@ -23,7 +23,6 @@ const CHUNK: usize = 1024;
 /// A BVH over triangles (a mesh) or boxes, built once, queried with batches of rays.
 #[pyclass(frozen, module = "canopy._canopy")]
 pub struct Bvh {
-    primitives: Vec<Primitive>,
     accel: Accel,
     /// A builder, or `none` (brute force: the plain loop every tree is checked against).
     kind: AccelKind,
@@ -105,7 +104,6 @@ impl Bvh {
                 let accel = Accel::build_optimized(kind, width, &primitives, &params, optimize);
                 let build_ms = start.elapsed().as_secs_f64() * 1e3;
                 Bvh {
-                    primitives,
                     accel,
                     kind,
                     width,
@@ -331,7 +329,7 @@ impl Bvh {
 
     #[getter]
     fn primitive_count(&self) -> usize {
-        self.primitives.len()
+        self.accel.shapes().len()
     }
 
     #[getter]
@@ -347,7 +345,7 @@ impl Bvh {
     fn stats<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let d = PyDict::new(py);
         d.set_item("builder", self.name())?;
-        d.set_item("primitives", self.primitives.len())?;
+        d.set_item("primitives", self.accel.shapes().len())?;
         d.set_item("build_ms", self.build_ms)?;
         let Some(tree) = self.accel.tree() else {
             return Ok(d);
@@ -379,8 +377,7 @@ impl Bvh {
         };
         py.detach(|| {
             canopy_bvh::epo(tree.view(), &self.params.sah, |prim, region| {
-                self.primitives[prim as usize]
-                    .shape
+                self.accel.shapes()[prim as usize]
                     .area_in_box(region)
                     .unwrap_or(0.0)
             })
@@ -392,9 +389,10 @@ impl Bvh {
             Some(tree) => tree
                 .validate(
                     &self
-                        .primitives
+                        .accel
+                        .shapes()
                         .iter()
-                        .map(|p| p.shape.bounds())
+                        .map(|s| s.bounds())
                         .collect::<Vec<Aabb>>(),
                 )
                 .map_err(|e| PyValueError::new_err(format!("invalid BVH: {e}"))),
@@ -454,8 +452,7 @@ impl Bvh {
                             let answer =
                                 |i: usize, hit: Option<Hit>| write_hit(t, prim, uv, i, hit);
                             let rays = |i: usize| batch.ray(first + i);
-                            self.accel
-                                .intersect_each(&self.primitives, count, rays, answer)
+                            self.accel.intersect_each(count, ALL_MASKS, rays, answer)
                         });
                 };
                 let traced = order.trace(
@@ -464,7 +461,7 @@ impl Bvh {
                     |rays, out| {
                         let answer = |i: usize, hit: Option<Hit>| out[i] = hit;
                         self.accel
-                            .intersect_each(&self.primitives, rays.len(), |i| rays[i], answer)
+                            .intersect_each(rays.len(), ALL_MASKS, |i| rays[i], answer)
                     },
                 );
                 let ranks = order.ranks();
@@ -509,8 +506,7 @@ impl Bvh {
                             let count = out.len();
                             let rays = |i: usize| batch.ray(chunk * CHUNK + i);
                             let answer = |i: usize, blocked: bool| out[i] = blocked;
-                            self.accel
-                                .occluded_each(&self.primitives, count, rays, answer)
+                            self.accel.occluded_each(count, ALL_MASKS, rays, answer)
                         });
                 };
                 let traced = order.trace(
@@ -519,7 +515,7 @@ impl Bvh {
                     |rays, out| {
                         let answer = |i: usize, blocked: bool| out[i] = blocked;
                         self.accel
-                            .occluded_each(&self.primitives, rays.len(), |i| rays[i], answer)
+                            .occluded_each(rays.len(), ALL_MASKS, |i| rays[i], answer)
                     },
                 );
                 order.unsort_into(&traced, blocked);
@@ -531,7 +527,7 @@ impl Bvh {
     fn __repr__(&self) -> String {
         format!(
             "Bvh({} primitives, builder={:?}, width={})",
-            self.primitives.len(),
+            self.accel.shapes().len(),
             self.name(),
             self.width.children()
         )

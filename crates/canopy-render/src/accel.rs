@@ -1,16 +1,22 @@
-//! The acceleration structure a render uses: none (a loop over all primitives, the
-//! report's baseline) or a BVH from any builder, binary or collapsed to 4 or 8 wide.
+//! The acceleration structure a render uses: the scene's own primitives in one
+//! bottom-level structure, each mesh in one of its own, and a top-level structure over
+//! their instances. Each is none (a loop over all primitives, the report's baseline) or
+//! a BVH from any builder, binary or collapsed to 4 or 8 wide.
 
 use crate::geometry::{Shape, ShearedRay};
-use crate::scene::Primitive;
+use crate::scene::{Primitive, Scene};
 use canopy_bvh::{
-    build_with_clipper, split_box, split_triangle, Aabb, BuildParams, Builder, BvhWidth, Clipper,
-    Hit, OptimizeBudget, Ray, TraversalCounter, TraversalStats, Tree, PACK_LANES,
+    split_box, split_triangle, Aabb, Blas, BlasParams, BuildParams, Builder, BvhWidth, Clipper,
+    Geometry, Hit, Instance, OptimizeBudget, PrimHit, Ray, RayQuery, Tlas, TraversalCounter, Tree,
+    TriangleMesh,
 };
-use rayon::prelude::*;
+use glam::{Affine3A, Vec3};
 use std::fmt;
 use std::str::FromStr;
+use std::sync::Arc;
 use std::time::{Duration, Instant};
+
+pub use canopy_bvh::{packed_params, PACKED_LEAF_PACKS};
 
 /// Which acceleration structure to build.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -49,15 +55,122 @@ impl FromStr for AccelKind {
     }
 }
 
-/// A built acceleration structure over a scene's primitives.
+/// A scene's shapes as geometry a structure owns: spheres and cuboids tested here,
+/// triangles packed into wide leaves (or tested here in binary trees).
+#[derive(Clone, Debug, Default)]
+pub struct ShapeList(pub Vec<Shape>);
+
+impl Geometry for ShapeList {
+    fn len(&self) -> usize {
+        self.0.len()
+    }
+
+    fn bounds(&self, prim: u32) -> Aabb {
+        self.0[prim as usize].bounds()
+    }
+
+    #[inline]
+    fn triangle(&self, prim: u32) -> Option<[Vec3; 3]> {
+        self.0[prim as usize].triangle_vertices()
+    }
+
+    fn has_triangles(&self) -> bool {
+        self.0.iter().any(|s| matches!(s, Shape::Triangle(_)))
+    }
+
+    #[inline]
+    fn intersect(&self, prim: u32, ray: &Ray, sheared: &ShearedRay) -> Option<PrimHit> {
+        self.0[prim as usize].intersect_sheared(ray, sheared)
+    }
+
+    #[inline(always)]
+    fn intersect_other(&self, prim: u32, ray: &Ray) -> Option<PrimHit> {
+        self.0[prim as usize].intersect_non_triangle(ray)
+    }
+
+    fn split(&self, prim: u32, within: Aabb, axis: usize, position: f32) -> (Aabb, Aabb) {
+        match self.0[prim as usize].triangle_vertices() {
+            Some(v) => split_triangle(v, within, axis, position),
+            None => split_box(within, axis, position),
+        }
+    }
+}
+
+/// A bottom-level structure of a scene: its own shapes, or one of its meshes.
+#[derive(Clone, Debug)]
+pub enum SceneBlas {
+    Shapes(Blas<ShapeList>),
+    Mesh(Blas<Arc<TriangleMesh>>),
+}
+
+macro_rules! each_blas {
+    ($self:expr, $blas:ident => $body:expr) => {
+        match $self {
+            SceneBlas::Shapes($blas) => $body,
+            SceneBlas::Mesh($blas) => $body,
+        }
+    };
+}
+
+impl SceneBlas {
+    pub fn tree(&self) -> Option<&Tree> {
+        each_blas!(self, b => b.tree())
+    }
+}
+
+impl RayQuery for SceneBlas {
+    fn bounds(&self) -> Aabb {
+        each_blas!(self, b => b.bounds())
+    }
+
+    #[inline]
+    fn intersect_masked(&self, ray: &Ray, mask: u32) -> Option<Hit> {
+        each_blas!(self, b => b.intersect_masked(ray, mask))
+    }
+
+    #[inline]
+    fn occluded_masked(&self, ray: &Ray, mask: u32) -> bool {
+        each_blas!(self, b => b.occluded_masked(ray, mask))
+    }
+
+    #[inline]
+    fn intersect_counted<C: TraversalCounter>(
+        &self,
+        ray: &Ray,
+        mask: u32,
+        counter: &mut C,
+    ) -> Option<Hit> {
+        each_blas!(self, b => b.intersect_counted(ray, mask, counter))
+    }
+
+    fn intersect_each<R, A>(&self, count: usize, mask: u32, ray: R, answer: A)
+    where
+        R: FnMut(usize) -> Ray,
+        A: FnMut(usize, Option<Hit>),
+    {
+        each_blas!(self, b => b.intersect_each(count, mask, ray, answer))
+    }
+
+    fn occluded_each<R, A>(&self, count: usize, mask: u32, ray: R, answer: A)
+    where
+        R: FnMut(usize) -> Ray,
+        A: FnMut(usize, bool),
+    {
+        each_blas!(self, b => b.occluded_each(count, mask, ray, answer))
+    }
+
+    fn orders_batches(&self) -> bool {
+        each_blas!(self, b => b.orders_batches())
+    }
+}
+
+/// The built structure over a scene: its primitives (instance 0, the identity) and its
+/// mesh instances (instance `k + 1` places [`Scene::instances`]`[k]`). A scene without
+/// mesh instances is traced by the primitives' structure alone, at no extra cost.
 #[derive(Clone, Debug)]
 pub struct Accel {
-    /// The tree in the layout asked for; `None` for brute force.
-    tree: Option<Tree>,
-    /// Whether any primitive is a triangle: only then does a query prepare the ray for
-    /// triangle tests.
-    has_triangles: bool,
-    /// Wall-clock time of the build, collapse included.
+    world: Tlas<SceneBlas>,
+    /// Wall-clock time of the build: every structure, collapse included.
     pub build_time: Duration,
 }
 
@@ -74,41 +187,10 @@ pub fn clipper(primitives: &[Primitive]) -> impl Clipper + '_ {
     }
 }
 
-/// A leaf of a packed tree with at most this many packs, unless the caller set the
-/// leaf size.
-pub const PACKED_LEAF_PACKS: u32 = 2;
-
-/// The parameters a wide tree over triangles only is built with. Its leaves are tested a
-/// pack of four triangles at a time, so where the caller left them at their defaults:
-/// - leaves are priced in packs ([`BuildParams::leaf_block`] 1 becomes [`PACK_LANES`]):
-///   a pack costs about one triangle test;
-/// - leaves may hold two packs (`max_leaf_size` 4 becomes 8): one node level fewer to
-///   fetch from memory, and the two packs lie side by side.
-///
-/// On the 202k dragon, incoherent rays in random order, one thread: leaves priced in packs
-/// gave 25-45% more rays per second; two-pack leaves another 7-31% (closest hit) and
-/// 16-18% (occlusion), measured in turns in one process (`examples/ray_speed.rs
-/// --leaf 4,8`). Larger leaves (12, 16) gave no more.
-pub fn packed_params(params: &BuildParams) -> BuildParams {
-    let defaults = BuildParams::default();
-    let lanes = PACK_LANES as u32;
-    BuildParams {
-        leaf_block: match params.leaf_block {
-            1 => lanes,
-            block => block,
-        },
-        max_leaf_size: match params.max_leaf_size {
-            size if size == defaults.max_leaf_size => PACKED_LEAF_PACKS * lanes,
-            size => size,
-        },
-        ..*params
-    }
-}
-
 impl Accel {
-    /// Builds the structure for `primitives`. A wide tree over triangles only is built
-    /// for its triangle packs ([`packed_params`]); the image does not change: every tree
-    /// gives the same closest hits.
+    /// Builds the structure for `primitives` alone. A wide tree over triangles only is
+    /// built for its triangle packs ([`packed_params`]); the image does not change:
+    /// every tree gives the same closest hits.
     pub fn build(
         kind: AccelKind,
         width: BvhWidth,
@@ -127,210 +209,141 @@ impl Accel {
         params: &BuildParams,
         optimize: Option<OptimizeBudget>,
     ) -> Self {
+        Self::build_all(kind, width, primitives, &[], &[], params, optimize)
+    }
+
+    /// The structure of a whole scene: its primitives and its mesh instances, every
+    /// structure built by `kind` in `width`.
+    pub fn for_scene(
+        scene: &Scene,
+        kind: AccelKind,
+        width: BvhWidth,
+        params: &BuildParams,
+        optimize: Option<OptimizeBudget>,
+    ) -> Self {
+        let meshes: Vec<Arc<TriangleMesh>> = scene.meshes.iter().map(|m| m.mesh.clone()).collect();
+        let placed: Vec<(u32, Affine3A)> = scene
+            .instances
+            .iter()
+            .map(|i| (i.mesh, i.to_world))
+            .collect();
+        Self::build_all(
+            kind,
+            width,
+            &scene.primitives,
+            &meshes,
+            &placed,
+            params,
+            optimize,
+        )
+    }
+
+    fn build_all(
+        kind: AccelKind,
+        width: BvhWidth,
+        primitives: &[Primitive],
+        meshes: &[Arc<TriangleMesh>],
+        placed: &[(u32, Affine3A)],
+        params: &BuildParams,
+        optimize: Option<OptimizeBudget>,
+    ) -> Self {
         let start = Instant::now();
-        let AccelKind::Bvh(builder) = kind else {
-            return Self {
-                has_triangles: has_triangles(primitives),
-                tree: None,
-                build_time: start.elapsed(),
-            };
+        let builder = match kind {
+            AccelKind::None => None,
+            AccelKind::Bvh(builder) => Some(builder),
         };
-        let boxes: Vec<_> = primitives.par_iter().map(|p| p.shape.bounds()).collect();
-        let packed = width != BvhWidth::Two
-            && primitives
-                .par_iter()
-                .all(|p| matches!(p.shape, Shape::Triangle(_)));
-        let params = if packed {
-            packed_params(params)
-        } else {
-            *params
+        let blas_params = BlasParams {
+            builder,
+            width,
+            build: *params,
+            optimize,
         };
-        let mut bvh = build_with_clipper(builder, &boxes, &params, &clipper(primitives));
-        if let Some(budget) = optimize {
-            bvh = canopy_bvh::optimize(&bvh, &params.sah, budget).0;
-        }
-        let mut tree = Tree::new(bvh, width);
-        tree.pack_triangles(|p| primitives[p as usize].shape.triangle_vertices());
+        let shapes = ShapeList(primitives.iter().map(|p| p.shape.clone()).collect());
+        let mut blases = vec![SceneBlas::Shapes(Blas::build(shapes, &blas_params))];
+        blases.extend(
+            meshes
+                .iter()
+                .map(|m| SceneBlas::Mesh(Blas::build(m.clone(), &blas_params))),
+        );
+        let mut instances = vec![Instance::new(0, Affine3A::IDENTITY)];
+        instances.extend(
+            placed
+                .iter()
+                .map(|&(mesh, to_world)| Instance::new(mesh + 1, to_world)),
+        );
+        let top = BlasParams {
+            optimize: None,
+            ..blas_params
+        };
+        let world = Tlas::build(blases, instances, &top)
+            .expect("scene instances are checked when the scene is made");
         Self {
-            has_triangles: has_triangles(primitives),
-            tree: Some(tree),
+            world,
             build_time: start.elapsed(),
         }
     }
 
-    /// The tree, unless this is the brute-force structure.
+    /// The tree over the scene's own primitives, unless this is brute force.
     pub fn tree(&self) -> Option<&Tree> {
-        self.tree.as_ref()
+        self.world.blases()[0].tree()
     }
 
-    /// The work a closest-hit query does for `ray`: node visits and primitive tests.
-    pub fn traversal_cost(&self, primitives: &[Primitive], ray: &Ray) -> TraversalStats {
-        let mut work = TraversalStats::default();
-        self.intersect_counted(primitives, ray, &mut work);
-        work
+    /// The shapes of the scene's own primitives, as the structure holds them.
+    pub fn shapes(&self) -> &[Shape] {
+        match &self.world.blases()[0] {
+            SceneBlas::Shapes(blas) => &blas.geometry().0,
+            SceneBlas::Mesh(_) => unreachable!("structure 0 holds the scene's primitives"),
+        }
     }
 
-    /// Closest hit; ties go to the lower primitive index whatever the structure.
+    /// Every structure: the primitives', each mesh's, and the top one over instances.
+    pub fn world(&self) -> &Tlas<SceneBlas> {
+        &self.world
+    }
+}
+
+impl RayQuery for Accel {
+    fn bounds(&self) -> Aabb {
+        self.world.bounds()
+    }
+
     #[inline]
-    pub fn intersect(&self, primitives: &[Primitive], ray: &Ray) -> Option<Hit> {
-        self.intersect_counted(primitives, ray, &mut ())
+    fn intersect_masked(&self, ray: &Ray, mask: u32) -> Option<Hit> {
+        self.world.intersect_masked(ray, mask)
     }
 
-    /// [`Accel::intersect`], reporting its work to `counter` (brute force counts one
-    /// primitive test per primitive and no nodes).
     #[inline]
-    pub fn intersect_counted<C: TraversalCounter>(
+    fn occluded_masked(&self, ray: &Ray, mask: u32) -> bool {
+        self.world.occluded_masked(ray, mask)
+    }
+
+    #[inline]
+    fn intersect_counted<C: TraversalCounter>(
         &self,
-        primitives: &[Primitive],
         ray: &Ray,
+        mask: u32,
         counter: &mut C,
     ) -> Option<Hit> {
-        // Trees with triangle packs test triangles themselves; the closure sees the rest.
-        let test_other =
-            |prim: u32, ray: &Ray| primitives[prim as usize].shape.intersect_non_triangle(ray);
-        if let Some(tree) = self.tree_without_triangle_closure() {
-            return tree.intersect_counted(ray, test_other, counter);
-        }
-        match &self.tree {
-            Some(tree) => {
-                // The shear depends on the direction only: it stays valid as t_max shrinks.
-                let sheared = ShearedRay::new(ray);
-                let test = |prim: u32, ray: &Ray| {
-                    primitives[prim as usize]
-                        .shape
-                        .intersect_sheared(ray, &sheared)
-                };
-                tree.intersect_counted(ray, test, counter)
-            }
-            None => {
-                for _ in primitives {
-                    counter.test_primitive();
-                }
-                brute_force(primitives, ray, &self.shear(ray))
-            }
-        }
+        self.world.intersect_counted(ray, mask, counter)
     }
 
-    /// Whether anything blocks `ray` within its range (any hit, not the closest): the
-    /// shadow-ray query.
-    #[inline]
-    pub fn occluded(&self, primitives: &[Primitive], ray: &Ray) -> bool {
-        let test_other = |prim: u32, ray: &Ray| {
-            primitives[prim as usize]
-                .shape
-                .intersect_non_triangle(ray)
-                .is_some()
-        };
-        if let Some(tree) = self.tree_without_triangle_closure() {
-            return tree.occluded(ray, test_other);
-        }
-        match &self.tree {
-            Some(tree) => {
-                let sheared = ShearedRay::new(ray);
-                let test = |prim: u32, ray: &Ray| {
-                    primitives[prim as usize]
-                        .shape
-                        .intersect_sheared(ray, &sheared)
-                        .is_some()
-                };
-                tree.occluded(ray, test)
-            }
-            None => {
-                let sheared = self.shear(ray);
-                primitives
-                    .iter()
-                    .any(|p| p.shape.intersect_sheared(ray, &sheared).is_some())
-            }
-        }
+    fn intersect_each<R, A>(&self, count: usize, mask: u32, ray: R, answer: A)
+    where
+        R: FnMut(usize) -> Ray,
+        A: FnMut(usize, Option<Hit>),
+    {
+        self.world.intersect_each(count, mask, ray, answer)
     }
 
-    /// Whether batches are best traced in the order of their rays' origins
-    /// ([`Tree::orders_batches`]; see [`canopy_bvh::RayOrder`]).
-    pub fn orders_batches(&self) -> bool {
-        self.tree.as_ref().is_some_and(Tree::orders_batches)
+    fn occluded_each<R, A>(&self, count: usize, mask: u32, ray: R, answer: A)
+    where
+        R: FnMut(usize) -> Ray,
+        A: FnMut(usize, bool),
+    {
+        self.world.occluded_each(count, mask, ray, answer)
     }
 
-    /// Closest hits of rays `0..count` on this thread: `ray(i)` makes ray `i` and
-    /// `answer(i, hit)` takes its hit, in order. The hits of [`Accel::intersect`]; a tree
-    /// that tests its own triangles (or has none) chooses its layout and instruction set
-    /// once for all the rays ([`Tree::intersect_each`]), the others go ray by ray.
-    pub fn intersect_each(
-        &self,
-        primitives: &[Primitive],
-        count: usize,
-        mut ray: impl FnMut(usize) -> Ray,
-        mut answer: impl FnMut(usize, Option<Hit>),
-    ) {
-        match self.tree_without_triangle_closure() {
-            Some(tree) => {
-                let test_other = |prim: u32, ray: &Ray| {
-                    primitives[prim as usize].shape.intersect_non_triangle(ray)
-                };
-                tree.intersect_each(count, ray, answer, test_other)
-            }
-            None => (0..count).for_each(|i| answer(i, self.intersect(primitives, &ray(i)))),
-        }
+    fn orders_batches(&self) -> bool {
+        self.world.orders_batches()
     }
-
-    /// Occlusion of rays `0..count` on this thread, as [`Accel::intersect_each`].
-    pub fn occluded_each(
-        &self,
-        primitives: &[Primitive],
-        count: usize,
-        mut ray: impl FnMut(usize) -> Ray,
-        mut answer: impl FnMut(usize, bool),
-    ) {
-        match self.tree_without_triangle_closure() {
-            Some(tree) => {
-                let test_other = |prim: u32, ray: &Ray| {
-                    primitives[prim as usize]
-                        .shape
-                        .intersect_non_triangle(ray)
-                        .is_some()
-                };
-                tree.occluded_each(count, ray, answer, test_other)
-            }
-            None => (0..count).for_each(|i| answer(i, self.occluded(primitives, &ray(i)))),
-        }
-    }
-
-    /// The tree, when no triangle reaches its closure: there are none, or the tree tests
-    /// them itself from its packs. Its queries then need no sheared ray.
-    #[inline]
-    fn tree_without_triangle_closure(&self) -> Option<&Tree> {
-        self.tree
-            .as_ref()
-            .filter(|tree| tree.has_triangle_packs() || !self.has_triangles)
-    }
-
-    /// The ray prepared for triangle tests, when there are triangles to test.
-    #[inline]
-    fn shear(&self, ray: &Ray) -> ShearedRay {
-        if self.has_triangles {
-            ShearedRay::new(ray)
-        } else {
-            ShearedRay::UNUSED
-        }
-    }
-}
-
-fn has_triangles(primitives: &[Primitive]) -> bool {
-    primitives
-        .iter()
-        .any(|p| matches!(p.shape, Shape::Triangle(_)))
-}
-
-fn brute_force(primitives: &[Primitive], ray: &Ray, sheared: &ShearedRay) -> Option<Hit> {
-    let mut best: Option<Hit> = None;
-    let mut ray = *ray;
-    for (prim, p) in primitives.iter().enumerate() {
-        if let Some(h) = p.shape.intersect_sheared(&ray, sheared) {
-            let hit = Hit::new(prim as u32, h);
-            if best.is_none_or(|b| hit.is_before(&b)) {
-                ray.t_max = hit.t;
-                best = Some(hit);
-            }
-        }
-    }
-    best
 }

@@ -69,8 +69,9 @@ fn fnv1a(bytes: &[u8], mut hash: u64) -> u64 {
 const FNV_OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
 
 /// A hash of everything that determines the image: settings, camera, background,
-/// materials, and every primitive's exact geometry, material and vertex normals (so a
-/// mesh whose `smooth` setting changed no longer matches).
+/// materials, every primitive's exact geometry, material and vertex normals (so a
+/// mesh whose `smooth` setting changed no longer matches), every instanced mesh and
+/// every instance's mesh, transform and material.
 pub fn fingerprint(scene: &Scene) -> u64 {
     let text = format!(
         "{:?}{:?}{:?}{:?}{}",
@@ -105,6 +106,19 @@ pub fn fingerprint(scene: &Scene) -> u64 {
     }
     for normals in &scene.vertex_normals {
         hash = fnv1a(bytemuck::cast_slice(normals), hash);
+    }
+    for mesh in &scene.meshes {
+        hash = fnv1a(mesh.name.as_bytes(), hash);
+        hash = fnv1a(bytemuck::cast_slice(mesh.mesh.vertices()), hash);
+        hash = fnv1a(bytemuck::cast_slice(mesh.mesh.indices()), hash);
+        hash = fnv1a(bytemuck::cast_slice(&mesh.normals), hash);
+    }
+    for instance in &scene.instances {
+        words.clear();
+        words.push(f32::from_bits(instance.mesh));
+        words.push(f32::from_bits(instance.material));
+        words.extend(instance.to_world.to_cols_array());
+        hash = fnv1a(bytemuck::cast_slice(&words), hash);
     }
     hash
 }

@@ -27,12 +27,12 @@ pub mod visualize;
 pub use accel::{clipper, Accel, AccelKind};
 pub use background::{Background, EnvironmentMap};
 pub use builtin::{BuiltinScene, BUILTIN_SCENES};
-pub use canopy_bvh::BvhWidth;
+pub use canopy_bvh::{BvhWidth, RayQuery};
 pub use error::{OutputError, SceneError};
 pub use film::Film;
 pub use integrator::{render, render_counted, render_samples, Accumulator, RenderStats};
 pub use output::write_image;
-pub use scene::{Integrator, RenderSettings, Scene};
+pub use scene::{Integrator, MeshInstance, RenderSettings, Scene, SceneMesh};
 
 use scene_file::{parse_scene, DirAssets};
 use std::path::Path;

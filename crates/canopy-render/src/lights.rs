@@ -1,11 +1,13 @@
 //! The scene's emitters as lights: every primitive with an emissive material, chosen in
 //! proportion to its power, then a point on it drawn by its shape.
 
-use crate::geometry::SurfaceSample;
+use crate::geometry::{Shape, SurfaceSample};
 use crate::rng::Rng;
 use crate::sampling::{luminance, Distribution1D};
-use crate::scene::Scene;
+use crate::scene::{Scene, PRIMITIVES_INSTANCE};
+use canopy_bvh::Hit;
 use glam::{Vec2, Vec3};
+use std::borrow::Cow;
 
 /// A point on a light, drawn for a point that wants its light.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -18,57 +20,92 @@ pub struct LightSample {
     pub pdf: f32,
 }
 
-/// The emitters of a scene, ready to be sampled.
+/// The emitters of a scene, ready to be sampled: every emissive primitive, and every
+/// triangle of an emissive mesh instance, each named by (instance, primitive) as a hit
+/// names it ([`crate::scene::PRIMITIVES_INSTANCE`] for the scene's own primitives).
 #[derive(Clone, Debug, Default)]
 pub struct Lights {
-    /// Primitive index of each light.
-    prims: Vec<u32>,
+    /// (instance, primitive) of each light.
+    emitters: Vec<(u32, u32)>,
     /// Choice of light, in proportion to luminance times area; `None` without lights.
     choice: Option<Distribution1D>,
-    /// Light index of each primitive, [`Lights::NONE`] for primitives that are not lights.
+    /// Light index of each of the scene's primitives, [`Lights::NONE`] where it is not one.
     light_of_prim: Vec<u32>,
+    /// For each mesh instance, the light index of its first triangle (its triangles are
+    /// lights in order), or [`Lights::NONE`] when its material does not emit.
+    first_light_of_instance: Vec<u32>,
 }
 
 impl Lights {
     const NONE: u32 = u32::MAX;
 
-    /// Every emissive primitive of positive power becomes a light.
+    /// Every emissive primitive of positive power becomes a light, then every triangle
+    /// of each emissive mesh instance (in world space; one of no power is never chosen).
     pub fn new(scene: &Scene) -> Self {
-        let mut prims = Vec::new();
+        let mut emitters = Vec::new();
         let mut power = Vec::new();
         let mut light_of_prim = vec![Self::NONE; scene.primitives.len()];
         for (index, primitive) in scene.primitives.iter().enumerate() {
             let emitted = scene.materials[primitive.material as usize].emitted();
             let p = luminance(emitted) * primitive.shape.area();
             if p.is_finite() && p > 0.0 {
-                light_of_prim[index] = prims.len() as u32;
-                prims.push(index as u32);
+                light_of_prim[index] = emitters.len() as u32;
+                emitters.push((PRIMITIVES_INSTANCE, index as u32));
                 power.push(p);
             }
         }
+        let mut first_light_of_instance = vec![Self::NONE; scene.instances.len()];
+        for (k, instance) in scene.instances.iter().enumerate() {
+            let radiance = luminance(scene.materials[instance.material as usize].emitted());
+            if !(radiance.is_finite() && radiance > 0.0) {
+                continue;
+            }
+            first_light_of_instance[k] = emitters.len() as u32;
+            let triangles = scene.meshes[instance.mesh as usize].mesh.indices().len() as u32;
+            for prim in 0..triangles {
+                emitters.push((k as u32 + 1, prim));
+                power.push(radiance * scene.instance_triangle(instance, prim).0.area());
+            }
+        }
         Self {
-            prims,
+            emitters,
             choice: Distribution1D::new(power),
             light_of_prim,
+            first_light_of_instance,
         }
     }
 
     pub fn len(&self) -> usize {
-        self.prims.len()
+        self.emitters.len()
     }
 
     pub fn is_empty(&self) -> bool {
-        self.prims.is_empty()
+        self.emitters.is_empty()
     }
 
-    /// The primitive of each light, in light order.
-    pub fn prims(&self) -> &[u32] {
-        &self.prims
+    /// The (instance, primitive) of each light, in light order.
+    pub fn emitters(&self) -> &[(u32, u32)] {
+        &self.emitters
     }
 
     /// The distribution lights are chosen by (their power); `None` without lights.
     pub fn choice(&self) -> Option<&Distribution1D> {
         self.choice.as_ref()
+    }
+
+    /// The shape and material of light `light`, in world space.
+    fn shape_of<'s>(&self, scene: &'s Scene, light: usize) -> (Cow<'s, Shape>, u32) {
+        let (inst, prim) = self.emitters[light];
+        match scene.instance_of(inst) {
+            None => {
+                let primitive = &scene.primitives[prim as usize];
+                (Cow::Borrowed(&primitive.shape), primitive.material)
+            }
+            Some(instance) => (
+                Cow::Owned(Shape::Triangle(scene.instance_triangle(instance, prim).0)),
+                instance.material,
+            ),
+        }
     }
 
     /// Chooses a light and a point on it for light arriving at `reference`; `None` when
@@ -77,26 +114,34 @@ impl Lights {
         let choice = self.choice.as_ref()?;
         let (light, _) = choice.sample(rng.next_f32());
         let u = Vec2::new(rng.next_f32(), rng.next_f32());
-        let primitive = &scene.primitives[self.prims[light] as usize];
-        let point = primitive.shape.sample_toward(reference, u)?;
+        let (shape, material) = self.shape_of(scene, light);
+        let point = shape.sample_toward(reference, u)?;
         Some(LightSample {
             point,
-            radiance: scene.materials[primitive.material as usize].emitted(),
+            radiance: scene.materials[material as usize].emitted(),
             pdf: point.pdf * choice.pmf(light),
         })
     }
 
-    /// The density [`Lights::sample`] has for the point `p` (normal `normal`) of primitive
-    /// `prim` that a ray from `reference` hit first; zero if `prim` is not a light.
-    pub fn pdf(&self, scene: &Scene, prim: u32, reference: Vec3, p: Vec3, normal: Vec3) -> f32 {
-        let (Some(choice), Some(&light)) = (&self.choice, self.light_of_prim.get(prim as usize))
-        else {
+    /// The light index of what `hit` found, if it is a light.
+    fn light_of(&self, hit: &Hit) -> Option<usize> {
+        let light = match hit.inst {
+            PRIMITIVES_INSTANCE => *self.light_of_prim.get(hit.prim as usize)?,
+            inst => match *self.first_light_of_instance.get(inst as usize - 1)? {
+                Self::NONE => Self::NONE,
+                first => first + hit.prim,
+            },
+        };
+        (light != Self::NONE).then_some(light as usize)
+    }
+
+    /// The density [`Lights::sample`] has for the point `p` (normal `normal`) that a ray
+    /// from `reference` hit first (`hit`); zero if what it hit is not a light.
+    pub fn pdf(&self, scene: &Scene, hit: &Hit, reference: Vec3, p: Vec3, normal: Vec3) -> f32 {
+        let (Some(choice), Some(light)) = (&self.choice, self.light_of(hit)) else {
             return 0.0;
         };
-        if light == Self::NONE {
-            return 0.0;
-        }
-        let shape = &scene.primitives[prim as usize].shape;
-        choice.pmf(light as usize) * shape.pdf_toward(reference, p, normal)
+        let (shape, _) = self.shape_of(scene, light);
+        choice.pmf(light) * shape.pdf_toward(reference, p, normal)
     }
 }

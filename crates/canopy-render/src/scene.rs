@@ -2,11 +2,12 @@
 
 pub use crate::background::Background;
 use crate::camera::CameraSpec;
-use crate::geometry::Shape;
+use crate::geometry::{Shape, Surface, Triangle};
 use crate::material::Material;
-use canopy_bvh::Aabb;
-use glam::Vec3;
+use canopy_bvh::{Aabb, Geometry, Hit, Ray, TriangleMesh};
+use glam::{Affine3A, Vec3};
 use std::path::PathBuf;
+use std::sync::Arc;
 
 /// How the radiance of a pixel sample is estimated.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -123,6 +124,31 @@ impl Default for RenderSettings {
     }
 }
 
+/// A triangle mesh stored once, placed in the world by [`MeshInstance`]s.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SceneMesh {
+    /// The name instances refer to it by.
+    pub name: String,
+    /// Shared with the acceleration structure, which tests it without a copy.
+    pub mesh: Arc<TriangleMesh>,
+    /// Per-vertex normals for smooth shading: empty (flat), or one per vertex.
+    pub normals: Vec<Vec3>,
+}
+
+/// A mesh placed in the world: by an affine transform (mirrors and non-uniform scale
+/// allowed), with one material.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MeshInstance {
+    /// Index into [`Scene::meshes`].
+    pub mesh: u32,
+    pub to_world: Affine3A,
+    pub material: u32,
+}
+
+/// Which part of a scene an instance index of a hit ([`Hit::inst`]) names: 0 is the
+/// scene's own primitives, `k + 1` its mesh instance `k`.
+pub const PRIMITIVES_INSTANCE: u32 = 0;
+
 /// One shape with its material.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Primitive {
@@ -138,9 +164,14 @@ pub struct Scene {
     pub settings: RenderSettings,
     pub background: Background,
     pub materials: Vec<Material>,
+    /// Shapes placed in the world as they are (spheres, cuboids, mesh triangles baked
+    /// into world space).
     pub primitives: Vec<Primitive>,
     /// Vertex normals of smooth triangles, indexed by `Triangle::normals`.
     pub vertex_normals: Vec<[Vec3; 3]>,
+    /// Meshes stored once, placed by `instances`.
+    pub meshes: Vec<SceneMesh>,
+    pub instances: Vec<MeshInstance>,
     /// Mesh triangles left out because they have no area (they can never be hit).
     pub skipped_degenerate: usize,
     /// The files the scene was read from (scene file, meshes): never to be written over.
@@ -153,6 +184,99 @@ impl Scene {
         self.primitives.iter().map(|p| p.shape.bounds()).collect()
     }
 
+    /// Box of everything in the world: primitives and mesh instances.
+    pub fn bounds(&self) -> Aabb {
+        let primitives = self.primitives.iter().map(|p| p.shape.bounds());
+        let instances = self.instances.iter().map(|i| {
+            let mesh = &self.meshes[i.mesh as usize].mesh;
+            let local = (0..mesh.len() as u32).fold(Aabb::EMPTY, |b, t| b.union(mesh.bounds(t)));
+            canopy_bvh::Instance::new(0, i.to_world).world_bounds(local)
+        });
+        primitives.chain(instances).fold(Aabb::EMPTY, Aabb::union)
+    }
+
+    /// The mesh instance a hit's instance index names, if it names one (not the
+    /// scene's own primitives).
+    #[inline]
+    pub fn instance_of(&self, inst: u32) -> Option<&MeshInstance> {
+        inst.checked_sub(1).map(|k| &self.instances[k as usize])
+    }
+
+    /// Triangle `prim` of mesh instance `instance` in world space, with its vertex normals
+    /// there (smooth meshes).
+    pub fn instance_triangle(
+        &self,
+        instance: &MeshInstance,
+        prim: u32,
+    ) -> (Triangle, Option<[Vec3; 3]>) {
+        let mesh = &self.meshes[instance.mesh as usize];
+        let world = mesh
+            .mesh
+            .vertices_of(prim)
+            .map(|v| instance.to_world.transform_point3(v));
+        let normals = (!mesh.normals.is_empty()).then(|| {
+            let to_normal = instance.to_world.matrix3.inverse().transpose();
+            mesh.mesh.indices()[prim as usize]
+                .map(|i| (to_normal * mesh.normals[i as usize]).normalize_or_zero())
+        });
+        (Triangle::new(world[0], world[1], world[2]), normals)
+    }
+
+    /// The surface where `ray` hits and the material there (`hit` from a query of `ray`
+    /// on the scene's structure, [`crate::Accel`]).
+    #[inline]
+    pub fn hit_surface(&self, ray: &Ray, hit: &Hit) -> (Surface, u32) {
+        match self.instance_of(hit.inst) {
+            None => {
+                let primitive = &self.primitives[hit.prim as usize];
+                let surface = primitive.shape.surface(ray, hit, &self.vertex_normals);
+                (surface, primitive.material)
+            }
+            Some(instance) => {
+                let (triangle, normals) = self.instance_triangle(instance, hit.prim);
+                let surface = triangle.surface_with_normals(hit.u, hit.v, normals.as_ref());
+                (surface, instance.material)
+            }
+        }
+    }
+
+    /// The same scene with every mesh instance's triangles baked into world space as
+    /// primitives (for renderers without instancing: the GPU's for now). Degenerate
+    /// triangles in world space are left out.
+    pub fn with_instances_baked(&self) -> Scene {
+        let mut baked = Scene {
+            meshes: Vec::new(),
+            instances: Vec::new(),
+            ..self.clone()
+        };
+        for instance in &self.instances {
+            let triangles = self.meshes[instance.mesh as usize].mesh.indices().len() as u32;
+            for prim in 0..triangles {
+                let (mut triangle, normals) = self.instance_triangle(instance, prim);
+                if triangle.area() == 0.0 {
+                    continue;
+                }
+                if let Some(normals) = normals {
+                    triangle.normals = baked.vertex_normals.len() as u32;
+                    baked.vertex_normals.push(normals);
+                }
+                baked.primitives.push(Primitive {
+                    shape: Shape::Triangle(triangle),
+                    material: instance.material,
+                });
+            }
+        }
+        baked
+    }
+
+    /// Triangles placed by instances (each counted once per instance).
+    pub fn instanced_triangles(&self) -> u64 {
+        self.instances
+            .iter()
+            .map(|i| self.meshes[i.mesh as usize].mesh.indices().len() as u64)
+            .sum()
+    }
+
     /// What is legal but probably not what the author meant, one sentence each.
     pub fn warnings(&self) -> Vec<String> {
         let mut warnings = Vec::new();
@@ -162,7 +286,7 @@ impl Scene {
                 self.skipped_degenerate
             ));
         }
-        if self.primitives.is_empty() {
+        if self.primitives.is_empty() && self.instances.is_empty() {
             warnings.push("the scene has no primitives".into());
         }
         let emitters = self

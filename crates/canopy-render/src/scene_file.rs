@@ -7,7 +7,7 @@ use crate::error::SceneError;
 use crate::files::{available_memory, read_regular_file, regular_file_size};
 use crate::geometry::{Cuboid, Shape, Sphere, Triangle};
 use crate::material::Material;
-use crate::mesh::{parse_mesh, MeshFormat};
+use crate::mesh::{parse_mesh, MeshData, MeshFormat};
 use crate::scene::{Background, Primitive, RenderSettings, Scene};
 use canopy_bvh::Aabb;
 use glam::{EulerRot, Mat3, Mat4, Quat, Vec3};
@@ -16,6 +16,9 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::sync::Arc;
 use toml::Spanned;
+
+mod instances;
+pub use instances::MAX_INSTANCES;
 
 /// Where a scene's mesh files come from.
 pub trait Assets {
@@ -81,6 +84,11 @@ struct SceneDoc {
     cuboids: Vec<Spanned<CuboidDoc>>,
     #[serde(default)]
     meshes: Vec<Spanned<MeshDoc>>,
+    /// Named meshes, placed only by `instances`.
+    #[serde(default)]
+    geometry: BTreeMap<String, Spanned<instances::GeometryDoc>>,
+    #[serde(default)]
+    instances: Vec<Spanned<instances::InstanceDoc>>,
 }
 
 /// `background = { environment = "file.hdr", rotate = 90, strength = 1 }`
@@ -260,6 +268,7 @@ pub fn parse_scene(source: &str, file: &str, assets: &dyn Assets) -> Result<Scen
             ..Scene::default()
         },
         named: BTreeMap::new(),
+        geometry_index: BTreeMap::new(),
     };
     builder.camera(&doc.camera)?;
     builder.settings(doc.render.as_ref())?;
@@ -282,13 +291,22 @@ pub fn parse_scene(source: &str, file: &str, assets: &dyn Assets) -> Result<Scen
     for mesh in &doc.meshes {
         builder.mesh(mesh, assets)?;
     }
+    for (name, geometry) in &doc.geometry {
+        builder.geometry(name, geometry, assets)?;
+    }
+    for instance in &doc.instances {
+        builder.instances(instance)?;
+    }
     Ok(builder.scene)
 }
 
 struct SceneBuilder<'a> {
     cx: &'a Context<'a>,
     scene: Scene,
+    /// Material index by name.
     named: BTreeMap<String, u32>,
+    /// Index into `scene.meshes` by geometry name.
+    geometry_index: BTreeMap<String, u32>,
 }
 
 fn finite(values: &[f32]) -> bool {
@@ -561,15 +579,31 @@ impl SceneBuilder<'_> {
         Ok(())
     }
 
-    fn mesh(&mut self, doc: &Spanned<MeshDoc>, assets: &dyn Assets) -> Result<(), SceneError> {
-        let m = doc.get_ref();
-        let line = self.cx.line_of(doc.span().start);
+    /// Reads and parses mesh file `file` (named by the entry at `span`), recording it
+    /// as an input.
+    fn read_mesh(
+        &mut self,
+        file: &str,
+        span: std::ops::Range<usize>,
+        assets: &dyn Assets,
+    ) -> Result<MeshData, SceneError> {
+        let line = self.cx.line_of(span.start);
         let mesh_error = |cause| SceneError::Mesh {
             file: self.cx.file.to_owned(),
             line,
-            mesh: m.file.clone(),
+            mesh: file.to_owned(),
             cause,
         };
+        let format = MeshFormat::from_path(file).map_err(mesh_error)?;
+        let bytes = assets
+            .read(file)
+            .map_err(|e| mesh_error(crate::mesh::MeshError::Invalid(e)))?;
+        self.scene.inputs.extend(assets.locate(file));
+        parse_mesh(&bytes, format).map_err(mesh_error)
+    }
+
+    fn mesh(&mut self, doc: &Spanned<MeshDoc>, assets: &dyn Assets) -> Result<(), SceneError> {
+        let m = doc.get_ref();
         let scale = match m.scale {
             None => Vec3::ONE,
             Some(ScaleDoc::Uniform(s)) => Vec3::splat(s),
@@ -583,12 +617,7 @@ impl SceneBuilder<'_> {
                 "mesh: transform numbers must be finite and `scale` non-zero",
             );
         }
-        let format = MeshFormat::from_path(&m.file).map_err(mesh_error)?;
-        let bytes = assets
-            .read(&m.file)
-            .map_err(|e| mesh_error(crate::mesh::MeshError::Invalid(e)))?;
-        self.scene.inputs.extend(assets.locate(&m.file));
-        let mut data = parse_mesh(&bytes, format).map_err(mesh_error)?;
+        let mut data = self.read_mesh(&m.file, doc.span(), assets)?;
         data.transform(&Mat4::from_scale_rotation_translation(
             scale,
             rotation(m.rotate),
@@ -753,6 +782,63 @@ mod tests {
         let scene = parse_scene(&source, "t.toml", &Mesh).unwrap();
         assert_eq!(scene.primitives.len(), 1);
         assert_eq!(scene.skipped_degenerate, 2);
+    }
+
+    const QUAD_GEOMETRY: &str = "[geometry.quad]\nfile = \"quad.obj\"\n";
+
+    #[test]
+    fn named_geometry_is_stored_once_and_placed_by_instances() {
+        let scene = parse(&format!(
+            "{QUAD_GEOMETRY}\
+             [[instances]]\ngeometry = \"quad\"\nmaterial = {{ type = \"lambertian\", albedo = [1, 1, 1] }}\n\
+             scale = [1, -2, 1]\nrotate = [0, 90, 0]\ntranslate = [1, 2, 3]\n\
+             [[instances]]\ngeometry = \"quad\"\nmaterial = {{ type = \"emissive\", radiance = [1, 1, 1] }}\n\
+             grid = {{ count = [3, 1, 2], step = [2, 0, 5] }}\n"
+        ))
+        .unwrap();
+        assert!(
+            scene.primitives.is_empty(),
+            "named geometry is not placed by itself"
+        );
+        assert_eq!(scene.meshes.len(), 1);
+        assert_eq!(scene.meshes[0].mesh.indices().len(), 2);
+        assert_eq!(scene.instances.len(), 7);
+        let first = scene.instances[0].to_world;
+        assert!(first.matrix3.determinant() < 0.0, "a mirrored instance");
+        assert!((first.transform_point3(Vec3::ZERO) - Vec3::new(1.0, 2.0, 3.0)).length() < 1e-6);
+        // Grid copy (i, j, k) = (2, 0, 1) is moved by (4, 0, 5); x runs fastest.
+        let last = scene.instances[6].to_world;
+        assert_eq!(last.transform_point3(Vec3::ZERO), Vec3::new(4.0, 0.0, 5.0));
+        assert_eq!(scene.instanced_triangles(), 14);
+        assert_ne!(scene.instances[0].material, scene.instances[1].material);
+    }
+
+    #[test]
+    fn instance_errors_name_the_line_and_what_is_wrong() {
+        let lambert = "material = { type = \"lambertian\", albedo = [1, 1, 1] }";
+        let e = error(&format!(
+            "{QUAD_GEOMETRY}[[instances]]\ngeometry = \"quads\"\n{lambert}\n"
+        ));
+        assert!(
+            e.contains("test.toml:6")
+                && e.contains("unknown geometry `quads`")
+                && e.contains("quad"),
+            "{e}"
+        );
+        let e = error(&format!(
+            "{QUAD_GEOMETRY}[[instances]]\ngeometry = \"quad\"\n{lambert}\nscale = [1, 0, 1]\n"
+        ));
+        assert!(e.contains("test.toml:6") && e.contains("non-zero"), "{e}");
+        let e = error(&format!(
+            "{QUAD_GEOMETRY}[[instances]]\ngeometry = \"quad\"\n{lambert}\ngrid = {{ count = [4096, 4096, 1], step = [1, 1, 1] }}\n"
+        ));
+        assert!(e.contains("16777216 copies"), "{e}");
+        let e = error(&format!(
+            "{QUAD_GEOMETRY}[[instances]]\ngeometry = \"quad\"\n{lambert}\ntranslate = [2e12, 0, 0]\n"
+        ));
+        assert!(e.contains("beyond"), "{e}");
+        let e = error("[geometry.gone]\nfile = \"gone.ply\"\n");
+        assert!(e.contains("test.toml:4") && e.contains("gone.ply"), "{e}");
     }
 
     #[test]

@@ -2,6 +2,7 @@
 #![allow(dead_code)] // each benchmark uses its own subset
 
 use canopy_bvh::Ray;
+use canopy_bvh::RayQuery;
 use canopy_render::camera::Camera;
 use canopy_render::rng::Rng;
 use canopy_render::Scene;
@@ -47,7 +48,7 @@ pub fn incoherent_rays(scene: &Scene, accel: &canopy_render::Accel, side: u32) -
     camera_rays(scene, side)
         .iter()
         .filter_map(|ray| {
-            let hit = accel.intersect(&scene.primitives, ray)?;
+            let hit = accel.intersect(ray)?;
             let origin = ray.origin + ray.dir * hit.t - ray.dir * (1e-4 * scale);
             Some(Ray::new(origin, rng.unit_vector(), 0.0, f32::INFINITY))
         })

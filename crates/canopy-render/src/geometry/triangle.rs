@@ -75,6 +75,11 @@ impl Triangle {
 
     /// The surface at the hit with barycentrics `(u, v)` (weights of vertices 1 and 2).
     pub fn surface(&self, u: f32, v: f32, vertex_normals: &[[Vec3; 3]]) -> Surface {
+        self.surface_with_normals(u, v, vertex_normals.get(self.normals as usize))
+    }
+
+    /// [`Triangle::surface`] with the vertex normals given (`None`: flat).
+    pub fn surface_with_normals(&self, u: f32, v: f32, normals: Option<&[Vec3; 3]>) -> Surface {
         // The point from the weights is far more precise than o + t d.
         let weights = [1.0 - u - v, u, v];
         let p = (0..3)
@@ -83,7 +88,7 @@ impl Triangle {
             })
             .as_vec3();
         let geometric_normal = self.normal();
-        let shading_normal = match vertex_normals.get(self.normals as usize) {
+        let shading_normal = match normals {
             Some(n) => {
                 let interpolated = (0..3)
                     .fold(Vec3::ZERO, |s, i| s + weights[i] * n[i])

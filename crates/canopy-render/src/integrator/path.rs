@@ -11,7 +11,7 @@ use crate::material::Material;
 use crate::rng::Rng;
 use crate::sampling::power_heuristic;
 use crate::scene::{Integrator, Scene};
-use canopy_bvh::Ray;
+use canopy_bvh::{Ray, RayQuery, ALL_MASKS};
 use glam::Vec3;
 
 /// Segments a path has before Russian roulette may end it.
@@ -67,14 +67,13 @@ impl Tracer<'_> {
             work.rays += 1;
             let Some(hit) = self
                 .accel
-                .intersect_counted(&scene.primitives, &ray, &mut work.probe)
+                .intersect_counted(&ray, ALL_MASKS, &mut work.probe)
             else {
                 radiance += throughput * scene.background.radiance(ray.dir);
                 break;
             };
-            let primitive = &scene.primitives[hit.prim as usize];
-            let material = &scene.materials[primitive.material as usize];
-            let surface = primitive.shape.surface(&ray, &hit, &scene.vertex_normals);
+            let (surface, material) = scene.hit_surface(&ray, &hit);
+            let material = &scene.materials[material as usize];
             radiance += throughput * material.emitted();
             let Some(sample) = material.sample(ray.dir, &surface, rng) else {
                 break;
@@ -105,7 +104,7 @@ impl Tracer<'_> {
             work.rays += 1;
             let Some(hit) = self
                 .accel
-                .intersect_counted(&scene.primitives, &ray, &mut work.probe)
+                .intersect_counted(&ray, ALL_MASKS, &mut work.probe)
             else {
                 let weight = match previous {
                     Some(v) if sample_background => {
@@ -116,20 +115,15 @@ impl Tracer<'_> {
                 radiance += throughput * weight * scene.background.radiance(ray.dir);
                 break;
             };
-            let primitive = &scene.primitives[hit.prim as usize];
-            let material = &scene.materials[primitive.material as usize];
-            let surface = primitive.shape.surface(&ray, &hit, &scene.vertex_normals);
+            let (surface, material) = scene.hit_surface(&ray, &hit);
+            let material = &scene.materials[material as usize];
             let emitted = material.emitted();
             if emitted != Vec3::ZERO {
                 let weight = match previous {
                     Some(v) => {
-                        let light_pdf = self.lights.pdf(
-                            scene,
-                            hit.prim,
-                            v.p,
-                            surface.p,
-                            surface.geometric_normal,
-                        );
+                        let light_pdf =
+                            self.lights
+                                .pdf(scene, &hit, v.p, surface.p, surface.geometric_normal);
                         power_heuristic(v.pdf, light_pdf)
                     }
                     None => 1.0,
@@ -215,8 +209,7 @@ impl Tracer<'_> {
     fn occluded<P: Probe>(&self, shadow: &Ray, work: &mut Work<P>) -> bool {
         work.rays += 1;
         work.shadow_rays += 1;
-        work.probe
-            .time_shadow(|| self.accel.occluded(&self.scene.primitives, shadow))
+        work.probe.time_shadow(|| self.accel.occluded(shadow))
     }
 }
 

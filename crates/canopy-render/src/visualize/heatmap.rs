@@ -9,6 +9,7 @@ use crate::camera::Camera;
 use crate::film::Film;
 use crate::rng::Rng;
 use crate::scene::Scene;
+use canopy_bvh::RayQuery;
 use glam::Vec3;
 use rayon::prelude::*;
 
@@ -33,7 +34,7 @@ pub fn render_heatmap(scene: &Scene, accel: &Accel) -> Heatmap {
             let mut rng = Rng::for_sample(s.seed, i as u64, 0);
             let u = ((i % width) as f32 + 0.5) / s.width as f32;
             let v = ((i / width) as f32 + 0.5) / s.height as f32;
-            let work = accel.traversal_cost(&scene.primitives, &camera.ray(u, v, &mut rng));
+            let work = accel.traversal_cost(&camera.ray(u, v, &mut rng));
             (work.nodes_visited + work.primitives_tested) as u32
         })
         .collect();

@@ -1,0 +1,195 @@
+//! Meshes stored once and placed many times: `[geometry.NAME]` tables name meshes,
+//! `[[instances]]` place them by a transform (and, with `grid`, many copies at once).
+//!
+//! ```toml
+//! [geometry.bunny]
+//! file = "bunny.ply"
+//! smooth = true
+//!
+//! [[instances]]
+//! geometry = "bunny"
+//! material = "gold"
+//! scale = 2.0
+//! rotate = [0, 45, 0]
+//! translate = [0, 0, -3]
+//! grid = { count = [10, 1, 10], step = [1.5, 0, 1.5] }  # 100 copies, offset by step
+//! ```
+
+use super::{in_range, rotation, Assets, ScaleDoc, SceneBuilder, MAX_COORDINATE};
+use crate::error::SceneError;
+use crate::scene::{MeshInstance, SceneMesh};
+use canopy_bvh::{Aabb, Geometry, Instance, TriangleMesh};
+use glam::{Affine3A, Vec3};
+use serde::Deserialize;
+use std::sync::Arc;
+use toml::Spanned;
+
+/// Most instances a scene may place (each costs about 200 bytes in the scene and its
+/// top-level structure).
+pub const MAX_INSTANCES: u64 = 1 << 22;
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct GeometryDoc {
+    file: String,
+    /// As for `[[meshes]]`: interpolate vertex normals (from the file, or computed).
+    smooth: Option<bool>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct InstanceDoc {
+    geometry: String,
+    material: Spanned<toml::Value>,
+    scale: Option<ScaleDoc>,
+    #[serde(default)]
+    rotate: [f32; 3],
+    #[serde(default)]
+    translate: [f32; 3],
+    grid: Option<GridDoc>,
+}
+
+/// `count[0] × count[1] × count[2]` copies, copy `(i, j, k)` moved by `(i, j, k) * step`
+/// after the instance's own transform.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct GridDoc {
+    count: [u32; 3],
+    step: [f32; 3],
+}
+
+impl SceneBuilder<'_> {
+    /// A named mesh, stored once: its zero-area triangles left out (and counted).
+    pub(super) fn geometry(
+        &mut self,
+        name: &str,
+        doc: &Spanned<GeometryDoc>,
+        assets: &dyn Assets,
+    ) -> Result<(), SceneError> {
+        let g = doc.get_ref();
+        let mut data = self.read_mesh(&g.file, doc.span(), assets)?;
+        if let Some(i) = data.positions.iter().position(|p| !in_range(&p.to_array())) {
+            return self.cx.invalid(
+                doc.span(),
+                format!(
+                    "geometry `{name}`: vertex {i} lies at {}, beyond ±{MAX_COORDINATE:e}",
+                    data.positions[i]
+                ),
+            );
+        }
+        match g.smooth {
+            Some(false) => data.normals.clear(),
+            Some(true) if data.normals.is_empty() => data.compute_vertex_normals(),
+            _ => {}
+        }
+        let before = data.triangles.len();
+        let positions = &data.positions;
+        data.triangles.retain(|t| {
+            let [a, b, c] = t.map(|i| positions[i as usize]);
+            (b - a).cross(c - a) != Vec3::ZERO
+        });
+        self.scene.skipped_degenerate += before - data.triangles.len();
+        let mesh =
+            TriangleMesh::new(data.positions, data.triangles).map_err(|e| SceneError::Invalid {
+                file: self.cx.file.to_owned(),
+                line: self.cx.line_of(doc.span().start),
+                message: format!("geometry `{name}` (`{}`): {e}", g.file),
+            })?;
+        self.geometry_index
+            .insert(name.to_owned(), self.scene.meshes.len() as u32);
+        self.scene.meshes.push(SceneMesh {
+            name: name.to_owned(),
+            mesh: Arc::new(mesh),
+            normals: data.normals,
+        });
+        Ok(())
+    }
+
+    /// One `[[instances]]` entry: one placement, or a grid of them.
+    pub(super) fn instances(&mut self, doc: &Spanned<InstanceDoc>) -> Result<(), SceneError> {
+        let d = doc.get_ref();
+        let Some(&mesh) = self.geometry_index.get(&d.geometry) else {
+            let known: Vec<&str> = self.geometry_index.keys().map(String::as_str).collect();
+            return self.cx.invalid(
+                doc.span(),
+                format!(
+                    "instance of unknown geometry `{}` (defined: {})",
+                    d.geometry,
+                    if known.is_empty() {
+                        "none".into()
+                    } else {
+                        known.join(", ")
+                    }
+                ),
+            );
+        };
+        let scale = match d.scale {
+            None => Vec3::ONE,
+            Some(ScaleDoc::Uniform(s)) => Vec3::splat(s),
+            Some(ScaleDoc::PerAxis(s)) => s.into(),
+        };
+        let (count, step) = match &d.grid {
+            None => ([1, 1, 1], Vec3::ZERO),
+            Some(g) => (g.count, Vec3::from(g.step)),
+        };
+        let numbers = [
+            &scale.to_array()[..],
+            &d.rotate,
+            &d.translate,
+            &step.to_array(),
+        ]
+        .concat();
+        if !numbers.iter().all(|v| v.is_finite()) || scale.cmpeq(Vec3::ZERO).any() {
+            return self.cx.invalid(
+                doc.span(),
+                "instance: transform numbers must be finite and `scale` non-zero",
+            );
+        }
+        let copies = count.iter().map(|&c| c as u64).product::<u64>();
+        let total = self.scene.instances.len() as u64 + copies;
+        if copies == 0 || total > MAX_INSTANCES {
+            return self.cx.invalid(
+                doc.span(),
+                format!(
+                    "instance: `grid` places {copies} copies; a scene holds 1 to {MAX_INSTANCES} instances"
+                ),
+            );
+        }
+        let material = self.material_ref(&d.material)?;
+        let base = Affine3A::from_scale_rotation_translation(
+            scale,
+            rotation(d.rotate),
+            d.translate.into(),
+        );
+        let local = {
+            let m = &self.scene.meshes[mesh as usize].mesh;
+            (0..m.len() as u32).fold(Aabb::EMPTY, |b, t| b.union(m.bounds(t)))
+        };
+        for k in 0..count[2] {
+            for j in 0..count[1] {
+                for i in 0..count[0] {
+                    let offset = Vec3::new(i as f32, j as f32, k as f32) * step;
+                    let to_world = Affine3A::from_translation(offset) * base;
+                    let world = Instance::new(0, to_world).world_bounds(local);
+                    if !local.is_empty()
+                        && !in_range(&[world.min.to_array(), world.max.to_array()].concat())
+                    {
+                        return self.cx.invalid(
+                            doc.span(),
+                            format!(
+                                "instance ({i}, {j}, {k}) of `{}` reaches {} .. {}, beyond ±{MAX_COORDINATE:e}",
+                                d.geometry, world.min, world.max
+                            ),
+                        );
+                    }
+                    self.scene.instances.push(MeshInstance {
+                        mesh,
+                        to_world,
+                        material,
+                    });
+                }
+            }
+        }
+        Ok(())
+    }
+}
