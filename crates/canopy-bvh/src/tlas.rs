@@ -26,6 +26,8 @@ pub struct Tlas<B> {
     tree: Option<Tree>,
     params: BlasParams,
     bounds: Aabb,
+    /// The only instance whose world box holds anything, where it is untransformed.
+    alone: Option<u32>,
     build_time: Duration,
 }
 
@@ -54,6 +56,7 @@ impl<B: RayQuery> Tlas<B> {
             tree: None,
             params: *params,
             bounds: Aabb::EMPTY,
+            alone: None,
             build_time: Duration::ZERO,
         };
         tlas.rebuild();
@@ -93,6 +96,11 @@ impl<B: RayQuery> Tlas<B> {
             .map(|i| i.world_bounds(self.blases[i.blas as usize].bounds()))
             .collect();
         self.bounds = boxes.iter().copied().fold(Aabb::EMPTY, Aabb::union);
+        let mut holding = (0..boxes.len()).filter(|&i| !boxes[i].is_empty());
+        self.alone = match (holding.next(), holding.next()) {
+            (Some(i), None) if self.instances[i].is_identity() => Some(i as u32),
+            _ => None,
+        };
         self.tree = self.params.builder.map(|builder| {
             Tree::new(
                 build(builder, &boxes, &self.params.build),
@@ -125,14 +133,13 @@ impl<B: RayQuery> Tlas<B> {
         self.build_time
     }
 
-    /// The one structure when the only instance is the untransformed whole: queries go
-    /// straight to it, at no extra cost.
+    /// The one structure when the only instance that holds anything is untransformed:
+    /// queries go straight to it, at no extra cost. With its index and mask.
     #[inline(always)]
-    fn alone(&self) -> Option<(&B, u32)> {
-        match self.instances.as_slice() {
-            [only] if only.is_identity() => Some((&self.blases[only.blas as usize], only.mask)),
-            _ => None,
-        }
+    fn alone(&self) -> Option<(&B, u32, u32)> {
+        let index = self.alone?;
+        let only = &self.instances[index as usize];
+        Some((&self.blases[only.blas as usize], index, only.mask))
     }
 
     /// The hit of `ray` (world space, its `t_max` the best so far) on instance `index`.
@@ -176,11 +183,11 @@ impl<B: RayQuery> Tlas<B> {
         C: TraversalCounter,
         Q: FnMut(&B, &Ray) -> Option<Hit>,
     {
-        if let Some((blas, only)) = self.alone() {
+        if let Some((blas, index, only)) = self.alone() {
             return (only & mask != 0)
                 .then(|| closest(blas, ray))
                 .flatten()
-                .map(|h| h.into_hit(0));
+                .map(|h| h.into_hit(index));
         }
         let test = |i: u32, r: &Ray| self.closest_in(i, r, mask, &mut closest);
         match &self.tree {
@@ -222,7 +229,7 @@ impl<B: RayQuery> RayQuery for Tlas<B> {
 
     #[inline]
     fn occluded_masked(&self, ray: &Ray, mask: u32) -> bool {
-        if let Some((blas, only)) = self.alone() {
+        if let Some((blas, _, only)) = self.alone() {
             return only & mask != 0 && blas.occluded_masked(ray, mask);
         }
         let test = |i: u32, r: &Ray| self.occluded_in(i, r, mask);
@@ -256,10 +263,11 @@ impl<B: RayQuery> RayQuery for Tlas<B> {
         R: FnMut(usize) -> Ray,
         A: FnMut(usize, Option<Hit>),
     {
-        if let Some((blas, only)) = self.alone() {
+        if let Some((blas, index, only)) = self.alone() {
             if only & mask != 0 {
-                return blas
-                    .intersect_each(count, mask, ray, |i, h| answer(i, h.map(|h| h.into_hit(0))));
+                return blas.intersect_each(count, mask, ray, |i, h| {
+                    answer(i, h.map(|h| h.into_hit(index)))
+                });
             }
         }
         match &self.tree {
@@ -278,7 +286,7 @@ impl<B: RayQuery> RayQuery for Tlas<B> {
         R: FnMut(usize) -> Ray,
         A: FnMut(usize, bool),
     {
-        if let Some((blas, only)) = self.alone() {
+        if let Some((blas, _, only)) = self.alone() {
             if only & mask != 0 {
                 return blas.occluded_each(count, mask, ray, answer);
             }

@@ -247,6 +247,20 @@ fn one_identity_instance_is_its_structure() {
         assert_eq!(bits(tlas.intersect(&ray)), bits(blas.intersect(&ray)));
         assert_eq!(tlas.occluded(&ray), blas.occluded(&ray));
     }
+    // An empty structure beside it changes nothing but the instance index.
+    let beside_empty: Tlas<Blas<TriangleMesh>> = Tlas::build(
+        vec![Blas::build(TriangleMesh::default(), &params), blas.clone()],
+        vec![
+            Instance::new(0, Affine3A::IDENTITY),
+            Instance::new(1, Affine3A::IDENTITY),
+        ],
+        &params,
+    )
+    .unwrap();
+    for ray in rays(500, 9) {
+        let want = blas.intersect(&ray).map(|h| Hit { inst: 1, ..h });
+        assert_eq!(bits(beside_empty.intersect(&ray)), bits(want));
+    }
     // A mask that the instance does not take sees nothing.
     let masked = Tlas::build(
         vec![blas],

@@ -258,7 +258,9 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     let params = args.build.params();
     let scene = &job.scene;
     if let AccelKind::Bvh(builder) = args.bvh {
-        args.build.check_memory(builder, scene.primitives.len())?;
+        let mesh_triangles: usize = scene.meshes.iter().map(|m| m.mesh.indices().len()).sum();
+        args.build
+            .check_memory(builder, scene.primitives.len() + mesh_triangles)?;
     }
     let gpu = match args.device {
         Device::Cpu => None,

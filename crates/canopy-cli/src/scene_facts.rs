@@ -20,6 +20,11 @@ pub struct SceneFacts {
     pub spheres: usize,
     pub triangles: usize,
     pub cuboids: usize,
+    /// Meshes stored once and placed by instances.
+    pub meshes: usize,
+    pub instances: usize,
+    /// Triangles the instances place, each counted once per instance.
+    pub instanced_triangles: u64,
 }
 
 impl SceneFacts {
@@ -39,6 +44,9 @@ impl SceneFacts {
             spheres: counts.spheres,
             triangles: counts.triangles,
             cuboids: counts.cuboids,
+            meshes: scene.meshes.len(),
+            instances: scene.instances.len(),
+            instanced_triangles: scene.instanced_triangles(),
         }
     }
 
@@ -54,10 +62,17 @@ impl SceneFacts {
         )
     }
 
-    /// `N (a spheres, b triangles, c cuboids)`
+    /// `N (a spheres, b triangles, c cuboids)`, and the instances if there are any.
     pub fn primitives_text(&self) -> String {
+        let instances = match self.instances {
+            0 => String::new(),
+            n => format!(
+                "; {n} instances of {} meshes placing {} triangles",
+                self.meshes, self.instanced_triangles
+            ),
+        };
         format!(
-            "{} ({} spheres, {} triangles, {} cuboids)",
+            "{} ({} spheres, {} triangles, {} cuboids){instances}",
             self.primitives, self.spheres, self.triangles, self.cuboids
         )
     }

@@ -118,7 +118,12 @@ fn gpu_closest_hits_equal_the_cpu_ones() {
     let rays = rays(20_000);
     let params = BuildParams::default();
     for builder in [Builder::BinnedSah, Builder::Sbvh, Builder::Lbvh] {
-        let accel = Accel::build(AccelKind::Bvh(builder), BvhWidth::Two, &prims, &params);
+        let accel = Accel::build(
+            AccelKind::Bvh(builder),
+            BvhWidth::Two,
+            &prims.clone().into(),
+            &params,
+        );
         let cpu: Vec<Option<Hit>> = rays.iter().map(|r| accel.intersect(r)).collect();
         let boxes: Vec<_> = prims.iter().map(|p| p.shape.bounds()).collect();
         let bvh = canopy_bvh::build_with_clipper(

@@ -101,7 +101,8 @@ impl Bvh {
         py.detach(|| {
             pools::install(o.threads, || {
                 let start = Instant::now();
-                let accel = Accel::build_optimized(kind, width, &primitives, &params, optimize);
+                let accel =
+                    Accel::build_optimized(kind, width, &primitives.into(), &params, optimize);
                 let build_ms = start.elapsed().as_secs_f64() * 1e3;
                 Bvh {
                     accel,
@@ -329,7 +330,7 @@ impl Bvh {
 
     #[getter]
     fn primitive_count(&self) -> usize {
-        self.accel.shapes().len()
+        self.accel.primitives().len()
     }
 
     #[getter]
@@ -345,7 +346,7 @@ impl Bvh {
     fn stats<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let d = PyDict::new(py);
         d.set_item("builder", self.name())?;
-        d.set_item("primitives", self.accel.shapes().len())?;
+        d.set_item("primitives", self.accel.primitives().len())?;
         d.set_item("build_ms", self.build_ms)?;
         let Some(tree) = self.accel.tree() else {
             return Ok(d);
@@ -377,7 +378,8 @@ impl Bvh {
         };
         py.detach(|| {
             canopy_bvh::epo(tree.view(), &self.params.sah, |prim, region| {
-                self.accel.shapes()[prim as usize]
+                self.accel.primitives()[prim as usize]
+                    .shape
                     .area_in_box(region)
                     .unwrap_or(0.0)
             })
@@ -390,9 +392,9 @@ impl Bvh {
                 .validate(
                     &self
                         .accel
-                        .shapes()
+                        .primitives()
                         .iter()
-                        .map(|s| s.bounds())
+                        .map(|p| p.shape.bounds())
                         .collect::<Vec<Aabb>>(),
                 )
                 .map_err(|e| PyValueError::new_err(format!("invalid BVH: {e}"))),
@@ -527,7 +529,7 @@ impl Bvh {
     fn __repr__(&self) -> String {
         format!(
             "Bvh({} primitives, builder={:?}, width={})",
-            self.accel.shapes().len(),
+            self.accel.primitives().len(),
             self.name(),
             self.width.children()
         )

@@ -55,10 +55,11 @@ impl FromStr for AccelKind {
     }
 }
 
-/// A scene's shapes as geometry a structure owns: spheres and cuboids tested here,
-/// triangles packed into wide leaves (or tested here in binary trees).
+/// A scene's primitives as geometry a structure shares with the scene: spheres and
+/// cuboids tested here, triangles packed into wide leaves (or tested here in binary
+/// trees).
 #[derive(Clone, Debug, Default)]
-pub struct ShapeList(pub Vec<Shape>);
+pub struct ShapeList(pub Arc<Vec<Primitive>>);
 
 impl Geometry for ShapeList {
     fn len(&self) -> usize {
@@ -66,30 +67,30 @@ impl Geometry for ShapeList {
     }
 
     fn bounds(&self, prim: u32) -> Aabb {
-        self.0[prim as usize].bounds()
+        self.0[prim as usize].shape.bounds()
     }
 
     #[inline]
     fn triangle(&self, prim: u32) -> Option<[Vec3; 3]> {
-        self.0[prim as usize].triangle_vertices()
+        self.0[prim as usize].shape.triangle_vertices()
     }
 
     fn has_triangles(&self) -> bool {
-        self.0.iter().any(|s| matches!(s, Shape::Triangle(_)))
+        self.0.iter().any(|p| matches!(p.shape, Shape::Triangle(_)))
     }
 
     #[inline]
     fn intersect(&self, prim: u32, ray: &Ray, sheared: &ShearedRay) -> Option<PrimHit> {
-        self.0[prim as usize].intersect_sheared(ray, sheared)
+        self.0[prim as usize].shape.intersect_sheared(ray, sheared)
     }
 
     #[inline(always)]
     fn intersect_other(&self, prim: u32, ray: &Ray) -> Option<PrimHit> {
-        self.0[prim as usize].intersect_non_triangle(ray)
+        self.0[prim as usize].shape.intersect_non_triangle(ray)
     }
 
     fn split(&self, prim: u32, within: Aabb, axis: usize, position: f32) -> (Aabb, Aabb) {
-        match self.0[prim as usize].triangle_vertices() {
+        match self.0[prim as usize].shape.triangle_vertices() {
             Some(v) => split_triangle(v, within, axis, position),
             None => split_box(within, axis, position),
         }
@@ -194,7 +195,7 @@ impl Accel {
     pub fn build(
         kind: AccelKind,
         width: BvhWidth,
-        primitives: &[Primitive],
+        primitives: &Arc<Vec<Primitive>>,
         params: &BuildParams,
     ) -> Self {
         Self::build_optimized(kind, width, primitives, params, None)
@@ -205,7 +206,7 @@ impl Accel {
     pub fn build_optimized(
         kind: AccelKind,
         width: BvhWidth,
-        primitives: &[Primitive],
+        primitives: &Arc<Vec<Primitive>>,
         params: &BuildParams,
         optimize: Option<OptimizeBudget>,
     ) -> Self {
@@ -241,7 +242,7 @@ impl Accel {
     fn build_all(
         kind: AccelKind,
         width: BvhWidth,
-        primitives: &[Primitive],
+        primitives: &Arc<Vec<Primitive>>,
         meshes: &[Arc<TriangleMesh>],
         placed: &[(u32, Affine3A)],
         params: &BuildParams,
@@ -258,7 +259,7 @@ impl Accel {
             build: *params,
             optimize,
         };
-        let shapes = ShapeList(primitives.iter().map(|p| p.shape.clone()).collect());
+        let shapes = ShapeList(primitives.clone());
         let mut blases = vec![SceneBlas::Shapes(Blas::build(shapes, &blas_params))];
         blases.extend(
             meshes
@@ -288,8 +289,8 @@ impl Accel {
         self.world.blases()[0].tree()
     }
 
-    /// The shapes of the scene's own primitives, as the structure holds them.
-    pub fn shapes(&self) -> &[Shape] {
+    /// The scene's own primitives, as the structure holds them.
+    pub fn primitives(&self) -> &[Primitive] {
         match &self.world.blases()[0] {
             SceneBlas::Shapes(blas) => &blas.geometry().0,
             SceneBlas::Mesh(_) => unreachable!("structure 0 holds the scene's primitives"),

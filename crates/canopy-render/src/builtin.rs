@@ -30,6 +30,7 @@ pub const BUILTIN_SCENES: &[BuiltinScene] = &[
     scene!("paper-6"),
     scene!("rtiow-final"),
     scene!("cornell"),
+    scene!("teapots"),
 ];
 
 /// Mesh files the built-in scenes reference, by the path the scene files use.

@@ -83,7 +83,7 @@ pub fn fingerprint(scene: &Scene) -> u64 {
     );
     let mut hash = fnv1a(text.as_bytes(), FNV_OFFSET);
     let mut words: Vec<f32> = Vec::with_capacity(16);
-    for p in &scene.primitives {
+    for p in scene.primitives.iter() {
         words.clear();
         words.push(f32::from_bits(p.material));
         match &p.shape {
@@ -378,7 +378,7 @@ mod tests {
     fn any_change_to_geometry_or_shading_does_not_match() {
         let (scene, checkpoint) = sample();
         let mut moved = scene.clone();
-        match &mut moved.primitives[3].shape {
+        match &mut std::sync::Arc::make_mut(&mut moved.primitives)[3].shape {
             Shape::Triangle(t) => t.v[1].x += 1e-3,
             Shape::Sphere(s) => s.radius += 1e-3,
             Shape::Cuboid(c) => c.translation.x += 1e-3,
@@ -388,7 +388,7 @@ mod tests {
         smoothed.vertex_normals.push([Vec3::Y; 3]);
         assert!(checkpoint.matches(&smoothed, Path::new("x")).is_err());
         let mut recoloured = scene;
-        recoloured.primitives[0].material ^= 1;
+        std::sync::Arc::make_mut(&mut recoloured.primitives)[0].material ^= 1;
         assert!(checkpoint.matches(&recoloured, Path::new("x")).is_err());
     }
 

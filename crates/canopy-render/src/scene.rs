@@ -165,8 +165,9 @@ pub struct Scene {
     pub background: Background,
     pub materials: Vec<Material>,
     /// Shapes placed in the world as they are (spheres, cuboids, mesh triangles baked
-    /// into world space).
-    pub primitives: Vec<Primitive>,
+    /// into world space); shared with the acceleration structure, which tests them
+    /// without a copy.
+    pub primitives: Arc<Vec<Primitive>>,
     /// Vertex normals of smooth triangles, indexed by `Triangle::normals`.
     pub vertex_normals: Vec<[Vec3; 3]>,
     /// Meshes stored once, placed by `instances`.
@@ -260,7 +261,7 @@ impl Scene {
                     triangle.normals = baked.vertex_normals.len() as u32;
                     baked.vertex_normals.push(normals);
                 }
-                baked.primitives.push(Primitive {
+                Arc::make_mut(&mut baked.primitives).push(Primitive {
                     shape: Shape::Triangle(triangle),
                     material: instance.material,
                 });
@@ -304,7 +305,7 @@ impl Scene {
     /// Counts of spheres, triangles and cuboids.
     pub fn shape_counts(&self) -> ShapeCounts {
         let mut counts = ShapeCounts::default();
-        for p in &self.primitives {
+        for p in self.primitives.iter() {
             match p.shape {
                 Shape::Sphere(_) => counts.spheres += 1,
                 Shape::Triangle(_) => counts.triangles += 1,

@@ -530,7 +530,7 @@ impl SceneBuilder<'_> {
     }
 
     fn push(&mut self, shape: Shape, material: u32) {
-        self.scene.primitives.push(Primitive { shape, material });
+        Arc::make_mut(&mut self.scene.primitives).push(Primitive { shape, material });
     }
 
     fn sphere(&mut self, doc: &Spanned<SphereDoc>) -> Result<(), SceneError> {

@@ -102,13 +102,13 @@ fn scene(integrator: Integrator) -> Scene {
         },
         background: Background::Constant(Vec3::splat(0.1)),
         materials,
-        primitives: vec![Primitive {
+        primitives: Arc::new(vec![Primitive {
             shape: Shape::Cuboid(Cuboid::axis_aligned(
                 Vec3::new(-4.0, -1.3, -4.0),
                 Vec3::new(4.0, -1.0, 4.0),
             )),
             material: 0,
-        }],
+        }]),
         meshes: vec![SceneMesh {
             name: "cube".into(),
             mesh: Arc::new(cube()),

@@ -15,7 +15,7 @@ fn scaled(mut scene: Scene, s: f32) -> Scene {
     c.look_at *= s;
     c.aperture *= s;
     c.focus_distance = c.focus_distance.map(|f| f * s);
-    for p in &mut scene.primitives {
+    for p in std::sync::Arc::make_mut(&mut scene.primitives) {
         match &mut p.shape {
             Shape::Sphere(sphere) => {
                 sphere.center *= s;

@@ -206,13 +206,15 @@ fn rays_at_shared_edges_and_vertices_never_escape() {
         .into_iter()
         .chain(box_faces.into_iter().map(|f| f.map(|i| i + offset)))
         .collect();
-    let primitives: Vec<Primitive> = faces
-        .iter()
-        .map(|&[a, b, c]| Primitive {
-            shape: Shape::Triangle(Triangle::new(v[a], v[b], v[c])),
-            material: 0,
-        })
-        .collect();
+    let primitives: std::sync::Arc<Vec<Primitive>> = std::sync::Arc::new(
+        faces
+            .iter()
+            .map(|&[a, b, c]| Primitive {
+                shape: Shape::Triangle(Triangle::new(v[a], v[b], v[c])),
+                material: 0,
+            })
+            .collect(),
+    );
 
     let mut structures = vec![(
         "none",
