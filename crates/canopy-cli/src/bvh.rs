@@ -87,7 +87,16 @@ fn parse_builders(list: &str) -> anyhow::Result<Vec<Builder>> {
 pub fn run(args: &BvhArgs) -> anyhow::Result<()> {
     let builders = parse_builders(&args.bvh)?;
     let params = args.build.params();
-    let scene = canopy_render::load_scene(&args.input)?;
+    let mut scene = canopy_render::load_scene(&args.input)?;
+    if !scene.instances.is_empty() {
+        // One tree over every placed triangle: the instances baked into world space.
+        let flat = scene.primitives.len() as u64 + scene.instanced_triangles();
+        crate::safety::check_memory(
+            flat * std::mem::size_of::<canopy_render::scene::Primitive>() as u64,
+            &format!("baking {flat} instanced triangles into one tree"),
+        )?;
+        scene = scene.with_instances_baked();
+    }
     if args.epo && scene.shape_counts().spheres > 0 {
         anyhow::bail!(
             "--epo: {} has spheres, whose area inside a box canopy does not compute; EPO needs triangles and cuboids only",

@@ -58,6 +58,8 @@ impl SceneInfo {
         let c = self.scene.shape_counts();
         let d = PyDict::new(py);
         d.set_item("primitives", self.scene.primitives.len())?;
+        d.set_item("instances", self.scene.instances.len())?;
+        d.set_item("instanced_triangles", self.scene.instanced_triangles())?;
         d.set_item("spheres", c.spheres)?;
         d.set_item("triangles", c.triangles)?;
         d.set_item("cuboids", c.cuboids)?;
@@ -162,7 +164,7 @@ pub fn render<'py>(
     let layout: BvhWidth = width.to_string().parse().map_err(PyValueError::new_err)?;
     let accel = py.detach(|| {
         pools::install(threads, || {
-            Accel::build(kind, layout, &scene.primitives, &BuildParams::default())
+            Accel::for_scene(&scene, kind, layout, &BuildParams::default(), None)
         })
     })?;
     let settings = scene.settings;

@@ -33,7 +33,7 @@ fn inputs() -> Vec<(&'static str, Scene)> {
     candidates
         .into_iter()
         .filter_map(|(label, source)| match load_scene(&source) {
-            Ok(scene) => Some((label, scene)),
+            Ok(scene) => Some((label, scene.with_instances_baked())),
             Err(e) => {
                 eprintln!("skipping {label}: {e}");
                 None

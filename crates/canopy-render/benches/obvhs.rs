@@ -34,12 +34,14 @@ fn mesh() -> (String, Scene) {
     let dragon = mesh_dir().join("dragon_res2.ply");
     let bunny = concat!(env!("CARGO_MANIFEST_DIR"), "/../../scenes/meshes/bunny.ply");
     match load_scene(&dragon.display().to_string()) {
-        Ok(scene) => ("dragon-202k".into(), scene),
+        Ok(scene) => ("dragon-202k".into(), scene.with_instances_baked()),
         Err(e) => {
             eprintln!("{e}; using the bunny");
             (
                 "bunny-3.7k".into(),
-                load_scene(bunny).expect("the bunny ships with canopy"),
+                load_scene(bunny)
+                    .expect("the bunny ships with canopy")
+                    .with_instances_baked(),
             )
         }
     }

@@ -33,7 +33,7 @@ fn main() {
             _ => mesh = arg,
         }
     }
-    let scene = load_scene(&mesh).expect("mesh");
+    let scene = load_scene(&mesh).expect("mesh").with_instances_baked();
     let params = packed_params(&BuildParams::default());
     let clip = clipper(&scene.primitives);
     let pools: Vec<_> = threads

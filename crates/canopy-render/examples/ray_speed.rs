@@ -69,7 +69,7 @@ fn options() -> Options {
 
 fn main() {
     let o = options();
-    let scene = load_scene(&o.mesh).expect("mesh");
+    let scene = load_scene(&o.mesh).expect("mesh").with_instances_baked();
     let tris: Vec<[Vec3; 3]> = scene
         .primitives
         .iter()

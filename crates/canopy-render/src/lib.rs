@@ -75,7 +75,8 @@ pub fn load_scene(name_or_path: &str) -> Result<Scene, SceneError> {
     }
 }
 
-/// A scene of one mesh file: grey, smooth-shaded, under the sky, seen from the front.
+/// A scene of one mesh file: grey, smooth-shaded where the file has normals, under the
+/// sky, seen from the front. The mesh is stored once and placed by one instance.
 pub fn scene_from_mesh(path: &Path) -> Result<Scene, SceneError> {
     let file = path
         .file_name()
@@ -84,16 +85,14 @@ pub fn scene_from_mesh(path: &Path) -> Result<Scene, SceneError> {
     let dir = path.parent().unwrap_or(Path::new(".")).to_owned();
     let source = format!(
         "name = {name:?}\n[camera]\nlook_from = [0, 0, 1]\nlook_at = [0, 0, 0]\n\
-         [[meshes]]\nfile = {file:?}\nmaterial = {{ type = \"lambertian\", albedo = [0.7, 0.7, 0.7] }}\n",
+         [geometry.mesh]\nfile = {file:?}\n\
+         [[instances]]\ngeometry = \"mesh\"\nmaterial = {{ type = \"lambertian\", albedo = [0.7, 0.7, 0.7] }}\n",
         name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default(),
     );
     let mut scene = parse_scene(&source, &path.display().to_string(), &DirAssets(dir))?;
     debug_assert_eq!(scene.inputs.len(), 1, "the mesh is recorded as an input");
     // Frame the mesh: look at its centre from the front, a little above.
-    let bounds = scene
-        .primitive_bounds()
-        .into_iter()
-        .fold(canopy_bvh::Aabb::EMPTY, canopy_bvh::Aabb::union);
+    let bounds = scene.bounds();
     let radius = 0.5 * bounds.extent().length();
     let centre = bounds.center();
     scene.camera.look_at = centre;

@@ -211,14 +211,19 @@ impl Scene {
         prim: u32,
     ) -> (Triangle, Option<[Vec3; 3]>) {
         let mesh = &self.meshes[instance.mesh as usize];
-        let world = mesh
-            .mesh
-            .vertices_of(prim)
-            .map(|v| instance.to_world.transform_point3(v));
-        let normals = (!mesh.normals.is_empty()).then(|| {
+        let local = mesh.mesh.vertices_of(prim);
+        let indices = mesh.mesh.indices()[prim as usize];
+        let has_normals = !mesh.normals.is_empty();
+        // The identity (a bare mesh file) is common: no transforms, no inverse.
+        if instance.to_world == Affine3A::IDENTITY {
+            let normals =
+                has_normals.then(|| indices.map(|i| mesh.normals[i as usize].normalize_or_zero()));
+            return (Triangle::new(local[0], local[1], local[2]), normals);
+        }
+        let world = local.map(|v| instance.to_world.transform_point3(v));
+        let normals = has_normals.then(|| {
             let to_normal = instance.to_world.matrix3.inverse().transpose();
-            mesh.mesh.indices()[prim as usize]
-                .map(|i| (to_normal * mesh.normals[i as usize]).normalize_or_zero())
+            indices.map(|i| (to_normal * mesh.normals[i as usize]).normalize_or_zero())
         });
         (Triangle::new(world[0], world[1], world[2]), normals)
     }

@@ -6,7 +6,7 @@ use canopy_render::load_scene;
 #[test]
 fn binned_sah_is_within_ten_percent_of_sweep_sah_on_the_bunny() {
     let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../scenes/meshes/bunny.ply");
-    let scene = load_scene(path).unwrap();
+    let scene = load_scene(path).unwrap().with_instances_baked();
     let boxes = scene.primitive_bounds();
     assert!(boxes.len() > 3000);
     let params = BuildParams::default();
@@ -25,7 +25,10 @@ fn binned_sah_is_within_ten_percent_of_sweep_sah_on_the_bunny() {
 #[test]
 fn presets_trade_build_time_for_tree_quality_in_order_on_the_bunny() {
     let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../scenes/meshes/bunny.ply");
-    let boxes = load_scene(path).unwrap().primitive_bounds();
+    let boxes = load_scene(path)
+        .unwrap()
+        .with_instances_baked()
+        .primitive_bounds();
     let sah = |preset: Preset| {
         let (builder, params) = preset.choice();
         let bvh = canopy_bvh::try_build(builder, &boxes, &params).unwrap();
@@ -46,7 +49,7 @@ fn presets_trade_build_time_for_tree_quality_in_order_on_the_bunny() {
 #[test]
 fn spatial_splits_lower_the_sah_of_binned_sah_on_the_bunny() {
     let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../scenes/meshes/bunny.ply");
-    let scene = load_scene(path).unwrap();
+    let scene = load_scene(path).unwrap().with_instances_baked();
     let boxes = scene.primitive_bounds();
     let params = BuildParams::default();
     let clipper = canopy_render::clipper(&scene.primitives);
@@ -81,7 +84,7 @@ fn packed_trees_take_two_pack_leaves_only_where_the_caller_left_the_defaults() {
     // On a mesh, the renderer's 8-wide tree has leaves of more than one pack, none over
     // two, and every leaf stays valid; a binary tree keeps the default leaf size.
     let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../scenes/meshes/bunny.ply");
-    let scene = load_scene(path).unwrap();
+    let scene = load_scene(path).unwrap().with_instances_baked();
     let boxes = scene.primitive_bounds();
     let kind = AccelKind::Bvh(Builder::BinnedSah);
     let params = BuildParams::default();

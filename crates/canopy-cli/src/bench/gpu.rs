@@ -56,6 +56,10 @@ pub fn run(args: &GpuArgs) -> anyhow::Result<()> {
     let mut rows = Vec::new();
     for name in &scenes {
         let mut scene = load_scene(name)?;
+        if !scene.instances.is_empty() {
+            // The GPU renders instances baked; so does the CPU here, for the same work.
+            scene = scene.with_instances_baked();
+        }
         (scene.settings.width, scene.settings.height) = args.size;
         scene.settings.spp = args.spp;
         scene.settings.max_depth = args.depth;

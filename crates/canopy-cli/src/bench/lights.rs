@@ -75,11 +75,12 @@ pub fn run(args: &LightsArgs) -> anyhow::Result<()> {
         };
         let name = &name;
         (scene.settings.width, scene.settings.height) = args.size;
-        let accel = Accel::build(
+        let accel = Accel::for_scene(
+            &scene,
             AccelKind::default(),
             BvhWidth::Eight,
-            &scene.primitives,
             &BuildParams::default(),
+            None,
         );
         eprintln!("{name}: reference at {} spp", args.reference_spp);
         let reference = pool.install(|| {

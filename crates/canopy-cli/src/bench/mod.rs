@@ -341,7 +341,7 @@ fn measure(
     runs: u32,
     progress: &ProgressBar,
 ) -> Measurement {
-    let accel = Accel::build(method.kind, method.width, &scene.primitives, params);
+    let accel = Accel::for_scene(scene, method.kind, method.width, params, None);
     let sah_cost = accel
         .tree()
         .map_or(0.0, |tree| tree.stats(&params.sah).sah_cost);

@@ -35,7 +35,7 @@ fn picture(
     scene.settings.width = size;
     scene.settings.height = size;
     scene.settings.spp = spp;
-    let accel = Accel::build(method.kind, method.width, &scene.primitives, params);
+    let accel = Accel::for_scene(&scene, method.kind, method.width, params, None);
     let (mut film, _) = render(&scene, &accel, &|| {});
     if let Some(tree) = accel.tree() {
         let levels = levels(method.width);

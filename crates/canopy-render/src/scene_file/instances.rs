@@ -17,6 +17,7 @@
 
 use super::{in_range, rotation, Assets, ScaleDoc, SceneBuilder, MAX_COORDINATE};
 use crate::error::SceneError;
+use crate::geometry::Triangle;
 use crate::scene::{MeshInstance, SceneMesh};
 use canopy_bvh::{Aabb, Geometry, Instance, TriangleMesh};
 use glam::{Affine3A, Vec3};
@@ -84,9 +85,10 @@ impl SceneBuilder<'_> {
         }
         let before = data.triangles.len();
         let positions = &data.positions;
+        // A triangle without area can never be hit (the same test as `[[meshes]]`).
         data.triangles.retain(|t| {
             let [a, b, c] = t.map(|i| positions[i as usize]);
-            (b - a).cross(c - a) != Vec3::ZERO
+            Triangle::new(a, b, c).area() != 0.0
         });
         self.scene.skipped_degenerate += before - data.triangles.len();
         let mesh =
