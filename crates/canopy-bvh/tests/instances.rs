@@ -397,3 +397,25 @@ fn boxes_and_empty_structures_through_instances() {
         assert!(tlas.blases()[1].intersect(&ray).is_none());
     }
 }
+
+/// Counting a query through instances changes no answer and counts the work of both
+/// levels: at least the top tree's nodes and the primitives of the instance hit.
+#[test]
+fn counted_queries_through_instances_answer_alike_and_count_both_levels() {
+    let tlas = tlas(&BlasParams::default(), Isa::best());
+    let mut hits = 0;
+    for ray in rays(500, 17) {
+        let mut stats = canopy_bvh::TraversalStats::default();
+        let hit = tlas.intersect_counted(&ray, ALL_MASKS, &mut stats);
+        assert_eq!(bits(hit), bits(tlas.intersect(&ray)));
+        assert_eq!(stats, tlas.traversal_cost(&ray));
+        if hit.is_some() {
+            hits += 1;
+            assert!(
+                stats.nodes_visited >= 2 && stats.primitives_tested >= 1,
+                "{stats:?}"
+            );
+        }
+    }
+    assert!(hits > 50);
+}

@@ -761,3 +761,47 @@ fn resuming_a_damaged_checkpoint_is_a_clear_error() {
     );
     std::fs::remove_dir_all(dir).unwrap();
 }
+
+/// A scene of named meshes placed by instances: `render` and `check` report the
+/// instances and the triangles they place; `bvh` measures one tree over every placed
+/// triangle; an instance of an unknown geometry names its line.
+#[test]
+fn instanced_scenes_render_check_and_measure() {
+    let dir = scratch("instances");
+    std::fs::write(
+        dir.join("quad.obj"),
+        "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n",
+    )
+    .unwrap();
+    let scene = format!(
+        "{CAMERA}[geometry.quad]\nfile = \"quad.obj\"\n\
+         [[instances]]\ngeometry = \"quad\"\nmaterial = {{ type = \"lambertian\", albedo = [0.5, 0.5, 0.5] }}\n\
+         translate = [-1.5, -1, 0]\nscale = [1, 1, -1]\ngrid = {{ count = [3, 2, 1], step = [1.1, 1.1, 0] }}\n"
+    );
+    std::fs::write(dir.join("s.toml"), scene).unwrap();
+    let json = |args: &[&str]| {
+        let out = canopy(args, &dir);
+        assert!(out.status.success(), "{}", stderr(&out));
+        serde_json::from_slice::<serde_json::Value>(&out.stdout).unwrap()
+    };
+    let rendered = json(&[
+        "render", "s.toml", "-o", "s.png", "--size", "16x16", "--spp", "1", "--json",
+    ]);
+    assert_eq!(rendered["instances"], 6);
+    assert_eq!(rendered["instanced_triangles"], 12);
+    assert_eq!(rendered["primitives"], 0);
+    let checked = json(&["check", "s.toml", "--json"]);
+    assert_eq!(checked["instances"], 6);
+    let measured = json(&["bvh", "s.toml", "--bvh", "lbvh", "--json"]);
+    assert_eq!(
+        measured["primitives"], 12,
+        "the instances baked into one tree"
+    );
+    let bad = "[[instances]]\ngeometry = \"quads\"\nmaterial = { type = \"lambertian\", albedo = [1, 1, 1] }\n";
+    assert_scene_fails(
+        "unknown-geometry",
+        &format!("{CAMERA}{bad}"),
+        &["bad.toml:4", "unknown geometry `quads` (defined: none)"],
+    );
+    std::fs::remove_dir_all(dir).unwrap();
+}
