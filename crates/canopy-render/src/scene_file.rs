@@ -810,6 +810,24 @@ mod tests {
         let last = scene.instances[6].to_world;
         assert_eq!(last.transform_point3(Vec3::ZERO), Vec3::new(4.0, 0.0, 5.0));
         assert_eq!(scene.instanced_triangles(), 14);
+        let listed = parse(&format!(
+            "{QUAD_GEOMETRY}[[instances]]\ngeometry = \"quad\"\nmaterial = {{ type = \"lambertian\", albedo = [1, 1, 1] }}\n\
+             scale = 2\nplaces = [{{ translate = [1, 0, 0] }}, {{ rotate = [0, 0, 90], translate = [0, 5, 0] }}]\n"
+        ))
+        .unwrap();
+        assert_eq!(listed.instances.len(), 2);
+        // Each place moves the instance after its own transform (scale 2 first).
+        let corner = |k: usize| listed.instances[k].to_world.transform_point3(Vec3::X);
+        assert!(
+            (corner(0) - Vec3::new(3.0, 0.0, 0.0)).length() < 1e-6,
+            "{}",
+            corner(0)
+        );
+        assert!(
+            (corner(1) - Vec3::new(0.0, 7.0, 0.0)).length() < 1e-5,
+            "{}",
+            corner(1)
+        );
         assert_ne!(scene.instances[0].material, scene.instances[1].material);
     }
 
@@ -833,6 +851,14 @@ mod tests {
             "{QUAD_GEOMETRY}[[instances]]\ngeometry = \"quad\"\n{lambert}\ngrid = {{ count = [4096, 4096, 1], step = [1, 1, 1] }}\n"
         ));
         assert!(e.contains("16777216 copies"), "{e}");
+        let e = error(&format!(
+            "{QUAD_GEOMETRY}[[instances]]\ngeometry = \"quad\"\n{lambert}\nplaces = [{{ translate = [1, 0, 0] }}, {{ scale = 0 }}]\n"
+        ));
+        assert!(e.contains("test.toml:6") && e.contains("(place 1)"), "{e}");
+        let e = error(&format!(
+            "{QUAD_GEOMETRY}[[instances]]\ngeometry = \"quad\"\n{lambert}\nplaces = [{{}}]\ngrid = {{ count = [2, 1, 1], step = [1, 0, 0] }}\n"
+        ));
+        assert!(e.contains("not both"), "{e}");
         let e = error(&format!(
             "{QUAD_GEOMETRY}[[instances]]\ngeometry = \"quad\"\n{lambert}\ntranslate = [2e12, 0, 0]\n"
         ));

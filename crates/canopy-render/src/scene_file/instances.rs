@@ -13,6 +13,11 @@
 //! rotate = [0, 45, 0]
 //! translate = [0, 0, -3]
 //! grid = { count = [10, 1, 10], step = [1.5, 0, 1.5] }  # 100 copies, offset by step
+//!
+//! [[instances]]
+//! geometry = "bunny"
+//! material = "gold"
+//! places = [{ translate = [4, 0, 0] }, { rotate = [0, 90, 0], translate = [6, 0, 0] }]
 //! ```
 
 use super::{in_range, rotation, Assets, ScaleDoc, SceneBuilder, MAX_COORDINATE};
@@ -48,6 +53,38 @@ pub(super) struct InstanceDoc {
     #[serde(default)]
     translate: [f32; 3],
     grid: Option<GridDoc>,
+    /// One copy per entry, each moved by the entry after the instance's own transform.
+    places: Option<Vec<PlaceDoc>>,
+}
+
+/// A transform: scale, then rotate (degrees about x, then y, then z), then translate.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct PlaceDoc {
+    scale: Option<ScaleDoc>,
+    #[serde(default)]
+    rotate: [f32; 3],
+    #[serde(default)]
+    translate: [f32; 3],
+}
+
+impl PlaceDoc {
+    /// The transform, if its numbers are finite and its scale non-zero.
+    fn transform(
+        scale: &Option<ScaleDoc>,
+        rotate: [f32; 3],
+        translate: [f32; 3],
+    ) -> Option<Affine3A> {
+        let scale = match scale {
+            None => Vec3::ONE,
+            Some(ScaleDoc::Uniform(s)) => Vec3::splat(*s),
+            Some(ScaleDoc::PerAxis(s)) => Vec3::from(*s),
+        };
+        let numbers = [&scale.to_array()[..], &rotate, &translate].concat();
+        (numbers.iter().all(|v| v.is_finite()) && !scale.cmpeq(Vec3::ZERO).any()).then(|| {
+            Affine3A::from_scale_rotation_translation(scale, rotation(rotate), translate.into())
+        })
+    }
 }
 
 /// `count[0] × count[1] × count[2]` copies, copy `(i, j, k)` moved by `(i, j, k) * step`
@@ -107,7 +144,7 @@ impl SceneBuilder<'_> {
         Ok(())
     }
 
-    /// One `[[instances]]` entry: one placement, or a grid of them.
+    /// One `[[instances]]` entry: one placement, a grid of them, or a list.
     pub(super) fn instances(&mut self, doc: &Spanned<InstanceDoc>) -> Result<(), SceneError> {
         let d = doc.get_ref();
         let Some(&mesh) = self.geometry_index.get(&d.geometry) else {
@@ -125,72 +162,88 @@ impl SceneBuilder<'_> {
                 ),
             );
         };
-        let scale = match d.scale {
-            None => Vec3::ONE,
-            Some(ScaleDoc::Uniform(s)) => Vec3::splat(s),
-            Some(ScaleDoc::PerAxis(s)) => s.into(),
+        let bad_transform = "instance: transform numbers must be finite and `scale` non-zero";
+        let Some(base) = PlaceDoc::transform(&d.scale, d.rotate, d.translate) else {
+            return self.cx.invalid(doc.span(), bad_transform);
         };
-        let (count, step) = match &d.grid {
-            None => ([1, 1, 1], Vec3::ZERO),
-            Some(g) => (g.count, Vec3::from(g.step)),
-        };
-        let numbers = [
-            &scale.to_array()[..],
-            &d.rotate,
-            &d.translate,
-            &step.to_array(),
-        ]
-        .concat();
-        if !numbers.iter().all(|v| v.is_finite()) || scale.cmpeq(Vec3::ZERO).any() {
-            return self.cx.invalid(
-                doc.span(),
-                "instance: transform numbers must be finite and `scale` non-zero",
-            );
-        }
-        let copies = count.iter().map(|&c| c as u64).product::<u64>();
-        let total = self.scene.instances.len() as u64 + copies;
-        if copies == 0 || total > MAX_INSTANCES {
-            return self.cx.invalid(
-                doc.span(),
-                format!(
-                    "instance: `grid` places {copies} copies; a scene holds 1 to {MAX_INSTANCES} instances"
-                ),
-            );
+        // Each copy: its name in errors, and the transform applied after `base`.
+        let mut moves: Vec<(String, Affine3A)> = Vec::new();
+        match (&d.grid, &d.places) {
+            (Some(_), Some(_)) => {
+                return self
+                    .cx
+                    .invalid(doc.span(), "instance: give `grid` or `places`, not both");
+            }
+            (Some(g), None) => {
+                let step = Vec3::from(g.step);
+                let copies = g.count.iter().map(|&c| c as u64).product::<u64>();
+                let total = self.scene.instances.len() as u64 + copies;
+                if !step.is_finite() || copies == 0 || total > MAX_INSTANCES {
+                    return self.cx.invalid(
+                        doc.span(),
+                        format!(
+                            "instance: `grid` places {copies} copies (step {step}); a scene holds 1 to {MAX_INSTANCES} instances, steps are finite"
+                        ),
+                    );
+                }
+                for k in 0..g.count[2] {
+                    for j in 0..g.count[1] {
+                        for i in 0..g.count[0] {
+                            let offset = Vec3::new(i as f32, j as f32, k as f32) * step;
+                            moves.push((
+                                format!("({i}, {j}, {k})"),
+                                Affine3A::from_translation(offset),
+                            ));
+                        }
+                    }
+                }
+            }
+            (None, Some(places)) => {
+                let total = self.scene.instances.len() + places.len();
+                if places.is_empty() || total as u64 > MAX_INSTANCES {
+                    return self.cx.invalid(
+                        doc.span(),
+                        format!(
+                            "instance: `places` lists {} copies; a scene holds 1 to {MAX_INSTANCES} instances",
+                            places.len()
+                        ),
+                    );
+                }
+                for (n, p) in places.iter().enumerate() {
+                    let Some(t) = PlaceDoc::transform(&p.scale, p.rotate, p.translate) else {
+                        return self
+                            .cx
+                            .invalid(doc.span(), format!("{bad_transform} (place {n})"));
+                    };
+                    moves.push((format!("place {n}"), t));
+                }
+            }
+            (None, None) => moves.push(("0".into(), Affine3A::IDENTITY)),
         }
         let material = self.material_ref(&d.material)?;
-        let base = Affine3A::from_scale_rotation_translation(
-            scale,
-            rotation(d.rotate),
-            d.translate.into(),
-        );
         let local = {
             let m = &self.scene.meshes[mesh as usize].mesh;
             (0..m.len() as u32).fold(Aabb::EMPTY, |b, t| b.union(m.bounds(t)))
         };
-        for k in 0..count[2] {
-            for j in 0..count[1] {
-                for i in 0..count[0] {
-                    let offset = Vec3::new(i as f32, j as f32, k as f32) * step;
-                    let to_world = Affine3A::from_translation(offset) * base;
-                    let world = Instance::new(0, to_world).world_bounds(local);
-                    if !local.is_empty()
-                        && !in_range(&[world.min.to_array(), world.max.to_array()].concat())
-                    {
-                        return self.cx.invalid(
-                            doc.span(),
-                            format!(
-                                "instance ({i}, {j}, {k}) of `{}` reaches {} .. {}, beyond ±{MAX_COORDINATE:e}",
-                                d.geometry, world.min, world.max
-                            ),
-                        );
-                    }
-                    self.scene.instances.push(MeshInstance {
-                        mesh,
-                        to_world,
-                        material,
-                    });
-                }
+        for (name, moved) in moves {
+            let to_world = moved * base;
+            let world = Instance::new(0, to_world).world_bounds(local);
+            if !local.is_empty()
+                && !in_range(&[world.min.to_array(), world.max.to_array()].concat())
+            {
+                return self.cx.invalid(
+                    doc.span(),
+                    format!(
+                        "instance {name} of `{}` reaches {} .. {}, beyond ±{MAX_COORDINATE:e}",
+                        d.geometry, world.min, world.max
+                    ),
+                );
             }
+            self.scene.instances.push(MeshInstance {
+                mesh,
+                to_world,
+                material,
+            });
         }
         Ok(())
     }
