@@ -143,6 +143,11 @@ impl TriangleMesh {
         Ok(())
     }
 
+    /// Box of every triangle (vertices no triangle uses do not count).
+    pub fn bounding_box(&self) -> Aabb {
+        (0..self.indices.len() as u32).fold(Aabb::EMPTY, |b, t| b.union(Geometry::bounds(self, t)))
+    }
+
     /// Bytes the mesh holds (vertices and indices).
     pub fn memory_bytes(&self) -> usize {
         std::mem::size_of_val(self.vertices.as_slice())

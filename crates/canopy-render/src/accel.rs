@@ -88,13 +88,6 @@ impl Geometry for ShapeList {
     fn intersect_other(&self, prim: u32, ray: &Ray) -> Option<PrimHit> {
         self.0[prim as usize].shape.intersect_non_triangle(ray)
     }
-
-    fn split(&self, prim: u32, within: Aabb, axis: usize, position: f32) -> (Aabb, Aabb) {
-        match self.0[prim as usize].shape.triangle_vertices() {
-            Some(v) => split_triangle(v, within, axis, position),
-            None => split_box(within, axis, position),
-        }
-    }
 }
 
 /// A bottom-level structure of a scene: its own shapes, or one of its meshes.

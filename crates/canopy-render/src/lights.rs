@@ -64,7 +64,7 @@ impl Lights {
             let triangles = scene.meshes[instance.mesh as usize].mesh.indices().len() as u32;
             for prim in 0..triangles {
                 emitters.push((k as u32 + 1, prim));
-                power.push(radiance * scene.instance_triangle(instance, prim).0.area());
+                power.push(radiance * scene.instance_triangle(instance, prim).area());
             }
         }
         Self {
@@ -102,7 +102,7 @@ impl Lights {
                 (Cow::Borrowed(&primitive.shape), primitive.material)
             }
             Some(instance) => (
-                Cow::Owned(Shape::Triangle(scene.instance_triangle(instance, prim).0)),
+                Cow::Owned(Shape::Triangle(scene.instance_triangle(instance, prim))),
                 instance.material,
             ),
         }

@@ -4,7 +4,7 @@ pub use crate::background::Background;
 use crate::camera::CameraSpec;
 use crate::geometry::{Shape, Surface, Triangle};
 use crate::material::Material;
-use canopy_bvh::{Aabb, Geometry, Hit, Ray, TriangleMesh};
+use canopy_bvh::{Aabb, Hit, Ray, TriangleMesh};
 use glam::{Affine3A, Vec3};
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -188,11 +188,12 @@ impl Scene {
     /// Box of everything in the world: primitives and mesh instances.
     pub fn bounds(&self) -> Aabb {
         let primitives = self.primitives.iter().map(|p| p.shape.bounds());
-        let instances = self.instances.iter().map(|i| {
-            let mesh = &self.meshes[i.mesh as usize].mesh;
-            let local = (0..mesh.len() as u32).fold(Aabb::EMPTY, |b, t| b.union(mesh.bounds(t)));
-            canopy_bvh::Instance::new(0, i.to_world).world_bounds(local)
-        });
+        // Each mesh's box once, however many instances place it.
+        let local: Vec<Aabb> = self.meshes.iter().map(|m| m.mesh.bounding_box()).collect();
+        let instances = self
+            .instances
+            .iter()
+            .map(|i| canopy_bvh::Instance::new(0, i.to_world).world_bounds(local[i.mesh as usize]));
         primitives.chain(instances).fold(Aabb::EMPTY, Aabb::union)
     }
 
@@ -203,29 +204,34 @@ impl Scene {
         inst.checked_sub(1).map(|k| &self.instances[k as usize])
     }
 
-    /// Triangle `prim` of mesh instance `instance` in world space, with its vertex normals
-    /// there (smooth meshes).
-    pub fn instance_triangle(
-        &self,
-        instance: &MeshInstance,
-        prim: u32,
-    ) -> (Triangle, Option<[Vec3; 3]>) {
+    /// Triangle `prim` of mesh instance `instance` in world space.
+    pub fn instance_triangle(&self, instance: &MeshInstance, prim: u32) -> Triangle {
+        let local = self.meshes[instance.mesh as usize].mesh.vertices_of(prim);
+        // The identity (a bare mesh file) is common: no transforms.
+        let [a, b, c] = match instance.to_world == Affine3A::IDENTITY {
+            true => local,
+            false => local.map(|v| instance.to_world.transform_point3(v)),
+        };
+        Triangle::new(a, b, c)
+    }
+
+    /// The vertex normals of triangle `prim` of mesh instance `instance` in world space;
+    /// `None` for a flat mesh.
+    pub fn instance_normals(&self, instance: &MeshInstance, prim: u32) -> Option<[Vec3; 3]> {
         let mesh = &self.meshes[instance.mesh as usize];
-        let local = mesh.mesh.vertices_of(prim);
-        let indices = mesh.mesh.indices()[prim as usize];
-        let has_normals = !mesh.normals.is_empty();
-        // The identity (a bare mesh file) is common: no transforms, no inverse.
-        if instance.to_world == Affine3A::IDENTITY {
-            let normals =
-                has_normals.then(|| indices.map(|i| mesh.normals[i as usize].normalize_or_zero()));
-            return (Triangle::new(local[0], local[1], local[2]), normals);
+        if mesh.normals.is_empty() {
+            return None;
         }
-        let world = local.map(|v| instance.to_world.transform_point3(v));
-        let normals = has_normals.then(|| {
-            let to_normal = instance.to_world.matrix3.inverse().transpose();
-            indices.map(|i| (to_normal * mesh.normals[i as usize]).normalize_or_zero())
-        });
-        (Triangle::new(world[0], world[1], world[2]), normals)
+        let indices = mesh.mesh.indices()[prim as usize];
+        let normals = indices.map(|i| mesh.normals[i as usize]);
+        let world = match instance.to_world == Affine3A::IDENTITY {
+            true => normals,
+            false => {
+                let to_normal = instance.to_world.matrix3.inverse().transpose();
+                normals.map(|n| to_normal * n)
+            }
+        };
+        Some(world.map(Vec3::normalize_or_zero))
     }
 
     /// The surface where `ray` hits and the material there (`hit` from a query of `ray`
@@ -239,7 +245,8 @@ impl Scene {
                 (surface, primitive.material)
             }
             Some(instance) => {
-                let (triangle, normals) = self.instance_triangle(instance, hit.prim);
+                let triangle = self.instance_triangle(instance, hit.prim);
+                let normals = self.instance_normals(instance, hit.prim);
                 let surface = triangle.surface_with_normals(hit.u, hit.v, normals.as_ref());
                 (surface, instance.material)
             }
@@ -258,11 +265,11 @@ impl Scene {
         for instance in &self.instances {
             let triangles = self.meshes[instance.mesh as usize].mesh.indices().len() as u32;
             for prim in 0..triangles {
-                let (mut triangle, normals) = self.instance_triangle(instance, prim);
+                let mut triangle = self.instance_triangle(instance, prim);
                 if triangle.area() == 0.0 {
                     continue;
                 }
-                if let Some(normals) = normals {
+                if let Some(normals) = self.instance_normals(instance, prim) {
                     triangle.normals = baked.vertex_normals.len() as u32;
                     baked.vertex_normals.push(normals);
                 }

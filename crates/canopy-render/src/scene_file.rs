@@ -604,19 +604,12 @@ impl SceneBuilder<'_> {
 
     fn mesh(&mut self, doc: &Spanned<MeshDoc>, assets: &dyn Assets) -> Result<(), SceneError> {
         let m = doc.get_ref();
-        let scale = match m.scale {
-            None => Vec3::ONE,
-            Some(ScaleDoc::Uniform(s)) => Vec3::splat(s),
-            Some(ScaleDoc::PerAxis(s)) => s.into(),
-        };
-        if !finite(&[&scale.to_array()[..], &m.rotate, &m.translate].concat())
-            || scale.cmpeq(Vec3::ZERO).any()
-        {
+        let Some(scale) = checked_scale(&m.scale, m.rotate, m.translate) else {
             return self.cx.invalid(
                 doc.span(),
                 "mesh: transform numbers must be finite and `scale` non-zero",
             );
-        }
+        };
         let mut data = self.read_mesh(&m.file, doc.span(), assets)?;
         data.transform(&Mat4::from_scale_rotation_translation(
             scale,
@@ -632,11 +625,7 @@ impl SceneBuilder<'_> {
                 ),
             );
         }
-        match m.smooth {
-            Some(false) => data.normals.clear(),
-            Some(true) if data.normals.is_empty() => data.compute_vertex_normals(),
-            _ => {}
-        }
+        apply_smooth(&mut data, m.smooth);
         let material = self.material_ref(&m.material)?;
         for &[a, b, c] in &data.triangles {
             let [pa, pb, pc] = [a, b, c].map(|i| data.positions[i as usize]);
@@ -655,6 +644,29 @@ impl SceneBuilder<'_> {
             self.push(Shape::Triangle(triangle), material);
         }
         Ok(())
+    }
+}
+
+/// The scale of a transform given as `scale`, `rotate` and `translate`, if every number is
+/// finite and the scale non-zero on every axis.
+fn checked_scale(scale: &Option<ScaleDoc>, rotate: [f32; 3], translate: [f32; 3]) -> Option<Vec3> {
+    let scale = match *scale {
+        None => Vec3::ONE,
+        Some(ScaleDoc::Uniform(s)) => Vec3::splat(s),
+        Some(ScaleDoc::PerAxis(s)) => s.into(),
+    };
+    (finite(&[&scale.to_array()[..], &rotate, &translate].concat())
+        && !scale.cmpeq(Vec3::ZERO).any())
+    .then_some(scale)
+}
+
+/// A mesh's `smooth` setting: `false` drops its normals, `true` computes them where the
+/// file has none, absent keeps what the file has.
+fn apply_smooth(data: &mut MeshData, smooth: Option<bool>) {
+    match smooth {
+        Some(false) => data.normals.clear(),
+        Some(true) if data.normals.is_empty() => data.compute_vertex_normals(),
+        _ => {}
     }
 }
 

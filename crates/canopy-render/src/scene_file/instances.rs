@@ -20,11 +20,13 @@
 //! places = [{ translate = [4, 0, 0] }, { rotate = [0, 90, 0], translate = [6, 0, 0] }]
 //! ```
 
-use super::{in_range, rotation, Assets, ScaleDoc, SceneBuilder, MAX_COORDINATE};
+use super::{
+    apply_smooth, checked_scale, in_range, rotation, Assets, ScaleDoc, SceneBuilder, MAX_COORDINATE,
+};
 use crate::error::SceneError;
 use crate::geometry::Triangle;
 use crate::scene::{MeshInstance, SceneMesh};
-use canopy_bvh::{Aabb, Geometry, Instance, TriangleMesh};
+use canopy_bvh::{Instance, TriangleMesh};
 use glam::{Affine3A, Vec3};
 use serde::Deserialize;
 use std::sync::Arc;
@@ -75,15 +77,12 @@ impl PlaceDoc {
         rotate: [f32; 3],
         translate: [f32; 3],
     ) -> Option<Affine3A> {
-        let scale = match scale {
-            None => Vec3::ONE,
-            Some(ScaleDoc::Uniform(s)) => Vec3::splat(*s),
-            Some(ScaleDoc::PerAxis(s)) => Vec3::from(*s),
-        };
-        let numbers = [&scale.to_array()[..], &rotate, &translate].concat();
-        (numbers.iter().all(|v| v.is_finite()) && !scale.cmpeq(Vec3::ZERO).any()).then(|| {
-            Affine3A::from_scale_rotation_translation(scale, rotation(rotate), translate.into())
-        })
+        let scale = checked_scale(scale, rotate, translate)?;
+        Some(Affine3A::from_scale_rotation_translation(
+            scale,
+            rotation(rotate),
+            translate.into(),
+        ))
     }
 }
 
@@ -115,11 +114,7 @@ impl SceneBuilder<'_> {
                 ),
             );
         }
-        match g.smooth {
-            Some(false) => data.normals.clear(),
-            Some(true) if data.normals.is_empty() => data.compute_vertex_normals(),
-            _ => {}
-        }
+        apply_smooth(&mut data, g.smooth);
         let before = data.triangles.len();
         let positions = &data.positions;
         // A triangle without area can never be hit (the same test as `[[meshes]]`).
@@ -221,10 +216,7 @@ impl SceneBuilder<'_> {
             (None, None) => moves.push(("0".into(), Affine3A::IDENTITY)),
         }
         let material = self.material_ref(&d.material)?;
-        let local = {
-            let m = &self.scene.meshes[mesh as usize].mesh;
-            (0..m.len() as u32).fold(Aabb::EMPTY, |b, t| b.union(m.bounds(t)))
-        };
+        let local = self.scene.meshes[mesh as usize].mesh.bounding_box();
         for (name, moved) in moves {
             let to_world = moved * base;
             let world = Instance::new(0, to_world).world_bounds(local);
