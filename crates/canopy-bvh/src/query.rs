@@ -114,6 +114,47 @@ pub trait RayQuery: Sync {
     }
 }
 
+/// A structure shared (by several top-level trees, or with its owner) answers as itself.
+impl<B: RayQuery + Send> RayQuery for std::sync::Arc<B> {
+    fn bounds(&self) -> Aabb {
+        (**self).bounds()
+    }
+    #[inline]
+    fn intersect_masked(&self, ray: &Ray, mask: u32) -> Option<Hit> {
+        (**self).intersect_masked(ray, mask)
+    }
+    #[inline]
+    fn occluded_masked(&self, ray: &Ray, mask: u32) -> bool {
+        (**self).occluded_masked(ray, mask)
+    }
+    #[inline]
+    fn intersect_counted<C: TraversalCounter>(
+        &self,
+        ray: &Ray,
+        mask: u32,
+        counter: &mut C,
+    ) -> Option<Hit> {
+        (**self).intersect_counted(ray, mask, counter)
+    }
+    fn intersect_each<R, A>(&self, count: usize, mask: u32, ray: R, answer: A)
+    where
+        R: FnMut(usize) -> Ray,
+        A: FnMut(usize, Option<Hit>),
+    {
+        (**self).intersect_each(count, mask, ray, answer)
+    }
+    fn occluded_each<R, A>(&self, count: usize, mask: u32, ray: R, answer: A)
+    where
+        R: FnMut(usize) -> Ray,
+        A: FnMut(usize, bool),
+    {
+        (**self).occluded_each(count, mask, ray, answer)
+    }
+    fn orders_batches(&self) -> bool {
+        (**self).orders_batches()
+    }
+}
+
 /// Answers of many rays in parallel over chunks of [`BATCH_CHUNK`]: `each(rays, out)`
 /// answers a chunk on one thread. Traced in [`RayOrder`] where `ordered` (and the batch
 /// is worth ordering), the answers then put back in the caller's order.

@@ -18,9 +18,8 @@ pub const MAX_SAH_COST: f32 = 1e6;
 /// Most repetitions of a measurement.
 pub const MAX_RUNS: u32 = 1000;
 
-/// Peak bytes per pixel of a render: the sums, the film, a checkpoint's copy and the
-/// encoded image.
-pub const BYTES_PER_PIXEL: u64 = 64;
+/// Peak bytes per pixel of a render (checked again by the render job).
+pub use canopy_job::BYTES_PER_PIXEL;
 
 pub fn threads() -> clap::builder::RangedI64ValueParser<u32> {
     clap::value_parser!(u32).range(1..=MAX_THREADS as i64)

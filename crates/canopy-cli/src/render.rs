@@ -9,13 +9,13 @@ use crate::safety::{
 };
 use crate::scene_facts::SceneFacts;
 use crate::Interrupted;
-use anyhow::{bail, Context};
+use anyhow::bail;
+use canopy_job::{CheckpointPolicy, Device, JobError, Observer, RenderJob, Structure};
 use canopy_render::camera::Camera;
 use canopy_render::checkpoint::Checkpoint;
 use canopy_render::visualize::{draw_bvh, render_heatmap, LevelRange};
 use canopy_render::{
-    output::image_format, render_samples, write_image, Accel, AccelKind, Accumulator, BvhWidth,
-    Integrator, RenderStats, Scene,
+    output::image_format, write_image, AccelKind, Accumulator, BvhWidth, Integrator, Region, Scene,
 };
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -23,7 +23,7 @@ use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 #[derive(Args)]
 pub struct RenderArgs {
@@ -57,8 +57,13 @@ pub struct RenderArgs {
     /// Where to render: `cpu` (all cores) or `gpu` (the first adapter wgpu finds; see
     /// `canopy devices`), with either integrator, from the binary tree of the chosen
     /// builder: the same image up to rounding.
-    #[arg(long, value_enum, default_value = "cpu")]
+    #[arg(long, default_value = "cpu", value_parser = parse_device)]
     device: Device,
+    /// Render only this rectangle of the image, as X,Y,WIDTHxHEIGHT (0,0 is the top-left
+    /// pixel): an image of that size, whose pixels are exactly those of the whole
+    /// image's render.
+    #[arg(long, value_parser = parse_region, conflicts_with_all = ["resume", "heatmap", "show_bvh"])]
+    region: Option<Region>,
     /// Worker threads, 1 to 1024 [default: all cores].
     #[arg(long, value_parser = limits::threads())]
     threads: Option<u32>,
@@ -100,11 +105,12 @@ pub struct RenderArgs {
     json: bool,
 }
 
-/// Where a render runs.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub enum Device {
-    Cpu,
-    Gpu,
+fn parse_device(s: &str) -> Result<Device, String> {
+    s.parse()
+}
+
+fn parse_region(s: &str) -> Result<Region, String> {
+    s.parse()
 }
 
 fn parse_accel(s: &str) -> Result<AccelKind, String> {
@@ -124,6 +130,8 @@ struct Summary {
     build_ms: f64,
     /// `cpu`, or the GPU adapter rendered on.
     device: String,
+    /// The rectangle rendered (X,Y,WIDTHxHEIGHT), when not the whole image.
+    region: Option<String>,
     threads: usize,
     /// Samples per pixel in the image (fewer than `spp` when interrupted).
     samples: u32,
@@ -162,22 +170,20 @@ struct Job {
     /// How a checkpoint names the scene: a built-in name or an absolute path.
     source: String,
     scene: Scene,
-    accumulator: Accumulator,
+    /// The samples of the checkpoint this render continues, if any.
+    accumulator: Option<Accumulator>,
     /// The checkpoint this render continues, if any.
     resumed_from: Option<PathBuf>,
 }
 
 fn load_job(args: &RenderArgs) -> anyhow::Result<Job> {
     if let Some(path) = &args.resume {
-        let checkpoint = Checkpoint::load(path)?;
-        let mut scene = canopy_render::load_scene(&checkpoint.scene)?;
-        scene.settings = checkpoint.settings;
-        checkpoint.matches(&scene, path)?;
+        let resumed = canopy_job::Resumed::load(path)?;
         return Ok(Job {
-            source: checkpoint.scene,
-            scene,
-            accumulator: checkpoint.accumulator,
-            resumed_from: Some(path.clone()),
+            source: resumed.source,
+            scene: resumed.scene,
+            accumulator: Some(resumed.accumulator),
+            resumed_from: Some(resumed.path),
         });
     }
     let arg = args
@@ -186,11 +192,10 @@ fn load_job(args: &RenderArgs) -> anyhow::Result<Job> {
         .expect("clap requires a scene without --resume");
     let mut scene = canopy_render::load_scene(arg)?;
     apply_overrides(&mut scene, args)?;
-    let accumulator = Accumulator::new(scene.settings.width, scene.settings.height);
     Ok(Job {
         source: canopy_render::scene_source(arg)?,
         scene,
-        accumulator,
+        accumulator: None,
         resumed_from: None,
     })
 }
@@ -245,56 +250,75 @@ fn plan_destinations(args: &RenderArgs, job: &Job) -> anyhow::Result<Destination
 pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     let job = load_job(args)?;
     let dest = plan_destinations(args, &job)?;
-    let settings = job.scene.settings;
-    let pixels = settings.width as u64 * settings.height as u64;
-    check_memory(
-        pixels * limits::BYTES_PER_PIXEL,
-        &format!("a {}x{} image", settings.width, settings.height),
-    )?;
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(args.threads.unwrap_or(0) as usize)
-        .build()
-        .context("cannot start the worker threads")?;
-    let params = args.build.params();
     let scene = &job.scene;
+    let settings = scene.settings;
+    let region = job
+        .accumulator
+        .as_ref()
+        .map_or(args.region, |a| Some(a.region))
+        .unwrap_or(Region::full(settings.width, settings.height));
+    region
+        .check_within(settings.width, settings.height)
+        .map_err(|e| anyhow::anyhow!("--region: {e}"))?;
+    check_memory(
+        region.pixels() as u64 * limits::BYTES_PER_PIXEL,
+        &format!("a {}x{} image", region.width, region.height),
+    )?;
     if let AccelKind::Bvh(builder) = args.bvh {
         let mesh_triangles: usize = scene.meshes.iter().map(|m| m.mesh.indices().len()).sum();
         args.build
             .check_memory(builder, scene.primitives.len() + mesh_triangles)?;
     }
-    let gpu = match args.device {
-        Device::Cpu => None,
-        Device::Gpu if args.bvh == AccelKind::None => {
-            bail!("--device gpu traces through a BVH; choose a builder with --bvh")
-        }
-        Device::Gpu if args.heatmap => {
-            bail!("--heatmap counts CPU traversal work; drop --device gpu")
-        }
-        Device::Gpu => Some(canopy_gpu::Gpu::new()?),
+    if args.device == Device::Gpu && args.heatmap {
+        bail!("--heatmap counts CPU traversal work; drop --device gpu");
+    }
+    let render_job = RenderJob {
+        scene,
+        source: job.source.clone(),
+        structure: Structure {
+            kind: args.bvh,
+            width: args.width,
+            params: args.build.params(),
+            optimize: args.optimize,
+        },
+        device: args.device,
+        threads: Some(args.threads.unwrap_or(0) as usize).filter(|&n| n > 0),
+        region,
+        checkpoint: CheckpointPolicy {
+            periodic: dest.periodic.clone(),
+            every: args.every,
+            on_interrupt: Some(dest.on_interrupt.clone()),
+        },
+        resume: job.accumulator.clone(),
     };
-    // The GPU walks the binary tree (in its own layout, derived from it).
-    let width = if gpu.is_some() {
-        BvhWidth::Two
-    } else {
-        args.width
-    };
-    let accel = pool.install(|| Accel::for_scene(scene, args.bvh, width, &params, args.optimize));
+    let prepared = render_job.prepare().map_err(|e| match e {
+        JobError::Invalid(why) if args.device == Device::Gpu => {
+            anyhow::anyhow!("--device gpu: {why} with --bvh")
+        }
+        e => e.into(),
+    })?;
+    let accel = prepared.accel();
     if args.show_bvh && accel.tree().is_none() {
         bail!("--show-bvh needs a BVH; choose a builder with --bvh");
     }
 
-    let mut summary = scene_summary(args, &job, &accel, pool.current_num_threads());
-    if let Some(gpu) = &gpu {
-        summary.device = gpu.describe();
-        summary.bvh_width = 2;
-    }
+    let mut summary = Summary {
+        facts: SceneFacts::of(&job.source, scene),
+        bvh: args.bvh.to_string(),
+        bvh_width: prepared.width().children(),
+        build_ms: prepared.build_time().as_secs_f64() * 1e3,
+        device: prepared.device_name(),
+        threads: prepared.threads(),
+        region: (!region.is_full(settings.width, settings.height)).then(|| region.to_string()),
+        ..Summary::default()
+    };
     print_scene_summary(&summary, args.json);
     for warning in scene.warnings() {
         summary.warn(warning);
     }
     summary.image = dest.image.display().to_string();
     if args.heatmap {
-        let map = pool.install(|| render_heatmap(scene, &accel));
+        let map = prepared.install(|| render_heatmap(scene, accel));
         write_image(&map.film, &dest.image)?;
         summary.heatmap_mean_cost = Some(map.mean_cost);
         summary.heatmap_max_cost = Some(map.max_cost);
@@ -307,55 +331,18 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         return finish(&summary, args.json);
     }
 
-    let rows = scene.settings.height as u64;
-    // The GPU has no instancing yet: it renders the scene with its instances baked.
-    let baked = match (&gpu, scene.instances.is_empty()) {
-        (Some(_), false) => {
-            let baked = scene.with_instances_baked();
-            let accel = pool.install(|| Accel::build(args.bvh, width, &baked.primitives, &params));
-            Some((baked, accel))
-        }
-        _ => None,
-    };
-    let (gpu_scene, gpu_accel) = match &baked {
-        Some((scene, accel)) => (scene, accel),
-        None => (scene, &accel),
-    };
-    let mut pass: Box<Pass> = match (&gpu, gpu_accel.tree()) {
-        (Some(gpu), Some(canopy_bvh::Tree::Binary(bvh))) => {
-            let renderer = canopy_gpu::Renderer::new(gpu, gpu_scene, bvh)?;
-            Box::new(move |accumulator, progress| {
-                let done = renderer.render_samples(accumulator, 1)?;
-                progress.inc(rows);
-                Ok(RenderStats {
-                    rays: done.rays,
-                    shadow_rays: done.shadow_rays,
-                    invalid_samples: done.invalid_samples,
-                    elapsed: done.elapsed,
-                    ..RenderStats::default()
-                })
-            })
-        }
-        _ => Box::new(|accumulator, progress| {
-            Ok(render_samples(scene, &accel, accumulator, 1, &|| {
-                progress.inc(1)
-            }))
-        }),
-    };
-    let run = pool.install(|| {
-        progressive(
-            scene,
-            &job.source,
-            &mut pass,
-            job.accumulator,
-            dest.periodic.as_deref(),
-            args.every,
-            &mut summary,
-        )
-    })?;
+    let mut observer = Terminal::new(settings.spp, region.height, &mut summary);
+    if let Some(resumed) = &job.accumulator {
+        observer
+            .progress
+            .set_position(resumed.samples as u64 * region.height as u64);
+    }
+    let run = prepared.run(&mut observer);
+    observer.progress.finish_and_clear();
+    let run = run?;
     let mut film = run.accumulator.film();
     if let (true, Some(tree)) = (args.show_bvh, accel.tree()) {
-        let camera = Camera::new(&scene.camera, film.width, film.height);
+        let camera = Camera::new(&scene.camera, settings.width, settings.height);
         let drawn = draw_bvh(&mut film, &camera, tree, args.levels);
         say!(
             args.json,
@@ -363,7 +350,23 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
             describe_levels(args.levels)
         );
     }
-    write_image(&film, &dest.image)?;
+    if let Err(e) = write_image(&film, &dest.image) {
+        // The samples are not lost with the image: keep them where a resume finds them.
+        let saved = match &run.saved {
+            Some(path) => Some(path.clone()),
+            None => Checkpoint::new(&job.source, scene, run.accumulator.clone())
+                .save(&dest.on_interrupt)
+                .ok()
+                .map(|()| dest.on_interrupt.clone()),
+        };
+        return Err(match saved {
+            Some(path) => anyhow::Error::from(e).context(format!(
+                "the image could not be written, but the render is saved: write it with `canopy render --resume {} -o OTHER.png`",
+                path.display()
+            )),
+            None => e.into(),
+        });
+    }
 
     let stats = run.stats;
     summary.samples = run.accumulator.samples;
@@ -371,14 +374,14 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     summary.rays = stats.rays;
     summary.shadow_rays = stats.shadow_rays;
     summary.mrays_per_second = stats.mrays_per_second();
-    match &gpu {
-        Some(_) => say!(
+    match args.device {
+        Device::Gpu => say!(
             args.json,
             "render      {:.3} s on {}",
             summary.render_seconds,
             summary.device
         ),
-        None => say!(
+        Device::Cpu => say!(
             args.json,
             "render      {:.3} s on {} threads",
             summary.render_seconds,
@@ -398,15 +401,14 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
             run.accumulator.invalid_samples
         ));
     }
-    let (done, spp) = (run.accumulator.samples, settings.spp);
-    if done < spp {
-        let saved = &dest.on_interrupt;
-        Checkpoint::new(&job.source, scene, run.accumulator).save(saved)?;
+    if let Some(saved) = &run.saved {
         summary.interrupted = true;
         summary.checkpoint = Some(saved.display().to_string());
         say!(
             args.json,
-            "partial     {done} of {spp} samples per pixel: the image is noisier than asked"
+            "partial     {} of {} samples per pixel: the image is noisier than asked",
+            run.accumulator.samples,
+            settings.spp
         );
         finish(&summary, args.json)?;
         return Err(Interrupted(format!(
@@ -415,11 +417,6 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
             dest.image.display()
         ))
         .into());
-    }
-    if let Some(path) = &dest.periodic {
-        // The render is complete: its checkpoint has nothing left to give. Only a file
-        // that is recognisably a checkpoint is removed.
-        let _ = Checkpoint::remove_if_checkpoint(path);
     }
     finish(&summary, args.json)
 }
@@ -434,89 +431,53 @@ fn finish(summary: &Summary, json: bool) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn scene_summary(args: &RenderArgs, job: &Job, accel: &Accel, threads: usize) -> Summary {
-    Summary {
-        facts: SceneFacts::of(&job.source, &job.scene),
-        bvh: args.bvh.to_string(),
-        bvh_width: args.width.children(),
-        build_ms: accel.build_time.as_secs_f64() * 1e3,
-        device: "cpu".into(),
-        threads,
-        ..Summary::default()
-    }
+/// The render as the terminal shows it: a progress bar by rows, warnings above it, and
+/// Ctrl-C, SIGTERM and SIGHUP to stop it after the pass in flight (which is then saved);
+/// a second signal ends the process at once.
+struct Terminal<'a> {
+    progress: ProgressBar,
+    interrupted: Arc<AtomicBool>,
+    summary: &'a mut Summary,
 }
 
-/// What a (possibly interrupted) progressive render produced.
-struct Progressive {
-    accumulator: Accumulator,
-    /// Rays and time of this session (not of earlier, resumed ones).
-    stats: RenderStats,
-}
-
-/// A pass: one more sample of every pixel, added to the accumulator (on the CPU or on
-/// the GPU), advancing the progress bar by rows.
-type Pass<'a> =
-    dyn FnMut(&mut Accumulator, &ProgressBar) -> anyhow::Result<RenderStats> + Send + 'a;
-
-/// Renders one sample per pixel at a time until the scene's spp are done or Ctrl-C is
-/// pressed, saving a checkpoint every `every` when asked. Passes add samples in order, so
-/// the image is the same as an uninterrupted render's.
-fn progressive(
-    scene: &Scene,
-    scene_source: &str,
-    pass: &mut Pass,
-    mut accumulator: Accumulator,
-    checkpoint: Option<&Path>,
-    every: Duration,
-    summary: &mut Summary,
-) -> anyhow::Result<Progressive> {
-    let interrupted = Arc::new(AtomicBool::new(false));
-    let flag = interrupted.clone();
-    // Ctrl-C, SIGTERM and SIGHUP end the render after the pass in flight, which is then
-    // saved; a second signal ends the process at once. Without a handler (another one is
-    // installed) a signal just ends the process as usual.
-    let _ = ctrlc::set_handler(move || {
-        if flag.swap(true, Ordering::SeqCst) {
-            std::process::exit(crate::EXIT_INTERRUPTED);
-        }
-    });
-    let (spp, rows) = (scene.settings.spp as u64, scene.settings.height as u64);
-    let progress = ProgressBar::new(spp * rows).with_style(
-        ProgressStyle::with_template(
-            "{spinner} rendering [{bar:40}] {percent:>3}%  {elapsed} elapsed, ETA {eta}",
-        )
-        .expect("valid template")
-        .progress_chars("=> "),
-    );
-    progress.set_position(accumulator.samples as u64 * rows);
-    let mut stats = RenderStats::default();
-    let mut last_save = Instant::now();
-    let mut save_failing = false;
-    while accumulator.samples < scene.settings.spp && !interrupted.load(Ordering::SeqCst) {
-        let pass = pass(&mut accumulator, &progress)?;
-        stats.rays += pass.rays;
-        stats.shadow_rays += pass.shadow_rays;
-        stats.elapsed += pass.elapsed;
-        if let Some(path) = checkpoint {
-            if last_save.elapsed() >= every && accumulator.samples < scene.settings.spp {
-                // A failed save (a full disk) must not end hours of rendering: warn once
-                // per run of failures, and try again at the next save.
-                match Checkpoint::new(scene_source, scene, accumulator.clone()).save(path) {
-                    Ok(()) => save_failing = false,
-                    Err(e) if !save_failing => {
-                        save_failing = true;
-                        progress.suspend(|| {
-                            summary.warn(format!("{e}; rendering goes on, saving again later"))
-                        });
-                    }
-                    Err(_) => {}
-                }
-                last_save = Instant::now();
+impl<'a> Terminal<'a> {
+    fn new(spp: u32, rows: u32, summary: &'a mut Summary) -> Self {
+        let interrupted = Arc::new(AtomicBool::new(false));
+        let flag = interrupted.clone();
+        // Without a handler (another one is installed) a signal just ends the process.
+        let _ = ctrlc::set_handler(move || {
+            if flag.swap(true, Ordering::SeqCst) {
+                std::process::exit(crate::EXIT_INTERRUPTED);
             }
+        });
+        let progress = ProgressBar::new(spp as u64 * rows as u64).with_style(
+            ProgressStyle::with_template(
+                "{spinner} rendering [{bar:40}] {percent:>3}%  {elapsed} elapsed, ETA {eta}",
+            )
+            .expect("valid template")
+            .progress_chars("=> "),
+        );
+        Self {
+            progress,
+            interrupted,
+            summary,
         }
     }
-    progress.finish_and_clear();
-    Ok(Progressive { accumulator, stats })
+}
+
+impl Observer for Terminal<'_> {
+    fn rows_done(&self, rows: u64) {
+        self.progress.inc(rows);
+    }
+
+    fn keep_going(&mut self) -> bool {
+        !self.interrupted.load(Ordering::SeqCst)
+    }
+
+    fn warning(&mut self, message: String) {
+        let summary = &mut *self.summary;
+        self.progress.suspend(|| summary.warn(message));
+    }
 }
 
 /// `<output>.checkpoint`, beside the image.

@@ -89,6 +89,54 @@ fn exr_output_and_brute_force_mode() {
 }
 
 #[test]
+fn a_region_renders_exactly_those_pixels_of_the_whole_image() {
+    let dir = scratch("region");
+    let render = |extra: &[&str]| {
+        let args = [
+            &[
+                "render", "cornell", "--size", "20x12", "--spp", "2", "--json",
+            ][..],
+            extra,
+        ]
+        .concat();
+        let out = canopy(&args, &dir);
+        assert!(out.status.success(), "{}", stderr(&out));
+        serde_json::from_slice::<serde_json::Value>(&out.stdout).unwrap()
+    };
+    let whole = render(&["-o", "whole.exr"]);
+    assert_eq!(whole["region"], serde_json::Value::Null);
+    let part = render(&["-o", "part.exr", "--region", "3,4,9x5"]);
+    assert_eq!(part["region"], "3,4,9x5");
+    let whole = image::open(dir.join("whole.exr")).unwrap().into_rgb32f();
+    let part = image::open(dir.join("part.exr")).unwrap().into_rgb32f();
+    assert_eq!((part.width(), part.height()), (9, 5));
+    for (x, y, p) in part.enumerate_pixels() {
+        assert_eq!(
+            p,
+            whole.get_pixel(x + 3, y + 4),
+            "pixel ({x}, {y}) of the region"
+        );
+    }
+    // A region beyond the image, or written wrongly: one clear message, no output.
+    for (region, words) in [
+        ("15,0,6x2", "beyond the 20x12 image"),
+        ("3x4", "X,Y,WIDTHxHEIGHT"),
+    ] {
+        let out = canopy(
+            &[
+                "render", "cornell", "--size", "20x12", "--spp", "1", "-o", "bad.png", "--region",
+                region,
+            ],
+            &dir,
+        );
+        assert!(!out.status.success());
+        assert!(stderr(&out).contains(words), "{region}: {}", stderr(&out));
+        assert!(!dir.join("bad.png").exists());
+    }
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+#[test]
 fn integrator_options_choose_the_estimator_and_are_reported() {
     let dir = scratch("integrator");
     let run = |extra: &[&str]| {

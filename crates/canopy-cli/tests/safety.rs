@@ -24,6 +24,40 @@ fn render(dir: &Path, args: &[&str]) -> std::process::Output {
 }
 
 #[test]
+fn a_failed_image_write_keeps_the_render_as_a_checkpoint() {
+    let dir = scratch("image-fails");
+    // `out.png/` passes the checks made before rendering and fails at the final rename.
+    let out = render(
+        &dir,
+        &["cornell", "-o", "out.png/", "--size", "8x8", "--spp", "2"],
+    );
+    assert_eq!(out.status.code(), Some(1));
+    let err = stderr(&out);
+    assert!(
+        err.contains("the render is saved") && err.contains("--resume out.png.checkpoint"),
+        "{err}"
+    );
+    assert_eq!(outputs(&dir), ["out.png.checkpoint"]);
+    // The saved samples give the image, and the finished render removes the checkpoint.
+    let out = render(&dir, &["--resume", "out.png.checkpoint", "-o", "again.exr"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert_eq!(outputs(&dir), ["again.exr"]);
+    let fresh = render(
+        &dir,
+        &["cornell", "-o", "fresh.exr", "--size", "8x8", "--spp", "2"],
+    );
+    assert!(fresh.status.success(), "{}", stderr(&fresh));
+    let read = |name: &str| {
+        image::open(dir.join(name))
+            .unwrap()
+            .into_rgb32f()
+            .into_raw()
+    };
+    assert_eq!(read("again.exr"), read("fresh.exr"));
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+#[test]
 fn a_checkpoint_path_holding_a_user_file_is_refused_and_the_file_kept() {
     let dir = scratch("notes");
     std::fs::write(dir.join("notes.txt"), "my notes").unwrap();

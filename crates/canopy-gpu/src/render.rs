@@ -63,6 +63,8 @@ struct Frame {
     env_z: [f32; 4],
     /// Its width and height.
     env_size: [u32; 4],
+    /// The region of the image rendered: x, y, width, height.
+    region: [u32; 4],
 }
 
 /// An environment map as the GPU reads it: pixels, and per pixel the end of its slice of
@@ -165,8 +167,9 @@ pub struct Renderer<'g> {
     ray_count: wgpu::Buffer,
     width: u32,
     height: u32,
-    /// Rows rendered per dispatch (the whole image unless its sums exceed a binding).
-    band_rows: u32,
+    /// Pixels whose sums one dispatch holds (the whole image unless its sums exceed a
+    /// binding).
+    band_pixels: u64,
 }
 
 impl<'g> Renderer<'g> {
@@ -225,8 +228,8 @@ impl<'g> Renderer<'g> {
         // The image is rendered in bands of rows, as many as one binding's sums hold.
         let row_bytes = width as u64 * 16;
         gpu.check_size("one row of the image's sums", row_bytes)?;
-        let band_rows = (gpu.max_binding_bytes() / row_bytes).min(height as u64) as u32;
-        let accum_bytes = band_rows as u64 * row_bytes;
+        let band_rows = (gpu.max_binding_bytes() / row_bytes).min(height as u64);
+        let accum_bytes = band_rows * row_bytes;
         let accum = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("sums"),
             size: accum_bytes,
@@ -266,6 +269,7 @@ impl<'g> Renderer<'g> {
             env_y: vec4(env.to_world.y_axis, 0.0),
             env_z: vec4(env.to_world.z_axis, 0.0),
             env_size: [env.size[0].max(1), env.size[1].max(1), 0, 0],
+            region: [0, 0, width, height],
         };
         let frame_buffer = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("frame"),
@@ -325,31 +329,33 @@ impl<'g> Renderer<'g> {
             ray_count,
             width,
             height,
-            band_rows,
+            band_pixels: band_rows * width as u64,
         })
     }
 
-    /// Renders `count` more samples of every pixel (samples `accumulator.samples..` of
-    /// each pixel's streams) and adds them to `accumulator`: one dispatch, or one per band
-    /// of rows for an image whose sums exceed a storage binding.
+    /// Renders `count` more samples of every pixel of the accumulator's region (samples
+    /// `accumulator.samples..` of each pixel's streams, as on the CPU) and adds them to
+    /// `accumulator`: one dispatch, or one per band of rows for a region whose sums
+    /// exceed a storage binding. The region must lie within the scene's image.
     pub fn render_samples(
         &self,
         accumulator: &mut Accumulator,
         count: u32,
     ) -> Result<DispatchStats, GpuError> {
-        assert_eq!(
-            (accumulator.width, accumulator.height),
-            (self.width, self.height),
-            "accumulator and scene differ in image size"
-        );
+        let region = accumulator.region;
+        if let Err(e) = region.check_within(self.width, self.height) {
+            panic!("the accumulator does not fit the scene's image: {e}");
+        }
         let start = Instant::now();
         let gpu = self.gpu;
-        let width = self.width as usize;
+        let width = region.width as usize;
+        let band_rows = (self.band_pixels / region.width as u64).min(region.height as u64) as u32;
         let mut invalid = 0u64;
-        for first_row in (0..self.height).step_by(self.band_rows as usize) {
-            let rows = self.band_rows.min(self.height - first_row);
+        for first_row in (0..region.height).step_by(band_rows as usize) {
+            let rows = band_rows.min(region.height - first_row);
             let frame = Frame {
                 samples: [accumulator.samples, count, self.frame.samples[2], first_row],
+                region: [region.x, region.y, region.width, region.height],
                 ..self.frame
             };
             // Each band is its own submission: the frame it reads is written before it.
@@ -364,7 +370,7 @@ impl<'g> Renderer<'g> {
                 let mut pass = encoder.begin_compute_pass(&Default::default());
                 pass.set_pipeline(&self.pipeline);
                 pass.set_bind_group(0, &self.bind_group, &[]);
-                pass.dispatch_workgroups(self.width.div_ceil(8), rows.div_ceil(8), 1);
+                pass.dispatch_workgroups(region.width.div_ceil(8), rows.div_ceil(8), 1);
             }
             gpu.queue.submit([encoder.finish()]);
             let sums: Vec<[f32; 4]> = gpu.read_back(&self.accum)?;

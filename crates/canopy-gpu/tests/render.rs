@@ -9,7 +9,9 @@
 use canopy_bvh::{BuildParams, Builder};
 use canopy_gpu::{Gpu, GpuError, GpuPrimitive, Renderer, CHUNKS};
 use canopy_render::rng::Rng;
-use canopy_render::{render, Accel, AccelKind, Accumulator, BvhWidth, Film, Integrator, Scene};
+use canopy_render::{
+    render, Accel, AccelKind, Accumulator, BvhWidth, Film, Integrator, Region, Scene,
+};
 
 fn gpu() -> Option<Gpu> {
     match Gpu::new() {
@@ -285,6 +287,53 @@ fn images_larger_than_a_binding_render_in_bands_of_rows_with_the_same_result() {
         "black pixels"
     );
     assert_eq!(whole.pixels, bands.pixels);
+}
+
+/// The pixels of `region` in `film`, row by row.
+fn crop(film: &Film, region: Region) -> Vec<glam::Vec3> {
+    (region.y..region.y + region.height)
+        .flat_map(|y| (region.x..region.x + region.width).map(move |x| film.pixel(x, y)))
+        .collect()
+}
+
+#[test]
+fn a_region_renders_exactly_those_pixels_of_the_whole_image() {
+    let Some(gpu) = gpu() else { return };
+    let mut scene = scene_from("regions", SPHERES);
+    scene.settings.height = 37;
+    scene.settings.spp = 3;
+    let boxes: Vec<_> = scene.primitives.iter().map(|p| p.shape.bounds()).collect();
+    let bvh = canopy_bvh::build(Builder::BinnedSah, &boxes, &BuildParams::default());
+    let whole = gpu_film(&gpu, &scene, &bvh);
+    // A region narrower than the image and in bands of its own (two rows of the image's
+    // width to a binding is five rows of this region).
+    let mut banded = Gpu::new().unwrap();
+    banded.cap_binding_bytes(2 * 16 * scene.settings.width as u64);
+    let (w, h) = (scene.settings.width, scene.settings.height);
+    for region in [
+        Region {
+            x: 3,
+            y: 5,
+            width: 13,
+            height: 11,
+        },
+        Region {
+            x: w - 1,
+            y: h - 1,
+            width: 1,
+            height: 1,
+        },
+        Region::full(w, h),
+    ] {
+        for device in [&gpu, &banded] {
+            let renderer = Renderer::new(device, &scene, &bvh).unwrap();
+            let mut acc = Accumulator::for_region(region);
+            renderer
+                .render_samples(&mut acc, scene.settings.spp)
+                .unwrap();
+            assert_eq!(acc.film().pixels, crop(&whole, region), "{region}");
+        }
+    }
 }
 
 #[test]

@@ -130,7 +130,7 @@ impl Bvh {
 
 /// `tnear` or `tfar`: one value for every ray, or one each.
 #[derive(Clone, Copy)]
-enum PerRay<'a> {
+pub(crate) enum PerRay<'a> {
     All(f32),
     Each(&'a [f32]),
 }
@@ -168,7 +168,7 @@ fn write_hit(t: &mut [f32], prim: &mut [i64], uv: &mut [f32], i: usize, hit: Opt
 /// A batch of rays as the caller's arrays, checked; rays are made from them on the fly,
 /// in parallel.
 #[derive(Clone, Copy)]
-struct Batch<'a> {
+pub(crate) struct Batch<'a> {
     origins: &'a [[f32; 3]],
     directions: &'a [[f32; 3]],
     tnear: PerRay<'a>,
@@ -176,12 +176,12 @@ struct Batch<'a> {
 }
 
 impl Batch<'_> {
-    fn len(&self) -> usize {
+    pub(crate) fn len(&self) -> usize {
         self.origins.len()
     }
 
     #[inline]
-    fn ray(&self, i: usize) -> Ray {
+    pub(crate) fn ray(&self, i: usize) -> Ray {
         Ray::new(
             Vec3::from(self.origins[i]),
             Vec3::from(self.directions[i]),
@@ -211,7 +211,7 @@ fn per_ray<'a, 'py>(
 }
 
 /// The checked batch of a query's arguments (`near` and `far` hold per-ray arrays).
-fn batch<'a, 'py>(
+pub(crate) fn batch<'a, 'py>(
     origins: &'a PyReadonlyArray2<'py, f32>,
     directions: &'a PyReadonlyArray2<'py, f32>,
     tnear: &'a Bound<'py, PyAny>,

@@ -5,7 +5,9 @@
 mod arrays;
 mod bvh;
 mod pools;
+mod ray_scene;
 mod render;
+mod scene;
 
 use pyo3::prelude::*;
 
@@ -15,11 +17,20 @@ fn builders() -> Vec<&'static str> {
     canopy_bvh::Builder::ALL.iter().map(|b| b.name()).collect()
 }
 
+/// The GPU adapters wgpu finds, described (empty when there is none).
+#[pyfunction]
+fn devices(py: Python<'_>) -> Vec<String> {
+    py.detach(canopy_gpu::adapters)
+}
+
 #[pymodule]
 fn _canopy(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<bvh::Bvh>()?;
     m.add_class::<render::SceneInfo>()?;
+    m.add_class::<scene::PyScene>()?;
+    m.add_class::<ray_scene::RayScene>()?;
     m.add_function(wrap_pyfunction!(builders, m)?)?;
+    m.add_function(wrap_pyfunction!(devices, m)?)?;
     m.add_function(wrap_pyfunction!(render::render, m)?)?;
     m.add_function(wrap_pyfunction!(render::load_scene, m)?)?;
     m.add_function(wrap_pyfunction!(render::read_image, m)?)?;

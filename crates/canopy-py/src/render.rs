@@ -1,15 +1,18 @@
 //! `canopy.render`, `canopy.load_scene` and `canopy.read_image`.
 
-use crate::pools;
-use canopy_bvh::{BuildParams, BvhWidth};
+use crate::scene::PyScene;
+use canopy_bvh::BvhWidth;
+use canopy_job::{CheckpointPolicy, Device, JobError, Observer, RenderJob, Resumed, Structure};
 use canopy_render::material::Material;
 use canopy_render::mesh::{parse_mesh, MeshFormat};
-use canopy_render::{load_scene as load, render_samples, Accel, AccelKind, Accumulator, Scene};
+use canopy_render::{load_scene as load, AccelKind, Region, Scene};
 use numpy::ndarray::Array2;
 use numpy::{IntoPyArray, PyArray2, PyArray3, ToPyArray};
-use pyo3::exceptions::{PyNotImplementedError, PyOSError, PyValueError};
+use pyo3::exceptions::{PyOSError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
+use std::path::PathBuf;
+use std::time::Duration;
 
 fn scene_error(e: canopy_render::SceneError) -> PyErr {
     match e {
@@ -22,6 +25,12 @@ fn scene_error(e: canopy_render::SceneError) -> PyErr {
 #[pyclass(frozen, module = "canopy._canopy")]
 pub struct SceneInfo {
     scene: Scene,
+}
+
+impl SceneInfo {
+    pub fn new(scene: Scene) -> Self {
+        Self { scene }
+    }
 }
 
 #[pymethods]
@@ -110,16 +119,21 @@ pub fn load_scene(py: Python<'_>, scene: &str) -> PyResult<SceneInfo> {
     Ok(SceneInfo { scene })
 }
 
-/// Renders a scene to a linear float32 image of shape (height, width, 3). Samples are
-/// added one per pixel per pass; between passes `progress(done, total)` is called and
-/// Ctrl-C is honoured (KeyboardInterrupt).
+/// Renders a scene to a linear float32 image of shape (height, width, 3), or of the
+/// region's shape when one is given (`region=(x, y, width, height)`: exactly those
+/// pixels of the whole image). Samples are added one per pixel per pass; between passes
+/// `progress(done, total)` is called and Ctrl-C is honoured (KeyboardInterrupt). With
+/// `checkpoint=path` the render is saved there every `checkpoint_every` seconds and when
+/// interrupted, and `resume=path` continues such a render (its scene and settings come
+/// from the file).
 #[pyfunction]
-#[pyo3(signature = (scene, spp=None, size=None, seed=None, max_depth=None, integrator=None,
-    russian_roulette=None, device="cpu", bvh="binned-sah", width=8, threads=None, progress=None))]
+#[pyo3(signature = (scene=None, spp=None, size=None, seed=None, max_depth=None, integrator=None,
+    russian_roulette=None, device="cpu", bvh="binned-sah", width=8, threads=None, progress=None,
+    region=None, checkpoint=None, checkpoint_every=60.0, resume=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn render<'py>(
     py: Python<'py>,
-    scene: &str,
+    scene: Option<SceneArg<'py>>,
     spp: Option<u32>,
     size: Option<(u32, u32)>,
     seed: Option<u64>,
@@ -130,57 +144,109 @@ pub fn render<'py>(
     bvh: &str,
     width: u32,
     threads: Option<usize>,
-    progress: Option<Bound<'py, PyAny>>,
+    progress: Option<Py<PyAny>>,
+    region: Option<(u32, u32, u32, u32)>,
+    checkpoint: Option<PathBuf>,
+    checkpoint_every: f64,
+    resume: Option<PathBuf>,
 ) -> PyResult<Bound<'py, PyArray3<f32>>> {
-    match device {
-        "cpu" => {}
-        "gpu" => {
-            return Err(PyNotImplementedError::new_err(
-                "device=\"gpu\": canopy has no GPU renderer yet; use device=\"cpu\"",
-            ))
-        }
-        other => {
-            return Err(PyValueError::new_err(format!(
-                "device must be \"cpu\" or \"gpu\", not {other:?}"
-            )))
-        }
-    }
-    let mut scene = py.detach(|| load(scene)).map_err(scene_error)?;
-    let s = &mut scene.settings;
-    if let Some((w, h)) = size {
-        (s.width, s.height) = (w, h);
-    }
-    s.spp = spp.unwrap_or(s.spp);
-    s.seed = seed.unwrap_or(s.seed);
-    s.max_depth = max_depth.unwrap_or(s.max_depth);
-    if let Some(name) = integrator {
-        s.integrator = name.parse().map_err(PyValueError::new_err)?;
-    }
-    s.russian_roulette = russian_roulette.unwrap_or(s.russian_roulette);
-    s.check().map_err(PyValueError::new_err)?;
+    let device: Device = device.parse().map_err(PyValueError::new_err)?;
     let kind: AccelKind = bvh
         .parse()
         .map_err(|e: canopy_bvh::UnknownBuilder| PyValueError::new_err(e.to_string()))?;
     let layout: BvhWidth = width.to_string().parse().map_err(PyValueError::new_err)?;
-    let accel = py.detach(|| {
-        pools::install(threads, || {
-            Accel::for_scene(&scene, kind, layout, &BuildParams::default(), None)
-        })
-    })?;
-    let settings = scene.settings;
-    let mut accumulator = Accumulator::new(settings.width, settings.height);
-    while accumulator.samples < settings.spp {
-        py.detach(|| {
-            pools::install(threads, || {
-                render_samples(&scene, &accel, &mut accumulator, 1, &|| {})
-            })
-        })?;
-        py.check_signals()?;
-        if let Some(callback) = &progress {
-            callback.call1((accumulator.samples, settings.spp))?;
-        }
+    if !(checkpoint_every.is_finite() && checkpoint_every >= 0.0) {
+        return Err(PyValueError::new_err(format!(
+            "checkpoint_every must be a number of seconds >= 0, not {checkpoint_every}"
+        )));
     }
-    let film = accumulator.film();
+    let overrides = spp.is_some()
+        || size.is_some()
+        || seed.is_some()
+        || max_depth.is_some()
+        || integrator.is_some()
+        || russian_roulette.is_some()
+        || region.is_some();
+    if resume.is_some() && overrides {
+        return Err(PyValueError::new_err(
+            "a resumed render keeps its checkpoint's settings: drop spp, size, seed, max_depth, integrator, russian_roulette and region",
+        ));
+    }
+    let given = match scene {
+        None => None,
+        Some(SceneArg::Named(name)) => {
+            let scene = py.detach(|| load(&name)).map_err(scene_error)?;
+            let source = canopy_render::scene_source(&name).map_err(scene_error)?;
+            Some((scene, source))
+        }
+        Some(SceneArg::Built(built)) => {
+            let scene = built.borrow().scene.clone();
+            let source = format!("python:{}", scene.name);
+            Some((scene, source))
+        }
+    };
+    let (mut scene, source, resumed) = match (given, &resume) {
+        (None, None) => return Err(PyValueError::new_err("render() needs a scene (or resume=)")),
+        (None, Some(path)) => {
+            let r = py.detach(|| Resumed::load(path)).map_err(job_error)?;
+            (r.scene, r.source, Some(r.accumulator))
+        }
+        (Some((scene, _)), Some(path)) => {
+            let r = py
+                .detach(|| Resumed::load_for(path, scene))
+                .map_err(job_error)?;
+            (r.scene, r.source, Some(r.accumulator))
+        }
+        (Some((scene, source)), None) => (scene, source, None),
+    };
+    if resumed.is_none() {
+        let s = &mut scene.settings;
+        if let Some((w, h)) = size {
+            (s.width, s.height) = (w, h);
+        }
+        s.spp = spp.unwrap_or(s.spp);
+        s.seed = seed.unwrap_or(s.seed);
+        s.max_depth = max_depth.unwrap_or(s.max_depth);
+        if let Some(name) = integrator {
+            s.integrator = name.parse().map_err(PyValueError::new_err)?;
+        }
+        s.russian_roulette = russian_roulette.unwrap_or(s.russian_roulette);
+        s.check().map_err(PyValueError::new_err)?;
+    }
+    let mut job = RenderJob::new(&scene, source);
+    job.structure = Structure {
+        kind,
+        width: layout,
+        ..Structure::default()
+    };
+    job.device = device;
+    job.threads = threads;
+    if let Some((x, y, width, height)) = region {
+        job.region = Region {
+            x,
+            y,
+            width,
+            height,
+        };
+    }
+    job.resume = resumed;
+    let checkpoint = checkpoint.or(resume);
+    job.checkpoint = CheckpointPolicy {
+        periodic: checkpoint.clone(),
+        every: Duration::from_secs_f64(checkpoint_every),
+        on_interrupt: checkpoint,
+    };
+    let mut observer = PyObserver {
+        progress,
+        error: None,
+    };
+    let outcome = py
+        .detach(|| job.prepare()?.run(&mut observer))
+        .map_err(job_error)?;
+    if let Some(error) = observer.error {
+        return Err(error);
+    }
+    let film = outcome.accumulator.film();
     let pixels: Vec<f32> = film.pixels.iter().flat_map(|p| p.to_array()).collect();
     let image = numpy::ndarray::Array3::from_shape_vec(
         (film.height as usize, film.width as usize, 3),
@@ -188,6 +254,60 @@ pub fn render<'py>(
     )
     .expect("height x width x 3 values");
     Ok(image.to_pyarray(py))
+}
+
+/// A scene to render: a built-in name, a file, or a `Scene` built in Python.
+#[derive(FromPyObject)]
+pub enum SceneArg<'py> {
+    Built(Bound<'py, PyScene>),
+    Named(String),
+}
+
+fn job_error(e: JobError) -> PyErr {
+    use canopy_render::checkpoint::CheckpointError;
+    match e {
+        JobError::Invalid(_) => PyValueError::new_err(e.to_string()),
+        JobError::Scene(e) => scene_error(e),
+        JobError::Checkpoint(CheckpointError::Read { .. } | CheckpointError::Write { .. }) => {
+            PyOSError::new_err(e.to_string())
+        }
+        JobError::Checkpoint(_) => PyValueError::new_err(e.to_string()),
+        JobError::Threads { .. } | JobError::Gpu(_) => PyRuntimeError::new_err(e.to_string()),
+    }
+}
+
+/// A render's progress and control from Python: the progress callback after each pass,
+/// Ctrl-C (and any exception the callback raises) stopping the render after the pass in
+/// flight, warnings through Python's `warnings`.
+struct PyObserver {
+    progress: Option<Py<PyAny>>,
+    /// The exception to raise once the render has stopped (and saved its checkpoint).
+    error: Option<PyErr>,
+}
+
+impl Observer for PyObserver {
+    fn keep_going(&mut self) -> bool {
+        if self.error.is_none() {
+            self.error = Python::attach(|py| py.check_signals().err());
+        }
+        self.error.is_none()
+    }
+
+    fn pass_done(&mut self, samples: u32, spp: u32) {
+        if let (Some(callback), None) = (&self.progress, &self.error) {
+            self.error = Python::attach(|py| callback.call1(py, (samples, spp)).err());
+        }
+    }
+
+    fn warning(&mut self, message: String) {
+        Python::attach(|py| {
+            let category = py.get_type::<pyo3::exceptions::PyRuntimeWarning>();
+            let message = std::ffi::CString::new(message).unwrap_or_default();
+            if let Err(e) = PyErr::warn(py, &category, &message, 1) {
+                self.error.get_or_insert(e);
+            }
+        });
+    }
 }
 
 /// The vertices (V, 3) float32 and triangles (F, 3) int64 of an OBJ or PLY file,

@@ -8,7 +8,8 @@
 //! b"CANOPYCK" | version u32 | fingerprint u64 | scene: u32 length + UTF-8 |
 //! width u32 | height u32 | spp u32 | max_depth u32 | seed u64 |
 //! integrator u32 (0 path, 1 bsdf) | russian_roulette u32 (0 or 1) |
-//! samples u32 | rays u64 | invalid u64 | sums: width*height*3 f32 | checksum u64
+//! region: x u32 | y u32 | width u32 | height u32 |
+//! samples u32 | rays u64 | invalid u64 | sums: region pixels * 3 f32 | checksum u64
 //! ```
 //!
 //! The checksum (FNV-1a over everything before it) catches truncated or damaged files;
@@ -19,6 +20,7 @@ use crate::files::{read_prefix, read_regular_file};
 use crate::geometry::Shape;
 use crate::integrator::Accumulator;
 use crate::output::write_atomically;
+use crate::region::Region;
 use crate::scene::{Integrator, RenderSettings, Scene};
 use glam::Vec3;
 use std::io::Write;
@@ -30,7 +32,11 @@ const MAGIC: &[u8; 8] = b"CANOPYCK";
 /// Version 3: the integrator and Russian roulette settings.
 /// Version 4: samples drawn from the counter-based random streams the GPU shares (a
 /// version 3 checkpoint's samples came from other streams).
-const VERSION: u32 = 4;
+/// Version 5: the region of the image rendered (version 4 files, still read, hold the
+/// whole image).
+const VERSION: u32 = 5;
+/// The oldest version whose samples this canopy can continue.
+const OLDEST_READ: u32 = 4;
 
 /// Largest checkpoint read: the header and the largest film allowed.
 const MAX_CHECKPOINT_BYTES: u64 = 1024 * 1024 + RenderSettings::MAX_PIXELS * 12;
@@ -153,6 +159,10 @@ impl Checkpoint {
             .expect("every integrator is listed") as u32;
         out.extend(integrator.to_le_bytes());
         out.extend((s.russian_roulette as u32).to_le_bytes());
+        let r = a.region;
+        for v in [r.x, r.y, r.width, r.height] {
+            out.extend(v.to_le_bytes());
+        }
         out.extend(a.samples.to_le_bytes());
         out.extend(a.rays.to_le_bytes());
         out.extend(a.invalid_samples.to_le_bytes());
@@ -201,9 +211,9 @@ impl Checkpoint {
             return Err("wrong magic number".into());
         }
         let version = r.u32()?;
-        if version != VERSION {
+        if !(OLDEST_READ..=VERSION).contains(&version) {
             return Err(format!(
-                "version {version}, this canopy reads version {VERSION}"
+                "version {version}, this canopy reads versions {OLDEST_READ} to {VERSION}"
             ));
         }
         let fingerprint = r.u64()?;
@@ -226,10 +236,20 @@ impl Checkpoint {
             },
         };
         settings.check()?;
+        let region = match version {
+            4 => Region::full(settings.width, settings.height),
+            _ => Region {
+                x: r.u32()?,
+                y: r.u32()?,
+                width: r.u32()?,
+                height: r.u32()?,
+            },
+        };
+        region.check_within(settings.width, settings.height)?;
         let (samples, rays, invalid_samples) = (r.u32()?, r.u64()?, r.u64()?);
-        let pixels = settings.width as usize * settings.height as usize;
+        let pixels = region.pixels();
         if r.bytes.len() - r.pos != pixels * 12 {
-            return Err("pixel data does not match the image size".into());
+            return Err("pixel data does not match the region's size".into());
         }
         let sums = (0..pixels)
             .map(|_| Ok(Vec3::new(r.f32()?, r.f32()?, r.f32()?)))
@@ -239,8 +259,7 @@ impl Checkpoint {
             settings,
             fingerprint,
             accumulator: Accumulator {
-                width: settings.width,
-                height: settings.height,
+                region,
                 sums,
                 samples,
                 rays,
@@ -345,6 +364,45 @@ mod tests {
         let back = Checkpoint::from_bytes(&other.to_bytes()).unwrap();
         assert_eq!(back.settings, bsdf.settings);
         assert!(back.matches(&scene, Path::new("x")).is_err());
+    }
+
+    /// The bytes of `checkpoint` as version 4 wrote them: no region (the whole image).
+    fn version_4_bytes(checkpoint: &Checkpoint) -> Vec<u8> {
+        let mut bytes = checkpoint.to_bytes();
+        bytes.truncate(bytes.len() - 8);
+        bytes[8..12].copy_from_slice(&4u32.to_le_bytes());
+        let region_at = 8 + 4 + 8 + 4 + checkpoint.scene.len() + 4 * 4 + 8 + 4 + 4;
+        bytes.drain(region_at..region_at + 16);
+        let checksum = fnv1a(&bytes, FNV_OFFSET);
+        bytes.extend(checksum.to_le_bytes());
+        bytes
+    }
+
+    #[test]
+    fn a_region_round_trips_and_version_4_files_hold_the_whole_image() {
+        let (scene, whole) = sample();
+        let v4 = version_4_bytes(&whole);
+        assert_eq!(Checkpoint::from_bytes(&v4).unwrap(), whole);
+
+        let region = Region {
+            x: 1,
+            y: 2,
+            width: 3,
+            height: 1,
+        };
+        let mut acc = Accumulator::for_region(region);
+        acc.sums[2] = Vec3::new(0.5, 2.0, -1.0);
+        acc.samples = 4;
+        let part = Checkpoint::new("cornell", &scene, acc);
+        let back = Checkpoint::from_bytes(&part.to_bytes()).unwrap();
+        assert_eq!(back, part);
+        assert_eq!(back.accumulator.region, region);
+
+        // A region that leaves the image is damage, not a render to continue.
+        let mut outside = part.clone();
+        outside.accumulator.region.x = 2;
+        let what = Checkpoint::from_bytes(&outside.to_bytes()).unwrap_err();
+        assert!(what.contains("beyond"), "{what}");
     }
 
     #[test]

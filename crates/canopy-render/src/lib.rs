@@ -18,9 +18,11 @@ pub mod lights;
 pub mod material;
 pub mod mesh;
 pub mod output;
+pub mod region;
 pub mod rng;
 pub mod sampling;
 pub mod scene;
+pub mod scene_build;
 pub mod scene_file;
 pub mod visualize;
 
@@ -32,6 +34,7 @@ pub use error::{OutputError, SceneError};
 pub use film::Film;
 pub use integrator::{render, render_counted, render_samples, Accumulator, RenderStats};
 pub use output::write_image;
+pub use region::Region;
 pub use scene::{Integrator, MeshInstance, RenderSettings, Scene, SceneMesh};
 
 use scene_file::{parse_scene, DirAssets};

@@ -5,19 +5,18 @@ use crate::background::decode_environment;
 use crate::camera::CameraSpec;
 use crate::error::SceneError;
 use crate::files::{available_memory, read_regular_file, regular_file_size};
-use crate::geometry::{Cuboid, Shape, Sphere, Triangle};
+use crate::geometry::{Shape, Triangle};
 use crate::material::Material;
 use crate::mesh::{parse_mesh, MeshData, MeshFormat};
 use crate::scene::{Background, Primitive, RenderSettings, Scene};
-use canopy_bvh::Aabb;
-use glam::{EulerRot, Mat3, Mat4, Quat, Vec3};
+use glam::{Mat3, Mat4, Quat, Vec3};
 use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::sync::Arc;
 use toml::Spanned;
 
-mod instances;
+pub(crate) mod instances;
 pub use instances::MAX_INSTANCES;
 
 /// Where a scene's mesh files come from.
@@ -322,62 +321,26 @@ pub const MAX_COORDINATE: f32 = 1e12;
 pub const MAX_RADIANCE: f32 = 1e12;
 
 /// A radiance: every component in [0, MAX_RADIANCE].
-fn radiance_ok(c: &[f32; 3]) -> bool {
-    c.iter().all(|v| (0.0..=MAX_RADIANCE).contains(v))
-}
+pub(crate) use crate::scene_build::in_range;
 
-/// Finite and within [`MAX_COORDINATE`] in magnitude.
-fn in_range(values: &[f32]) -> bool {
-    values.iter().all(|v| v.abs() <= MAX_COORDINATE)
+fn radiance_ok(c: &[f32; 3]) -> bool {
+    crate::scene_build::radiance_ok(Vec3::from(*c))
 }
 
 impl SceneBuilder<'_> {
     fn camera(&mut self, doc: &Spanned<CameraDoc>) -> Result<(), SceneError> {
         let c = doc.get_ref();
-        let span = doc.span();
-        let numbers = [&c.look_from[..], &c.look_at, &c.up, &[c.vfov, c.aperture]].concat();
-        if !in_range(&numbers) || c.focus_distance.is_some_and(|f| !in_range(&[f])) {
-            return self.cx.invalid(
-                span,
-                format!("camera: every number must be finite and within ±{MAX_COORDINATE:e}"),
-            );
-        }
-        let (from, at, up) = (
-            Vec3::from(c.look_from),
-            Vec3::from(c.look_at),
-            Vec3::from(c.up),
-        );
-        if from == at {
-            return self
-                .cx
-                .invalid(span, "camera: `look_from` and `look_at` are the same point");
-        }
-        if up.cross(at - from).length_squared() == 0.0 {
-            return self
-                .cx
-                .invalid(span, "camera: `up` is parallel to the viewing direction");
-        }
-        if !(c.vfov > 0.0 && c.vfov < 180.0) {
-            return self.cx.invalid(
-                span,
-                format!("camera: `vfov` must be in (0, 180) degrees, not {}", c.vfov),
-            );
-        }
-        if c.aperture < 0.0 || c.focus_distance.is_some_and(|f| f <= 0.0) {
-            return self.cx.invalid(
-                span,
-                "camera: `aperture` must be >= 0 and `focus_distance` > 0",
-            );
-        }
-        self.scene.camera = CameraSpec {
-            look_from: from,
-            look_at: at,
-            up,
+        let camera = CameraSpec {
+            look_from: c.look_from.into(),
+            look_at: c.look_at.into(),
+            up: c.up.into(),
             vfov: c.vfov,
             aperture: c.aperture,
             focus_distance: c.focus_distance,
         };
-        Ok(())
+        self.scene
+            .set_camera(camera)
+            .or_else(|problem| self.cx.invalid(doc.span(), format!("camera: {problem}")))
     }
 
     fn settings(&mut self, doc: Option<&Spanned<RenderDoc>>) -> Result<(), SceneError> {
@@ -467,34 +430,23 @@ impl SceneBuilder<'_> {
             Ok(doc) => doc,
             Err(e) => return self.cx.invalid(span, format!("material: {}", e.message())),
         };
-        // A surface cannot reflect more light than it receives.
-        let albedo_ok = |c: &[f32; 3]| c.iter().all(|v| (0.0..=1.0).contains(v));
         let material = match doc {
-            MaterialDoc::Lambertian { albedo } if albedo_ok(&albedo) => Material::Lambertian {
+            MaterialDoc::Lambertian { albedo } => Material::Lambertian {
                 albedo: albedo.into(),
             },
-            MaterialDoc::Metal { albedo, fuzz }
-                if albedo_ok(&albedo) && (0.0..=1.0).contains(&fuzz) =>
-            {
-                Material::Metal {
-                    albedo: albedo.into(),
-                    fuzz,
-                }
-            }
-            MaterialDoc::Dielectric { ior } if ior.is_finite() && ior > 0.0 => {
-                Material::Dielectric { ior }
-            }
-            MaterialDoc::Emissive { radiance } if radiance_ok(&radiance) => Material::Emissive {
+            MaterialDoc::Metal { albedo, fuzz } => Material::Metal {
+                albedo: albedo.into(),
+                fuzz,
+            },
+            MaterialDoc::Dielectric { ior } => Material::Dielectric { ior },
+            MaterialDoc::Emissive { radiance } => Material::Emissive {
                 radiance: radiance.into(),
             },
-            _ => {
-                return self.cx.invalid(
-                    span,
-                    "material: `albedo` components must be in [0, 1], `radiance` in [0, 1e12], `fuzz` in [0, 1], `ior` finite and > 0",
-                )
-            }
         };
-        Ok(material)
+        match material.check() {
+            Ok(()) => Ok(material),
+            Err(problem) => self.cx.invalid(span, format!("material: {problem}")),
+        }
     }
 
     /// A material given by name or inline as a table.
@@ -535,48 +487,24 @@ impl SceneBuilder<'_> {
 
     fn sphere(&mut self, doc: &Spanned<SphereDoc>) -> Result<(), SceneError> {
         let s = doc.get_ref();
-        if !(in_range(&s.center) && s.radius > 0.0 && s.radius <= MAX_COORDINATE) {
-            return self.cx.invalid(
-                doc.span(),
-                format!(
-                    "sphere: `center` must be within ±{MAX_COORDINATE:e} and `radius` in (0, {MAX_COORDINATE:e}] (got {})",
-                    s.radius
-                ),
-            );
-        }
         let material = self.material_ref(&s.material)?;
-        self.push(
-            Shape::Sphere(Sphere::new(s.center.into(), s.radius)),
-            material,
-        );
-        Ok(())
+        self.scene
+            .add_sphere(s.center.into(), s.radius, material)
+            .or_else(|problem| self.cx.invalid(doc.span(), format!("sphere: {problem}")))
     }
 
     fn cuboid(&mut self, doc: &Spanned<CuboidDoc>) -> Result<(), SceneError> {
         let c = doc.get_ref();
-        if !finite(&c.rotate) || !in_range(&[&c.min[..], &c.max, &c.translate].concat()) {
-            return self.cx.invalid(
-                doc.span(),
-                format!(
-                    "cuboid: every number must be finite, and positions within ±{MAX_COORDINATE:e}"
-                ),
-            );
-        }
-        let (min, max) = (Vec3::from(c.min), Vec3::from(c.max));
-        if min.cmpgt(max).any() {
-            return self.cx.invalid(
-                doc.span(),
-                "cuboid: `min` must not exceed `max` on any axis",
-            );
-        }
         let material = self.material_ref(&c.material)?;
-        let cuboid = Cuboid {
-            local: Aabb::new(min, max),
-            rotation: Mat3::from_quat(rotation(c.rotate)),
-            translation: c.translate.into(),
-        };
-        self.push(Shape::Cuboid(cuboid), material);
-        Ok(())
+        self.scene
+            .add_cuboid(
+                c.min.into(),
+                c.max.into(),
+                c.rotate,
+                c.translate.into(),
+                material,
+            )
+            .or_else(|problem| self.cx.invalid(doc.span(), format!("cuboid: {problem}")))
     }
 
     /// Reads and parses mesh file `file` (named by the entry at `span`), recording it
@@ -672,8 +600,7 @@ fn apply_smooth(data: &mut MeshData, smooth: Option<bool>) {
 
 /// Rotation by Euler angles in degrees: about x first, then y, then z.
 fn rotation(degrees: [f32; 3]) -> Quat {
-    let [x, y, z] = degrees.map(f32::to_radians);
-    Quat::from_euler(EulerRot::ZYX, z, y, x)
+    crate::scene_build::rotation_from_degrees(degrees)
 }
 
 #[cfg(test)]

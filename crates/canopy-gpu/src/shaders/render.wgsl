@@ -21,7 +21,8 @@ struct Frame {
     v: vec4<f32>,
     // width, height, seed key, max depth
     size: vec4<u32>,
-    // first sample, samples, background kind (0 sky, 1 constant, 2 map), first row
+    // first sample, samples, background kind (0 sky, 1 constant, 2 map), first row of
+    // the band in the region
     samples: vec4<u32>,
     background: vec4<f32>,
     // lights, background is black (1), integrator (0 bsdf, 1 path), Russian roulette (1)
@@ -31,6 +32,8 @@ struct Frame {
     env_y: vec4<f32>,
     env_z: vec4<f32>,
     env_size: vec4<u32>,
+    // The region of the image rendered: x, y, width, height.
+    region: vec4<u32>,
 }
 
 @group(0) @binding(3) var<storage, read> materials: array<Material>;
@@ -317,14 +320,16 @@ fn radiance_bsdf(camera_origin: vec3<f32>, camera_dir: vec3<f32>, rng: ptr<funct
 fn render(@builtin(global_invocation_id) id: vec3<u32>) {
     let width = frame.size.x;
     let height = frame.size.y;
-    // This dispatch renders a band of rows from frame.samples.w, as many as `accum`
-    // holds (large images come in several bands: render.rs).
-    let x = id.x;
-    let y = id.y + frame.samples.w;
-    let local = id.y * width + x;
-    if (x >= width || y >= height || local >= arrayLength(&accum)) {
+    // This dispatch renders a band of the region's rows from frame.samples.w, as many
+    // as `accum` holds (large regions come in several bands: render.rs).
+    let region = frame.region;
+    let row = id.y + frame.samples.w;
+    let local = id.y * region.z + id.x;
+    if (id.x >= region.z || row >= region.w || local >= arrayLength(&accum)) {
         return;
     }
+    let x = region.x + id.x;
+    let y = region.y + row;
     let pixel = y * width + x;
     var sum = accum[local];
     var rays = vec2<u32>(0u);

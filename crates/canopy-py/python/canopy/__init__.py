@@ -18,19 +18,29 @@ int64 indices) and checked: a wrong shape, a NaN, an index past the vertex count
 
 from __future__ import annotations
 
-from typing import Callable, NamedTuple, Optional, Sequence, Tuple, Union
+from typing import Callable, List, NamedTuple, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
 from . import _canopy
+from .scene import Scene, dielectric, emissive, lambertian, metal
+from .ray_scene import RayHits, RayScene
 
 __version__: str = _canopy.__version__
 
 __all__ = [
     "Bvh",
     "Hits",
+    "RayHits",
+    "RayScene",
+    "Scene",
     "SceneInfo",
+    "dielectric",
+    "emissive",
+    "lambertian",
+    "metal",
     "builders",
+    "devices",
     "load_mesh",
     "load_scene",
     "read_image",
@@ -232,6 +242,12 @@ class Bvh:
         return repr(self._native)
 
 
+def devices() -> List[str]:
+    """The GPU adapters that ``device="gpu"`` can render on, described; empty when
+    there is none (``canopy devices`` on the command line)."""
+    return _canopy.devices()
+
+
 def load_mesh(path) -> Tuple[np.ndarray, np.ndarray]:
     """The vertices (V, 3) float32 and triangles (F, 3) int64 of an OBJ or PLY file, read
     as canopy's scenes read them (polygons fan-triangulated)."""
@@ -245,7 +261,7 @@ def load_scene(scene: str) -> SceneInfo:
 
 
 def render(
-    scene: str,
+    scene=None,
     *,
     spp: Optional[int] = None,
     size: Optional[Tuple[int, int]] = None,
@@ -258,17 +274,34 @@ def render(
     width: int = 8,
     threads: Optional[int] = None,
     progress: Optional[Callable[[int, int], None]] = None,
+    region: Optional[Tuple[int, int, int, int]] = None,
+    checkpoint=None,
+    checkpoint_every: float = 60.0,
+    resume=None,
 ) -> np.ndarray:
-    """Renders a scene (built-in name, scene file or mesh) to a linear float32 image of
-    shape (height, width, 3), exactly as ``canopy render`` does (the same pixels as its
-    EXR output). Settings left as None come from the scene. ``size`` is (width, height).
-    ``progress(done, total)`` is called after each sample per pixel; Ctrl-C raises
-    KeyboardInterrupt between samples. ``device="gpu"`` is not available yet.
+    """Renders a scene (built-in name, scene file or mesh, or a :class:`Scene` built in
+    Python) to a linear float32 image of shape (height, width, 3), exactly as
+    ``canopy render`` does (the same pixels as its EXR output). Settings left as None
+    come from the scene. ``size`` is (width, height).
+
+    ``device="gpu"`` renders on the first GPU adapter found (the CPU's image up to
+    rounding). ``region=(x, y, width, height)`` renders only that rectangle: an image of
+    that shape whose pixels are exactly those of the whole image.
+
+    ``progress(done, total)`` is called after each sample per pixel; Ctrl-C (or an
+    exception raised by ``progress``) stops the render after the sample in flight. With
+    ``checkpoint=path`` the render is saved there every ``checkpoint_every`` seconds and
+    when stopped; ``render(resume=path)`` continues it to the same image (a
+    :class:`Scene` is given again: ``render(scene, resume=path)``).
     """
     if size is not None:
         size = (int(size[0]), int(size[1]))
+    if region is not None:
+        region = tuple(int(v) for v in region)
+        if len(region) != 4:
+            raise ValueError(f"region must be (x, y, width, height), not {region!r}")
     return _canopy.render(
-        str(scene),
+        None if scene is None else scene._native if isinstance(scene, Scene) else str(scene),
         spp=spp,
         size=size,
         seed=seed,
@@ -280,6 +313,10 @@ def render(
         width=int(width),
         threads=threads,
         progress=progress,
+        region=region,
+        checkpoint=None if checkpoint is None else str(checkpoint),
+        checkpoint_every=float(checkpoint_every),
+        resume=None if resume is None else str(resume),
     )
 
 

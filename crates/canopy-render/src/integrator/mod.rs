@@ -7,6 +7,7 @@ use crate::accel::Accel;
 use crate::camera::Camera;
 use crate::film::Film;
 use crate::lights::Lights;
+use crate::region::Region;
 use crate::rng::Rng;
 use crate::scene::Scene;
 use canopy_bvh::{TraversalCounter, TraversalStats};
@@ -138,13 +139,13 @@ fn render_with<P: Probe>(
 }
 
 /// A render in progress: every pixel's sum of samples (in sample order) and how many
-/// samples each pixel has. Adding the rest later gives exactly the image of an
-/// uninterrupted render.
+/// samples each pixel has, over the whole image or a region of it. Adding the rest
+/// later gives exactly the image of an uninterrupted render.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Accumulator {
-    pub width: u32,
-    pub height: u32,
-    /// Sum of the radiance samples of each pixel, row by row from the top.
+    /// The pixels accumulated, in the scene's image.
+    pub region: Region,
+    /// Sum of the radiance samples of each pixel of the region, row by row from the top.
     pub sums: Vec<Vec3>,
     /// Samples every pixel has received.
     pub samples: u32,
@@ -154,30 +155,36 @@ pub struct Accumulator {
 }
 
 impl Accumulator {
+    /// An empty accumulator for the whole of a `width` x `height` image.
     pub fn new(width: u32, height: u32) -> Self {
+        Self::for_region(Region::full(width, height))
+    }
+
+    /// An empty accumulator for `region` of the image.
+    pub fn for_region(region: Region) -> Self {
         Self {
-            width,
-            height,
-            sums: vec![Vec3::ZERO; width as usize * height as usize],
+            region,
+            sums: vec![Vec3::ZERO; region.pixels()],
             samples: 0,
             rays: 0,
             invalid_samples: 0,
         }
     }
 
-    /// The mean of the samples so far.
+    /// The mean of the samples so far: an image of the region's size.
     pub fn film(&self) -> Film {
         let n = self.samples.max(1) as f32;
         Film {
-            width: self.width,
-            height: self.height,
+            width: self.region.width,
+            height: self.region.height,
             pixels: self.sums.iter().map(|s| *s / n).collect(),
         }
     }
 }
 
 /// Adds the next `count` samples (indices `samples .. samples + count`) to every pixel
-/// of `accumulator`, which must match the scene's image size.
+/// of `accumulator`. Its region must lie within the scene's image (see
+/// [`Region::check_within`]); a pixel gets the same samples in any region.
 pub fn render_samples(
     scene: &Scene,
     accel: &Accel,
@@ -196,11 +203,10 @@ fn accumulate<P: Probe>(
     on_row_done: &(dyn Fn() + Sync),
 ) -> RenderStats {
     let settings = scene.settings;
-    assert_eq!(
-        (accumulator.width, accumulator.height),
-        (settings.width, settings.height),
-        "accumulator and scene differ in image size"
-    );
+    let region = accumulator.region;
+    if let Err(e) = region.check_within(settings.width, settings.height) {
+        panic!("the accumulator does not fit the scene's image: {e}");
+    }
     let camera = Camera::new(&scene.camera, settings.width, settings.height);
     let lights = Lights::new(scene);
     let tracer = Tracer {
@@ -214,13 +220,15 @@ fn accumulate<P: Probe>(
     let width = settings.width as usize;
     accumulator
         .sums
-        .par_chunks_mut(width.max(1))
+        .par_chunks_mut(region.width as usize)
         .enumerate()
-        .for_each(|(y, row)| {
+        .for_each(|(row_in_region, row)| {
             let row_start = Instant::now();
             let mut work = Work::<P>::default();
             let mut invalid = 0;
-            for (x, sum) in row.iter_mut().enumerate() {
+            let y = region.y as usize + row_in_region;
+            for (x_in_region, sum) in row.iter_mut().enumerate() {
+                let x = region.x as usize + x_in_region;
                 let index = (y * width + x) as u64;
                 for sample in first_sample..first_sample + count {
                     let mut rng = Rng::for_sample(settings.seed, index, sample as u64);

@@ -1,0 +1,26 @@
+//! What a caller sees of a render while it runs, and how it stops one.
+
+/// Progress and control of a running render. Every method has a default that does
+/// nothing (and never cancels), so `()` observes nothing.
+///
+/// [`rows_done`](Self::rows_done) is called from worker threads while a pass runs; the
+/// other methods between passes, on the thread that runs the job.
+pub trait Observer: Sync {
+    /// `rows` more rows of the region have their sample of this pass.
+    fn rows_done(&self, _rows: u64) {}
+
+    /// Whether to render another pass; asked before each. A render told to stop ends
+    /// with the passes it has, and saves them where the checkpoint policy says.
+    fn keep_going(&mut self) -> bool {
+        true
+    }
+
+    /// A pass is done: every pixel of the region has `samples` of `spp` samples.
+    fn pass_done(&mut self, _samples: u32, _spp: u32) {}
+
+    /// Something went wrong that the render survives (a periodic checkpoint that could
+    /// not be written); the library never prints, so it tells the caller.
+    fn warning(&mut self, _message: String) {}
+}
+
+impl Observer for () {}

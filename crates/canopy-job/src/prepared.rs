@@ -1,0 +1,256 @@
+//! A job made ready to run (structure built, device opened), and the run itself: passes,
+//! periodic checkpoints, cancellation, the checkpoint of an interrupted render.
+
+use crate::engine::Engine;
+use crate::observer::Observer;
+use crate::{Device, JobError, RenderJob};
+use canopy_render::checkpoint::Checkpoint;
+use canopy_render::{Accel, AccelKind, Accumulator, BvhWidth, RenderStats, Scene};
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+/// Most worker threads a job may ask for.
+pub const MAX_THREADS: usize = 1024;
+
+/// Peak bytes per pixel of a render: the sums, the film, a checkpoint's copy and the
+/// encoded image.
+pub const BYTES_PER_PIXEL: u64 = 64;
+
+/// A job with its acceleration structure built and its device open.
+pub struct Prepared<'j> {
+    job: &'j RenderJob<'j>,
+    pool: Option<rayon::ThreadPool>,
+    accel: Accel,
+    gpu: Option<GpuPlan>,
+}
+
+/// The GPU, and the scene it renders when that is not the job's own: the GPU has no
+/// two-level traversal yet, so instances are baked into world-space triangles for it.
+struct GpuPlan {
+    gpu: canopy_gpu::Gpu,
+    baked: Option<(Scene, Accel)>,
+}
+
+/// What a run produced.
+#[derive(Debug)]
+pub struct Outcome {
+    /// Every sample of the region so far: the resumed ones and this run's.
+    pub accumulator: Accumulator,
+    /// Rays and time of this run (not of the resumed runs before it).
+    pub stats: RenderStats,
+    /// Whether every sample asked for is in; false when the observer stopped the render.
+    pub complete: bool,
+    /// Where an incomplete render's state was saved (the policy's `on_interrupt`).
+    pub saved: Option<PathBuf>,
+}
+
+impl<'s> RenderJob<'s> {
+    /// Checks the job, starts its threads, opens its device and builds its acceleration
+    /// structure.
+    pub fn prepare(&self) -> Result<Prepared<'_>, JobError> {
+        let settings = self.scene.settings;
+        settings.check().map_err(JobError::Invalid)?;
+        self.region()
+            .check_within(settings.width, settings.height)
+            .map_err(JobError::Invalid)?;
+        let region = self.region();
+        let needed = region.pixels() as u64 * BYTES_PER_PIXEL;
+        if let Some(free) = canopy_render::files::available_memory() {
+            if needed > free {
+                return Err(JobError::Invalid(format!(
+                    "a {}x{} image needs about {} MiB of memory, more than the {} MiB available",
+                    region.width,
+                    region.height,
+                    needed >> 20,
+                    free >> 20
+                )));
+            }
+        }
+        if let Some(resumed) = &self.resume {
+            if resumed.samples > settings.spp {
+                return Err(JobError::Invalid(format!(
+                    "the render to resume has {} samples per pixel, more than the {} asked for",
+                    resumed.samples, settings.spp
+                )));
+            }
+        }
+        let pool = match self.threads {
+            None => None,
+            Some(n) if !(1..=MAX_THREADS).contains(&n) => {
+                return Err(JobError::Invalid(format!(
+                    "threads must be in 1..={MAX_THREADS}, not {n}"
+                )))
+            }
+            Some(n) => Some(
+                rayon::ThreadPoolBuilder::new()
+                    .num_threads(n)
+                    .build()
+                    .map_err(|e| JobError::Threads {
+                        threads: n,
+                        cause: e.to_string(),
+                    })?,
+            ),
+        };
+        let structure = &self.structure;
+        let gpu = match self.device {
+            Device::Cpu => None,
+            Device::Gpu if structure.kind == AccelKind::None => {
+                return Err(JobError::Invalid(
+                    "the GPU traces through a BVH; choose a builder, not `none`".into(),
+                ))
+            }
+            Device::Gpu => Some(canopy_gpu::Gpu::new()?),
+        };
+        // The GPU walks the binary tree (in its own layout, derived from it).
+        let width = match gpu {
+            Some(_) => BvhWidth::Two,
+            None => structure.width,
+        };
+        let install = |work: &(dyn Fn() -> Accel + Sync)| match &pool {
+            Some(pool) => pool.install(work),
+            None => work(),
+        };
+        let scene = self.scene;
+        let accel = install(&|| {
+            Accel::for_scene(
+                scene,
+                structure.kind,
+                width,
+                &structure.params,
+                structure.optimize,
+            )
+        });
+        let gpu = gpu.map(|gpu| GpuPlan {
+            gpu,
+            baked: (!scene.instances.is_empty()).then(|| {
+                let baked = scene.with_instances_baked();
+                let accel = install(&|| {
+                    Accel::build(structure.kind, width, &baked.primitives, &structure.params)
+                });
+                (baked, accel)
+            }),
+        });
+        Ok(Prepared {
+            job: self,
+            pool,
+            accel,
+            gpu,
+        })
+    }
+}
+
+impl Prepared<'_> {
+    /// The structure over the job's scene (the one the CPU traces).
+    pub fn accel(&self) -> &Accel {
+        &self.accel
+    }
+
+    pub fn build_time(&self) -> Duration {
+        self.accel.build_time
+    }
+
+    /// Children per node of the tree rendered through: 2 on the GPU.
+    pub fn width(&self) -> BvhWidth {
+        match self.gpu {
+            Some(_) => BvhWidth::Two,
+            None => self.job.structure.width,
+        }
+    }
+
+    /// `cpu`, or the GPU adapter in words.
+    pub fn device_name(&self) -> String {
+        match &self.gpu {
+            Some(plan) => plan.gpu.describe(),
+            None => "cpu".into(),
+        }
+    }
+
+    /// Worker threads on the CPU.
+    pub fn threads(&self) -> usize {
+        self.install(rayon::current_num_threads)
+    }
+
+    /// Runs `work` on the job's worker threads.
+    pub fn install<R: Send>(&self, work: impl FnOnce() -> R + Send) -> R {
+        match &self.pool {
+            Some(pool) => pool.install(work),
+            None => work(),
+        }
+    }
+
+    /// Renders the job's region, one sample per pixel per pass, until every sample is in
+    /// or `observer` says stop. Periodic checkpoints are saved as the policy says (a
+    /// failed save is a warning, tried again later); a stopped render saves its state to
+    /// the policy's `on_interrupt`; a complete one removes its periodic checkpoint.
+    pub fn run(&self, observer: &mut dyn Observer) -> Result<Outcome, JobError> {
+        let job = self.job;
+        let scene = job.scene;
+        let engine = match &self.gpu {
+            None => Engine::Cpu {
+                scene,
+                accel: &self.accel,
+            },
+            Some(plan) => {
+                let (scene, accel) = match &plan.baked {
+                    Some((scene, accel)) => (scene, accel),
+                    None => (scene, &self.accel),
+                };
+                let Some(canopy_bvh::Tree::Binary(bvh)) = accel.tree() else {
+                    unreachable!("the GPU's structure is a binary tree, checked in prepare")
+                };
+                Engine::Gpu(Box::new(canopy_gpu::Renderer::new(&plan.gpu, scene, bvh)?))
+            }
+        };
+        let mut accumulator = job
+            .resume
+            .clone()
+            .unwrap_or_else(|| Accumulator::for_region(job.region));
+        let spp = scene.settings.spp;
+        let policy = &job.checkpoint;
+        let mut stats = RenderStats::default();
+        let mut last_save = Instant::now();
+        let mut save_failing = false;
+        while accumulator.samples < spp && observer.keep_going() {
+            let pass = self.install(|| engine.pass(&mut accumulator, &*observer))?;
+            stats.rays += pass.rays;
+            stats.shadow_rays += pass.shadow_rays;
+            stats.invalid_samples += pass.invalid_samples;
+            stats.elapsed += pass.elapsed;
+            observer.pass_done(accumulator.samples, spp);
+            let Some(path) = &policy.periodic else {
+                continue;
+            };
+            if last_save.elapsed() >= policy.every && accumulator.samples < spp {
+                // A failed save (a full disk) must not end hours of rendering: warn once
+                // per run of failures, and try again at the next save.
+                match Checkpoint::new(&job.source, scene, accumulator.clone()).save(path) {
+                    Ok(()) => save_failing = false,
+                    Err(e) if !save_failing => {
+                        save_failing = true;
+                        observer.warning(format!("{e}; rendering goes on, saving again later"));
+                    }
+                    Err(_) => {}
+                }
+                last_save = Instant::now();
+            }
+        }
+        let complete = accumulator.samples >= spp;
+        let mut saved = None;
+        if !complete {
+            if let Some(path) = &policy.on_interrupt {
+                Checkpoint::new(&job.source, scene, accumulator.clone()).save(path)?;
+                saved = Some(path.clone());
+            }
+        } else if let Some(path) = &policy.periodic {
+            // The render is complete: its checkpoint has nothing left to give. Only a
+            // file that is recognisably a checkpoint is removed.
+            let _ = Checkpoint::remove_if_checkpoint(path);
+        }
+        Ok(Outcome {
+            accumulator,
+            stats,
+            complete,
+            saved,
+        })
+    }
+}

@@ -1,0 +1,271 @@
+//! The render job: regions that put together give the whole image bit for bit, passes
+//! that an observer sees and stops, checkpoints kept and resumed into the same image,
+//! and jobs that contradict themselves refused before any work.
+
+use canopy_job::{CheckpointPolicy, Device, JobError, Observer, RenderJob, Resumed};
+use canopy_render::checkpoint::Checkpoint;
+use canopy_render::{load_scene, AccelKind, Accumulator, Film, Region, Scene};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Duration;
+
+fn small(name: &str, width: u32, height: u32, spp: u32) -> Scene {
+    let mut scene = load_scene(name).unwrap();
+    scene.settings.width = width;
+    scene.settings.height = height;
+    scene.settings.spp = spp;
+    scene
+}
+
+fn pixels_of(film: &Film, region: Region) -> Vec<glam::Vec3> {
+    (region.y..region.y + region.height)
+        .flat_map(|y| (region.x..region.x + region.width).map(move |x| film.pixel(x, y)))
+        .collect()
+}
+
+/// Records what it is told, and stops the render after `stop_after` passes.
+#[derive(Default)]
+struct Recorder {
+    rows: AtomicU64,
+    passes: Vec<(u32, u32)>,
+    stop_after: Option<usize>,
+    warnings: Vec<String>,
+}
+
+impl Observer for Recorder {
+    fn rows_done(&self, rows: u64) {
+        self.rows.fetch_add(rows, Ordering::Relaxed);
+    }
+    fn keep_going(&mut self) -> bool {
+        self.stop_after.is_none_or(|n| self.passes.len() < n)
+    }
+    fn pass_done(&mut self, samples: u32, spp: u32) {
+        self.passes.push((samples, spp));
+    }
+    fn warning(&mut self, message: String) {
+        self.warnings.push(message);
+    }
+}
+
+fn temp_dir(name: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("canopy-job-{name}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+#[test]
+fn tiles_put_together_are_the_whole_image_bit_for_bit() {
+    // Spheres, boxes and lights (cornell), and instanced meshes (teapots).
+    for (name, threads) in [
+        ("cornell", Some(1)),
+        ("teapots", Some(2)),
+        ("paper-3", None),
+    ] {
+        let scene = small(name, 29, 21, 2);
+        let mut job = RenderJob::new(&scene, name);
+        job.threads = threads;
+        let whole = job.prepare().unwrap().run(&mut ()).unwrap();
+        assert!(whole.complete && whole.saved.is_none());
+        let whole = whole.accumulator.film();
+        assert!(
+            whole.pixels.iter().any(|p| p.length() > 0.0),
+            "{name}: black"
+        );
+        for tile in Region::full(29, 21).tiles(8) {
+            let mut job = RenderJob::new(&scene, name);
+            job.region = tile;
+            job.threads = Some(2);
+            let part = job.prepare().unwrap().run(&mut ()).unwrap();
+            assert_eq!(part.accumulator.region, tile);
+            assert_eq!(
+                part.accumulator.film().pixels,
+                pixels_of(&whole, tile),
+                "{name}: tile {tile}"
+            );
+        }
+    }
+}
+
+#[test]
+fn an_observer_sees_every_pass_and_row() {
+    let scene = small("paper-1", 16, 9, 3);
+    let mut job = RenderJob::new(&scene, "paper-1");
+    job.region = Region {
+        x: 2,
+        y: 1,
+        width: 10,
+        height: 5,
+    };
+    let mut seen = Recorder::default();
+    let outcome = job.prepare().unwrap().run(&mut seen).unwrap();
+    assert!(outcome.complete);
+    assert_eq!(seen.passes, [(1, 3), (2, 3), (3, 3)]);
+    assert_eq!(seen.rows.load(Ordering::Relaxed), 3 * 5);
+    assert_eq!(outcome.accumulator.samples, 3);
+    assert!(outcome.stats.rays >= 3 * 50, "{:?}", outcome.stats);
+}
+
+#[test]
+fn a_stopped_render_saves_its_state_and_resumes_into_the_same_image() {
+    let dir = temp_dir("resume");
+    let checkpoint = dir.join("part.checkpoint");
+    let scene = small("cornell", 20, 14, 5);
+    let region = Region {
+        x: 4,
+        y: 3,
+        width: 9,
+        height: 8,
+    };
+    let mut whole = RenderJob::new(&scene, "cornell");
+    whole.region = region;
+    let uninterrupted = whole.prepare().unwrap().run(&mut ()).unwrap().accumulator;
+
+    let mut job = RenderJob::new(&scene, "cornell");
+    job.region = region;
+    job.checkpoint = CheckpointPolicy {
+        periodic: None,
+        every: Duration::ZERO,
+        on_interrupt: Some(checkpoint.clone()),
+    };
+    let mut stopper = Recorder {
+        stop_after: Some(2),
+        ..Recorder::default()
+    };
+    let stopped = job.prepare().unwrap().run(&mut stopper).unwrap();
+    assert!(!stopped.complete);
+    assert_eq!(stopped.accumulator.samples, 2);
+    assert_eq!(stopped.saved.as_deref(), Some(checkpoint.as_path()));
+    let saved = Checkpoint::load(&checkpoint).unwrap();
+    assert_eq!(saved.accumulator, stopped.accumulator);
+
+    // Resumed (scene found again by its name), it goes on from sample 2 to the same image,
+    // then removes its checkpoint.
+    let resumed = Resumed::load(&checkpoint).unwrap();
+    let mut seen = Recorder::default();
+    let done = resumed.job().prepare().unwrap().run(&mut seen).unwrap();
+    assert_eq!(seen.passes, [(3, 5), (4, 5), (5, 5)]);
+    assert!(done.complete);
+    assert_eq!(done.accumulator.sums, uninterrupted.sums);
+    assert_eq!(done.accumulator.region, region);
+    assert!(
+        !checkpoint.exists(),
+        "a complete render keeps no checkpoint"
+    );
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+#[test]
+fn periodic_checkpoints_hold_the_passes_so_far() {
+    let dir = temp_dir("periodic");
+    let checkpoint = dir.join("periodic.checkpoint");
+    let scene = small("paper-3", 12, 8, 4);
+    let mut job = RenderJob::new(&scene, "paper-3");
+    job.checkpoint = CheckpointPolicy {
+        periodic: Some(checkpoint.clone()),
+        every: Duration::ZERO,
+        on_interrupt: None,
+    };
+    // Stopped after 3 passes with nowhere to save on interrupt: the periodic save after
+    // the third pass holds them.
+    let mut stopper = Recorder {
+        stop_after: Some(3),
+        ..Recorder::default()
+    };
+    let stopped = job.prepare().unwrap().run(&mut stopper).unwrap();
+    assert!(!stopped.complete && stopped.saved.is_none());
+    assert_eq!(
+        Checkpoint::load(&checkpoint).unwrap().accumulator,
+        stopped.accumulator
+    );
+
+    // A periodic save that fails is a warning, and the render goes on.
+    let mut blocked = job.clone();
+    blocked.checkpoint.periodic = Some(dir.join("no-such-dir").join("ck"));
+    let mut seen = Recorder::default();
+    let outcome = blocked.prepare().unwrap().run(&mut seen).unwrap();
+    assert!(outcome.complete);
+    assert_eq!(seen.warnings.len(), 1, "{:?}", seen.warnings);
+    assert!(
+        seen.warnings[0].contains("rendering goes on"),
+        "{:?}",
+        seen.warnings
+    );
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+#[test]
+fn contradictory_jobs_are_refused_before_any_work() {
+    let scene = small("cornell", 10, 10, 2);
+    let refuse = |job: RenderJob, words: &str| match job.prepare() {
+        Err(e @ JobError::Invalid(_)) => {
+            assert!(e.to_string().contains(words), "{e}");
+        }
+        Err(e) => panic!("{e}"),
+        Ok(_) => panic!("accepted a job that should be refused ({words})"),
+    };
+    let mut outside = RenderJob::new(&scene, "cornell");
+    outside.region = Region {
+        x: 5,
+        y: 5,
+        width: 6,
+        height: 1,
+    };
+    refuse(outside, "beyond the 10x10 image");
+    let mut empty = RenderJob::new(&scene, "cornell");
+    empty.region.height = 0;
+    refuse(empty, "no pixels");
+    let mut threads = RenderJob::new(&scene, "cornell");
+    threads.threads = Some(0);
+    refuse(threads, "threads must be");
+    let mut brute_gpu = RenderJob::new(&scene, "cornell");
+    brute_gpu.device = Device::Gpu;
+    brute_gpu.structure.kind = AccelKind::None;
+    refuse(brute_gpu, "choose a builder");
+    let mut too_many = RenderJob::new(&scene, "cornell");
+    let mut done = Accumulator::new(10, 10);
+    done.samples = 3;
+    too_many.resume = Some(done);
+    refuse(too_many, "more than the 2 asked for");
+    assert_eq!("gpu".parse::<Device>(), Ok(Device::Gpu));
+    assert!("tpu"
+        .parse::<Device>()
+        .unwrap_err()
+        .contains("\"cpu\" or \"gpu\""));
+}
+
+#[test]
+fn on_the_gpu_a_region_is_the_whole_images_pixels_too() {
+    let scene = small("teapots", 24, 16, 2);
+    let mut whole = RenderJob::new(&scene, "teapots");
+    whole.device = Device::Gpu;
+    let prepared = match whole.prepare() {
+        Ok(prepared) => prepared,
+        Err(JobError::Gpu(e @ canopy_gpu::GpuError::NoAdapter(_))) => {
+            eprintln!("SKIPPED: no GPU adapter: {e}");
+            return;
+        }
+        Err(e) => panic!("{e}"),
+    };
+    assert_eq!(prepared.width(), canopy_render::BvhWidth::Two);
+    assert_ne!(prepared.device_name(), "cpu");
+    let mut seen = Recorder::default();
+    let image = prepared.run(&mut seen).unwrap().accumulator.film();
+    assert_eq!(seen.rows.load(Ordering::Relaxed), 2 * 16);
+    assert!(image.pixels.iter().any(|p| p.length() > 0.0), "black");
+    let region = Region {
+        x: 5,
+        y: 3,
+        width: 11,
+        height: 9,
+    };
+    let mut part = RenderJob::new(&scene, "teapots");
+    part.device = Device::Gpu;
+    part.region = region;
+    let part = part
+        .prepare()
+        .unwrap()
+        .run(&mut ())
+        .unwrap()
+        .accumulator
+        .film();
+    assert_eq!(part.pixels, pixels_of(&image, region));
+}

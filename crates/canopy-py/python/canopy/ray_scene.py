@@ -1,0 +1,122 @@
+"""Ray queries over several meshes placed by instances, as Embree's and Open3D's
+ray-casting scenes answer them: each mesh gets its own BVH once, a top-level BVH over the
+instances' world boxes finds the instance a ray meets, and the ray continues through the
+mesh's tree in the mesh's own space.
+
+>>> import numpy as np, canopy
+>>> scene = canopy.RayScene()
+>>> tri = scene.add_mesh([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]])
+>>> below = np.eye(4); below[2, 3] = -2
+>>> copy = scene.add_instance(tri, below)
+>>> hits = scene.intersect([[0.2, 0.2, 1.0], [0.2, 0.2, -1.0]], [[0, 0, -1], [0, 0, -1]])
+>>> hits.t.tolist(), hits.instance.tolist(), hits.normal[0].tolist()
+([1.0, 1.0], [0, 1], [0.0, 0.0, 1.0])
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple, Optional
+
+import numpy as np
+
+from . import _canopy
+from .scene import _transform
+
+EVERY_RAY = 0xFFFFFFFF
+"""The mask of an instance every ray sees, and of a ray that sees every instance."""
+
+
+class RayHits(NamedTuple):
+    """Closest hits of a batch of rays, one row per ray."""
+
+    t: np.ndarray
+    """(n,) float32 distance along the ray (in units of its direction's length); inf on a miss."""
+    instance: np.ndarray
+    """(n,) int64 index of the instance hit (in the order added); -1 on a miss."""
+    geometry: np.ndarray
+    """(n,) int64 index of that instance's geometry; -1 on a miss."""
+    prim: np.ndarray
+    """(n,) int64 index of the triangle (face row) in its geometry; -1 on a miss."""
+    uv: np.ndarray
+    """(n, 2) float32 barycentric weights of the triangle's vertices 1 and 2 (0 on a miss)."""
+    normal: np.ndarray
+    """(n, 3) float32 unit geometric normal, (v1 - v0) x (v2 - v0), in world space (0 on a miss)."""
+
+
+def _mask(mask) -> int:
+    mask = int(mask)
+    if not 0 <= mask <= EVERY_RAY:
+        raise ValueError(f"mask must be a 32-bit unsigned integer, not {mask}")
+    return mask
+
+
+class RayScene:
+    """Triangle meshes, each stored and built once, placed by any number of instances
+    (any invertible affine transform: rotations, mirrors, non-uniform scale), each with
+    a 32-bit mask that rays select by. ``builder`` and ``width`` choose the BVHs as for
+    :class:`canopy.Bvh`. The top-level tree is rebuilt at the first query after
+    instances change (milliseconds for thousands)."""
+
+    def __init__(self, *, builder: str = "binned-sah", width: int = 8):
+        if not isinstance(builder, str):
+            raise TypeError(f"builder must be a name (see canopy.builders()), not {builder!r}")
+        self._native = _canopy.RayScene(builder, int(width))
+
+    def add_geometry(self, vertices, faces, *, threads: Optional[int] = None) -> int:
+        """Adds a triangle mesh (``vertices`` (V, 3), ``faces`` (F, 3)) without placing
+        it; returns its geometry index for :meth:`add_instance`."""
+        from . import _array
+
+        vertices = _array(vertices, "vertices", np.float32, 2, "(V, 3)")
+        faces = _array(faces, "faces", np.int64, 2, "(F, 3)")
+        return self._native.add_geometry(vertices, faces, threads)
+
+    def add_mesh(self, vertices, faces, transform=None, *, mask: int = EVERY_RAY,
+                 threads: Optional[int] = None) -> int:
+        """Adds a triangle mesh and places one instance of it by ``transform`` (4x4 or
+        3x4; identity by default), as Open3D's ``add_triangles`` does; returns the
+        geometry's index (its instance is the last one added)."""
+        geometry = self.add_geometry(vertices, faces, threads=threads)
+        self.add_instance(geometry, transform, mask=mask)
+        return geometry
+
+    def add_instance(self, geometry: int, transform=None, *, mask: int = EVERY_RAY) -> int:
+        """Places ``geometry`` by ``transform``; returns the instance's index, which hits
+        report. The geometry is not copied."""
+        return self._native.add_instance(int(geometry), _transform(transform), _mask(mask))
+
+    def set_transform(self, instance: int, transform) -> None:
+        """Moves an instance (the top-level tree is rebuilt at the next query)."""
+        self._native.set_transform(int(instance), _transform(transform))
+
+    @property
+    def geometry_count(self) -> int:
+        return self._native.geometry_count
+
+    @property
+    def instance_count(self) -> int:
+        return self._native.instance_count
+
+    def _rays(self, origins, directions, tnear, tfar):
+        from . import _array, _per_ray
+
+        origins = _array(origins, "origins", np.float32, 2, "(n, 3)")
+        directions = _array(directions, "directions", np.float32, 2, "(n, 3)")
+        n = origins.shape[0]
+        return origins, directions, _per_ray(tnear, "tnear", n), _per_ray(tfar, "tfar", n)
+
+    def intersect(self, origins, directions, tnear=0.0, tfar=np.inf, *, mask: int = EVERY_RAY,
+                  threads: Optional[int] = None) -> RayHits:
+        """Closest hits of the rays ``origin + t * direction``, ``tnear <= t <= tfar``,
+        among the instances whose mask shares a bit with ``mask``. Ties go to the lower
+        instance, then the lower triangle."""
+        hits = self._native.intersect(*self._rays(origins, directions, tnear, tfar), _mask(mask), threads)
+        return RayHits(*hits)
+
+    def occluded(self, origins, directions, tnear=0.0, tfar=np.inf, *, mask: int = EVERY_RAY,
+                 threads: Optional[int] = None) -> np.ndarray:
+        """(n,) bool: whether anything ``mask`` sees lies on each ray within its range."""
+        return self._native.occluded(*self._rays(origins, directions, tnear, tfar), _mask(mask), threads)
+
+    def __repr__(self) -> str:
+        return repr(self._native)

@@ -1,0 +1,229 @@
+"""Scenes built from Python: meshes from numpy arrays placed by instances, spheres,
+boxes, materials, a camera, a background and render settings, rendered by
+``canopy.render(scene)`` exactly as a scene file with the same contents would be.
+
+>>> import numpy as np, canopy
+>>> scene = canopy.Scene(size=(64, 48), spp=4)
+>>> scene.camera(look_from=(0, 1, 4), look_at=(0, 0, 0))
+>>> quad = scene.add_mesh([[-1, 0, -1], [1, 0, -1], [1, 0, 1], [-1, 0, 1]],
+...                       [[0, 2, 1], [0, 3, 2]], material=canopy.lambertian((0.7, 0.7, 0.7)))
+>>> scene.add_sphere((0, 0.5, 0), 0.5, material=canopy.metal((0.9, 0.8, 0.6), fuzz=0.1))
+>>> image = canopy.render(scene)
+
+Every call is checked as the scene file parser checks its entries; a refused call
+raises ``ValueError`` naming the argument and leaves the scene as it was.
+"""
+
+from __future__ import annotations
+
+from typing import Optional, Sequence, Tuple, Union
+
+import numpy as np
+
+from . import _canopy
+
+Material = Union[dict, int]
+"""A material: a dict as a scene file writes it (see :func:`lambertian` and friends), or
+the index :meth:`Scene.add_material` returned."""
+
+
+def lambertian(albedo) -> dict:
+    """An ideal diffuse surface; ``albedo`` is (r, g, b), each in [0, 1]."""
+    return {"type": "lambertian", "albedo": [float(c) for c in albedo]}
+
+
+def metal(albedo, fuzz: float = 0.0) -> dict:
+    """A mirror tinted by ``albedo``, blurred by ``fuzz`` in [0, 1] (0 is a perfect mirror)."""
+    return {"type": "metal", "albedo": [float(c) for c in albedo], "fuzz": float(fuzz)}
+
+
+def dielectric(ior: float) -> dict:
+    """Glass-like refraction with index of refraction ``ior`` (1.5 for glass)."""
+    return {"type": "dielectric", "ior": float(ior)}
+
+
+def emissive(radiance) -> dict:
+    """A light: emits ``radiance`` (r, g, b), each >= 0, from both sides."""
+    return {"type": "emissive", "radiance": [float(c) for c in radiance]}
+
+
+def _transform(transform) -> np.ndarray:
+    """A (3, 4) float32 affine matrix from a 4x4 or 3x4 matrix (column vectors), or the
+    identity for None."""
+    if transform is None:
+        return np.eye(4, dtype=np.float32)[:3]
+    m = np.asarray(transform, dtype=np.float64)
+    if m.shape == (4, 4):
+        if not np.array_equal(m[3], [0, 0, 0, 1]):
+            raise ValueError(f"transform: the last row of a 4x4 affine matrix must be [0, 0, 0, 1], not {m[3].tolist()}")
+        m = m[:3]
+    if m.shape != (3, 4):
+        raise ValueError(f"transform must be a 4x4 or 3x4 matrix, not shape {m.shape}")
+    return np.ascontiguousarray(m, dtype=np.float32)
+
+
+def _vec3(value, name: str) -> Tuple[float, float, float]:
+    v = np.asarray(value, dtype=np.float64).reshape(-1)
+    if v.shape != (3,):
+        raise ValueError(f"{name} must be three numbers, not {value!r}")
+    return (float(v[0]), float(v[1]), float(v[2]))
+
+
+class Scene:
+    """A scene under construction. ``size`` is (width, height); the other settings are
+    those of a scene file's ``[render]`` table."""
+
+    def __init__(
+        self,
+        *,
+        size: Tuple[int, int] = (640, 480),
+        spp: int = 64,
+        max_depth: int = 8,
+        seed: int = 0,
+        integrator: str = "path",
+        russian_roulette: bool = True,
+        name: str = "",
+    ):
+        self._native = _canopy.Scene(str(name))
+        self._mesh_materials = {}
+        self.settings(
+            size=size,
+            spp=spp,
+            max_depth=max_depth,
+            seed=seed,
+            integrator=integrator,
+            russian_roulette=russian_roulette,
+        )
+
+    def settings(
+        self,
+        *,
+        size: Tuple[int, int],
+        spp: int,
+        max_depth: int = 8,
+        seed: int = 0,
+        integrator: str = "path",
+        russian_roulette: bool = True,
+    ) -> None:
+        """Sets every render setting (``canopy.render`` may still override them)."""
+        width, height = (int(size[0]), int(size[1]))
+        self._native.set_settings(
+            width, height, int(spp), int(max_depth), int(seed), str(integrator), bool(russian_roulette)
+        )
+
+    def camera(
+        self,
+        look_from,
+        look_at,
+        *,
+        up=(0.0, 1.0, 0.0),
+        vfov: float = 40.0,
+        aperture: float = 0.0,
+        focus_distance: Optional[float] = None,
+    ) -> None:
+        """Places the camera: ``vfov`` is the vertical field of view in degrees;
+        ``aperture`` > 0 blurs what is not at ``focus_distance`` (default: ``look_at``)."""
+        self._native.set_camera(
+            _vec3(look_from, "look_from"),
+            _vec3(look_at, "look_at"),
+            _vec3(up, "up"),
+            float(vfov),
+            float(aperture),
+            None if focus_distance is None else float(focus_distance),
+        )
+
+    def background(self, value="sky", *, environment=None, rotate=0.0, strength: float = 1.0) -> None:
+        """The light from where no surface is: ``"sky"`` (the report's gradient), an
+        (r, g, b) radiance, or ``environment="file.hdr"`` (or .exr), turned by ``rotate``
+        degrees about the vertical (or (x, y, z) Euler degrees) and scaled by
+        ``strength``."""
+        if environment is not None:
+            angles = (0.0, float(rotate), 0.0) if np.isscalar(rotate) else _vec3(rotate, "rotate")
+            self._native.set_environment(str(environment), angles, float(strength))
+        elif isinstance(value, str):
+            if value != "sky":
+                raise ValueError(f'background must be "sky", an (r, g, b) radiance or environment=..., not {value!r}')
+            self._native.set_sky()
+        else:
+            self._native.set_background_color(_vec3(value, "background"))
+
+    def add_material(self, material: dict) -> int:
+        """Adds a material (a dict from :func:`lambertian` and friends); returns its index,
+        which every ``material=`` argument also takes."""
+        if not isinstance(material, dict):
+            raise TypeError(f"a material is a dict such as canopy.lambertian((0.5, 0.5, 0.5)), not {type(material).__name__}")
+        return self._native.add_material(material)
+
+    @staticmethod
+    def _material(material: Material):
+        """An index, or a dict that the native call adds only if it succeeds."""
+        if isinstance(material, (int, np.integer)) and not isinstance(material, bool):
+            return int(material)
+        if not isinstance(material, dict):
+            raise TypeError(f"a material is a dict such as canopy.lambertian((0.5, 0.5, 0.5)) or an index, not {type(material).__name__}")
+        return material
+
+    def add_sphere(self, center, radius: float, *, material: Material) -> None:
+        self._native.add_sphere(_vec3(center, "center"), float(radius), self._material(material))
+
+    def add_spheres(self, centers, radii, *, material: Material) -> None:
+        """Adds spheres at the rows of ``centers`` (n, 3) with ``radii`` (n,) or one radius."""
+        centers = np.ascontiguousarray(np.asarray(centers, dtype=np.float32).reshape(-1, 3))
+        radii = np.asarray(radii, dtype=np.float32)
+        if radii.ndim == 0:
+            radii = np.full(len(centers), radii, dtype=np.float32)
+        self._native.add_spheres(centers, np.ascontiguousarray(radii.reshape(-1)), self._material(material))
+
+    def add_box(self, min, max, *, material: Material, rotate=(0.0, 0.0, 0.0), translate=(0.0, 0.0, 0.0)) -> None:
+        """Adds the box ``min``..``max``, rotated by (x, y, z) Euler degrees, then translated."""
+        self._native.add_box(
+            _vec3(min, "min"), _vec3(max, "max"), _vec3(rotate, "rotate"), _vec3(translate, "translate"),
+            self._material(material),
+        )
+
+    def add_mesh(
+        self,
+        vertices,
+        faces,
+        *,
+        material: Material = None,
+        transform=None,
+        normals=None,
+        smooth: bool = False,
+        name: str = "",
+    ) -> int:
+        """Adds a triangle mesh, stored once, and places one instance of it by
+        ``transform`` (4x4 or 3x4, column vectors; identity by default) with
+        ``material`` (grey by default). Returns the mesh's index for :meth:`add_instance`.
+        ``normals`` (one per vertex) or ``smooth=True`` (computed) shade it smoothly."""
+        vertices = np.ascontiguousarray(np.asarray(vertices, dtype=np.float32))
+        faces = np.ascontiguousarray(np.asarray(faces, dtype=np.int64))
+        if vertices.ndim != 2 or faces.ndim != 2:
+            raise ValueError("vertices must have shape (n, 3) and faces (m, 3)")
+        if normals is not None:
+            normals = np.ascontiguousarray(np.asarray(normals, dtype=np.float32))
+            if normals.ndim != 2:
+                raise ValueError("normals must have shape (n, 3)")
+        material = self._material(lambertian((0.7, 0.7, 0.7)) if material is None else material)
+        mesh, material = self._native.add_mesh(
+            str(name), vertices, faces, normals, bool(smooth), _transform(transform), material
+        )
+        self._mesh_materials[mesh] = material
+        return mesh
+
+    def add_instance(self, mesh: int, transform=None, *, material: Material = None) -> int:
+        """Places another copy of mesh ``mesh`` by ``transform`` (any invertible affine
+        matrix: rotations, mirrors, non-uniform scale), with ``material`` or the one
+        the mesh was added with. Returns the instance's index. The mesh is not copied."""
+        if material is None:
+            if mesh not in self._mesh_materials:
+                raise ValueError(f"add_instance: mesh {mesh} does not exist")
+            material = self._mesh_materials[mesh]
+        return self._native.add_instance(int(mesh), _transform(transform), self._material(material))
+
+    def info(self) -> "_canopy.SceneInfo":
+        """The scene described: ``settings``, ``counts``, ``bounds``, ``warnings``."""
+        return self._native.info()
+
+    def __repr__(self) -> str:
+        return repr(self._native)

@@ -1,0 +1,311 @@
+//! `canopy._canopy.RayScene`: triangle meshes placed by instances and queried with
+//! batches of rays, as Embree's and Open3D's ray-casting scenes are. A hit names the
+//! instance, its geometry, the triangle, t, barycentrics and the geometric normal in
+//! world space.
+
+use crate::arrays;
+use crate::bvh::batch;
+use crate::pools;
+use canopy_bvh::{Blas, BlasParams, Hit, Instance, Ray, RayQuery, Tlas, TriangleMesh};
+use glam::{Affine3A, Mat3, Vec3};
+use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray2, PyUntypedArrayMethods};
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use rayon::prelude::*;
+use std::sync::{Arc, Mutex};
+
+type MeshBlas = Arc<Blas<TriangleMesh>>;
+
+/// Meshes (each with its own BVH, built once) and the instances placing them; the top
+/// tree over the instances is built at the first query after a change.
+#[pyclass(module = "canopy._canopy")]
+pub struct RayScene {
+    meshes: Vec<MeshBlas>,
+    instances: Vec<Instance>,
+    params: BlasParams,
+    /// The top tree of the current instances, once a query has needed it.
+    tlas: Mutex<Option<Arc<Tlas<MeshBlas>>>>,
+}
+
+impl RayScene {
+    fn tlas(&self, threads: Option<usize>) -> PyResult<Arc<Tlas<MeshBlas>>> {
+        let mut cached = self.tlas.lock().expect("no query panics holding the lock");
+        if let Some(tlas) = &*cached {
+            return Ok(tlas.clone());
+        }
+        let tlas = pools::install(threads, || {
+            Tlas::build(self.meshes.clone(), self.instances.clone(), &self.params)
+        })?
+        .map_err(|e| PyValueError::new_err(e.to_string()))?;
+        let tlas = Arc::new(tlas);
+        *cached = Some(tlas.clone());
+        Ok(tlas)
+    }
+
+    fn changed(&mut self) {
+        *self
+            .tlas
+            .get_mut()
+            .expect("no query panics holding the lock") = None;
+    }
+}
+
+/// The rows of a (3, 4) float32 matrix as an affine transform.
+fn affine(array: &PyReadonlyArray2<'_, f32>) -> PyResult<Affine3A> {
+    if array.shape() != [3, 4] {
+        return Err(PyValueError::new_err(format!(
+            "transform must be a 4x4 or 3x4 matrix, not {:?}",
+            array.shape()
+        )));
+    }
+    let m = array.as_array();
+    let column = |j: usize| Vec3::new(m[[0, j]], m[[1, j]], m[[2, j]]);
+    Ok(Affine3A::from_mat3_translation(
+        Mat3::from_cols(column(0), column(1), column(2)),
+        column(3),
+    ))
+}
+
+/// The world-space unit normal of the triangle `hit` names, (v1 - v0) x (v2 - v0) in its
+/// mesh, through its instance's inverse transpose.
+fn geometric_normal(tlas: &Tlas<MeshBlas>, hit: &Hit) -> Vec3 {
+    let instance = &tlas.instances()[hit.inst as usize];
+    let mesh = tlas.blases()[instance.blas as usize].geometry();
+    let [a, b, c] = mesh.vertices_of(hit.prim);
+    instance
+        .normal_to_world((b - a).cross(c - a))
+        .normalize_or_zero()
+}
+
+#[pymethods]
+impl RayScene {
+    #[new]
+    #[pyo3(signature = (builder="binned-sah", width=8))]
+    fn new(builder: &str, width: u32) -> PyResult<Self> {
+        let kind: canopy_render::AccelKind = builder
+            .parse()
+            .map_err(|e: canopy_bvh::UnknownBuilder| PyValueError::new_err(e.to_string()))?;
+        let width: canopy_bvh::BvhWidth =
+            width.to_string().parse().map_err(PyValueError::new_err)?;
+        let builder = match kind {
+            canopy_render::AccelKind::None => None,
+            canopy_render::AccelKind::Bvh(b) => Some(b),
+        };
+        let mut params = BlasParams::new(builder, width);
+        params.build = canopy_bvh::packed_params(&params.build);
+        Ok(Self {
+            meshes: Vec::new(),
+            instances: Vec::new(),
+            params,
+            tlas: Mutex::new(None),
+        })
+    }
+
+    /// Adds a mesh and builds its BVH; returns the geometry's index. It is placed by
+    /// `add_instance` only.
+    #[pyo3(signature = (vertices, faces, threads=None))]
+    fn add_geometry(
+        &mut self,
+        py: Python<'_>,
+        vertices: PyReadonlyArray2<'_, f32>,
+        faces: PyReadonlyArray2<'_, i64>,
+        threads: Option<usize>,
+    ) -> PyResult<u32> {
+        let positions: Vec<Vec3> = arrays::points("vertices", &vertices)?
+            .iter()
+            .map(|&p| p.into())
+            .collect();
+        let triangles: Vec<[u32; 3]> = arrays::faces(&faces, positions.len())?
+            .iter()
+            .map(|f| f.map(|i| i as u32))
+            .collect();
+        let mesh = TriangleMesh::new(positions, triangles)
+            .map_err(|e| PyValueError::new_err(format!("add_geometry: {e}")))?;
+        let params = self.params;
+        let blas = py.detach(|| pools::install(threads, || Blas::build(mesh, &params)))?;
+        self.meshes.push(Arc::new(blas));
+        Ok(self.meshes.len() as u32 - 1)
+    }
+
+    /// Places geometry `geometry` by `transform` (a (3, 4) float32 matrix), seen by rays
+    /// whose mask shares a bit with `mask`; returns the instance's index.
+    fn add_instance(
+        &mut self,
+        geometry: u32,
+        transform: PyReadonlyArray2<'_, f32>,
+        mask: u32,
+    ) -> PyResult<u32> {
+        if geometry as usize >= self.meshes.len() {
+            return Err(PyValueError::new_err(format!(
+                "add_instance: geometry {geometry} does not exist (the scene has {})",
+                self.meshes.len()
+            )));
+        }
+        let to_world = affine(&transform)?;
+        let determinant = to_world.matrix3.determinant();
+        if !to_world.is_finite() || determinant == 0.0 || !to_world.inverse().is_finite() {
+            return Err(PyValueError::new_err(format!(
+                "add_instance: the transform must be finite and invertible (determinant {determinant:e})"
+            )));
+        }
+        if self.instances.len() >= u32::MAX as usize {
+            return Err(PyValueError::new_err("add_instance: too many instances"));
+        }
+        let id = self.instances.len() as u32;
+        self.instances.push(
+            Instance::new(geometry, to_world)
+                .with_mask(mask)
+                .with_id(id),
+        );
+        self.changed();
+        Ok(id)
+    }
+
+    /// Moves instance `instance` to `transform`.
+    fn set_transform(
+        &mut self,
+        instance: u32,
+        transform: PyReadonlyArray2<'_, f32>,
+    ) -> PyResult<()> {
+        let count = self.instances.len();
+        let to_world = affine(&transform)?;
+        let Some(slot) = self.instances.get_mut(instance as usize) else {
+            return Err(PyValueError::new_err(format!(
+                "set_transform: instance {instance} does not exist (the scene has {count})"
+            )));
+        };
+        if !to_world.is_finite()
+            || to_world.matrix3.determinant() == 0.0
+            || !to_world.inverse().is_finite()
+        {
+            return Err(PyValueError::new_err(
+                "set_transform: the transform must be finite and invertible",
+            ));
+        }
+        *slot = slot.with_transform(to_world);
+        self.changed();
+        Ok(())
+    }
+
+    #[getter]
+    fn geometry_count(&self) -> usize {
+        self.meshes.len()
+    }
+
+    #[getter]
+    fn instance_count(&self) -> usize {
+        self.instances.len()
+    }
+
+    /// Closest hits: t (inf on a miss), instance, geometry and primitive (-1 on a miss),
+    /// barycentrics uv and the world-space unit geometric normal (0 on a miss).
+    #[pyo3(signature = (origins, directions, tnear, tfar, mask, threads=None))]
+    #[allow(clippy::type_complexity, clippy::too_many_arguments)]
+    fn intersect<'py>(
+        &self,
+        py: Python<'py>,
+        origins: PyReadonlyArray2<'py, f32>,
+        directions: PyReadonlyArray2<'py, f32>,
+        tnear: Bound<'py, PyAny>,
+        tfar: Bound<'py, PyAny>,
+        mask: u32,
+        threads: Option<usize>,
+    ) -> PyResult<(
+        Bound<'py, PyArray1<f32>>,
+        Bound<'py, PyArray1<i64>>,
+        Bound<'py, PyArray1<i64>>,
+        Bound<'py, PyArray1<i64>>,
+        Bound<'py, PyArray2<f32>>,
+        Bound<'py, PyArray2<f32>>,
+    )> {
+        let (mut near, mut far) = (None, None);
+        let batch = batch(&origins, &directions, &tnear, &mut near, &tfar, &mut far)?;
+        let n = batch.len();
+        let tlas = py.detach(|| self.tlas(threads))?;
+        let t_out = PyArray1::<f32>::zeros(py, n, false);
+        let inst_out = PyArray1::<i64>::zeros(py, n, false);
+        let geom_out = PyArray1::<i64>::zeros(py, n, false);
+        let prim_out = PyArray1::<i64>::zeros(py, n, false);
+        let uv_out = PyArray2::<f32>::zeros(py, [n, 2], false);
+        let normal_out = PyArray2::<f32>::zeros(py, [n, 3], false);
+        // SAFETY: the arrays were just made here and nothing else refers to them yet.
+        let (t, inst, geom, prim, uv, normal) = unsafe {
+            (
+                t_out.as_slice_mut().expect("contiguous"),
+                inst_out.as_slice_mut().expect("contiguous"),
+                geom_out.as_slice_mut().expect("contiguous"),
+                prim_out.as_slice_mut().expect("contiguous"),
+                uv_out.as_slice_mut().expect("contiguous"),
+                normal_out.as_slice_mut().expect("contiguous"),
+            )
+        };
+        py.detach(|| {
+            pools::install(threads, || {
+                let rays: Vec<Ray> = (0..n).into_par_iter().map(|i| batch.ray(i)).collect();
+                let mut hits = vec![None; n];
+                tlas.intersect_batch(&rays, &mut hits, mask);
+                t.par_iter_mut()
+                    .zip(inst.par_iter_mut())
+                    .zip(geom.par_iter_mut())
+                    .zip(prim.par_iter_mut())
+                    .zip(uv.par_chunks_mut(2))
+                    .zip(normal.par_chunks_mut(3))
+                    .zip(hits.par_iter())
+                    .for_each(
+                        |((((((t, inst), geom), prim), uv), normal), hit)| match hit {
+                            Some(hit) => {
+                                *t = hit.t;
+                                *inst = hit.inst as i64;
+                                *geom = tlas.instances()[hit.inst as usize].blas as i64;
+                                *prim = hit.prim as i64;
+                                uv.copy_from_slice(&[hit.u, hit.v]);
+                                normal.copy_from_slice(&geometric_normal(&tlas, hit).to_array());
+                            }
+                            None => {
+                                *t = f32::INFINITY;
+                                (*inst, *geom, *prim) = (-1, -1, -1);
+                            }
+                        },
+                    );
+            })
+        })?;
+        Ok((t_out, inst_out, geom_out, prim_out, uv_out, normal_out))
+    }
+
+    /// Whether anything `mask` sees lies on each ray within [tnear, tfar].
+    #[pyo3(signature = (origins, directions, tnear, tfar, mask, threads=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn occluded<'py>(
+        &self,
+        py: Python<'py>,
+        origins: PyReadonlyArray2<'py, f32>,
+        directions: PyReadonlyArray2<'py, f32>,
+        tnear: Bound<'py, PyAny>,
+        tfar: Bound<'py, PyAny>,
+        mask: u32,
+        threads: Option<usize>,
+    ) -> PyResult<Bound<'py, PyArray1<bool>>> {
+        let (mut near, mut far) = (None, None);
+        let batch = batch(&origins, &directions, &tnear, &mut near, &tfar, &mut far)?;
+        let n = batch.len();
+        let tlas = py.detach(|| self.tlas(threads))?;
+        let out = PyArray1::<bool>::zeros(py, n, false);
+        // SAFETY: the array was just made here and nothing else refers to it yet.
+        let blocked = unsafe { out.as_slice_mut().expect("contiguous") };
+        py.detach(|| {
+            pools::install(threads, || {
+                let rays: Vec<Ray> = (0..n).into_par_iter().map(|i| batch.ray(i)).collect();
+                tlas.occluded_batch(&rays, blocked, mask);
+            })
+        })?;
+        Ok(out)
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "RayScene({} geometries, {} instances)",
+            self.meshes.len(),
+            self.instances.len()
+        )
+    }
+}

@@ -1,0 +1,159 @@
+"""Scenes built in Python: the same pixels as the scene file with the same contents,
+instances with any invertible transform, errors that name the call, and checkpoints."""
+
+import numpy as np
+import pytest
+
+import canopy
+from conftest import MESHES
+
+TEAPOT = MESHES / "teapot.obj"
+
+SCENE_FILE = f"""
+name = "table"
+background = "sky"
+[camera]
+look_from = [0, 3, 9]
+look_at = [0, 0.5, 0]
+vfov = 35
+[render]
+width = 40
+height = 30
+spp = 3
+max_depth = 5
+seed = 11
+[[spheres]]
+center = [0, -100, 0]
+radius = 99.5
+material = {{ type = "lambertian", albedo = [0.5, 0.5, 0.5] }}
+[[spheres]]
+center = [2.2, 0.5, 0]
+radius = 0.5
+material = {{ type = "dielectric", ior = 1.5 }}
+[[cuboids]]
+min = [-0.5, -0.5, -0.5]
+max = [0.5, 0.5, 0.5]
+rotate = [0, 30, 0]
+translate = [-2.2, 0, 0]
+material = {{ type = "metal", albedo = [0.9, 0.8, 0.6], fuzz = 0.1 }}
+[geometry.teapot]
+file = "{TEAPOT}"
+smooth = false
+[[instances]]
+geometry = "teapot"
+material = {{ type = "lambertian", albedo = [0.8, 0.3, 0.2] }}
+places = [{{ translate = [0, 0, 0] }}, {{ translate = [0, 0, -3] }}]
+"""
+
+
+def table_scene() -> canopy.Scene:
+    scene = canopy.Scene(size=(40, 30), spp=3, max_depth=5, seed=11, name="table")
+    scene.camera(look_from=(0, 3, 9), look_at=(0, 0.5, 0), vfov=35)
+    scene.add_sphere((0, -100, 0), 99.5, material=canopy.lambertian((0.5, 0.5, 0.5)))
+    scene.add_sphere((2.2, 0.5, 0), 0.5, material=canopy.dielectric(1.5))
+    scene.add_box((-0.5, -0.5, -0.5), (0.5, 0.5, 0.5), rotate=(0, 30, 0), translate=(-2.2, 0, 0),
+                  material=canopy.metal((0.9, 0.8, 0.6), fuzz=0.1))
+    vertices, faces = canopy.load_mesh(TEAPOT)
+    teapot = scene.add_mesh(vertices, faces, material=canopy.lambertian((0.8, 0.3, 0.2)))
+    back = np.eye(4)
+    back[2, 3] = -3
+    scene.add_instance(teapot, back)
+    return scene
+
+
+def test_a_python_scene_renders_the_scene_files_pixels(tmp_path):
+    path = tmp_path / "table.toml"
+    path.write_text(SCENE_FILE)
+    from_file = canopy.render(str(path))
+    scene = table_scene()
+    info = scene.info()
+    assert info.counts["primitives"] == 3 and info.counts["instances"] == 2
+    assert info.counts["instanced_triangles"] == 2 * len(canopy.load_mesh(TEAPOT)[1])
+    from_python = canopy.render(scene)
+    assert from_python.shape == (30, 40, 3)
+    assert from_python.max() > 0
+    np.testing.assert_array_equal(from_python, from_file)
+    # Overrides and regions apply to Python scenes as to files.
+    part = canopy.render(scene, region=(5, 6, 10, 7))
+    np.testing.assert_array_equal(part, from_python[6:13, 5:15])
+
+
+def test_instances_take_any_invertible_transform_and_the_mesh_is_stored_once():
+    scene = canopy.Scene(size=(24, 18), spp=2)
+    scene.camera(look_from=(0, 0, 8), look_at=(0, 0, 0))
+    vertices, faces = canopy.load_mesh(TEAPOT)
+    teapot = scene.add_mesh(vertices, faces, smooth=True)
+    mirror = np.diag([-1.0, 1.0, 1.0, 1.0])
+    squash = np.diag([2.0, 0.5, 1.0, 1.0])
+    squash[:3, 3] = (0, 2, 0)
+    angle = np.radians(40)
+    turn = np.array([[np.cos(angle), 0, np.sin(angle), -2], [0, 1, 0, -1], [-np.sin(angle), 0, np.cos(angle), 0]])
+    for i, t in enumerate([mirror, squash, turn]):
+        assert scene.add_instance(teapot, t, material=canopy.emissive((1, 1, 1)) if i == 2 else None) == i + 1
+    info = scene.info()
+    assert info.counts["instances"] == 4 and info.counts["emissive_materials"] == 1
+    image = canopy.render(scene)
+    assert np.isfinite(image).all() and image.max() > 0
+
+
+@pytest.mark.parametrize(
+    "call, words",
+    [
+        (lambda s: s.add_sphere((0, 0, 0), -1, material=canopy.lambertian((1, 1, 1))), "add_sphere: `center`"),
+        (lambda s: s.add_sphere((0, 0, 0), 1, material=canopy.lambertian((2, 1, 1))), "[0, 1]"),
+        (lambda s: s.add_sphere((0, 0, 0), 1, material={"type": "lambertian", "albdo": [1, 1, 1]}), "has no `albdo`"),
+        (lambda s: s.add_sphere((0, 0, 0), 1, material={"type": "plastic"}), "unknown type `plastic`"),
+        (lambda s: s.add_sphere((0, 0, 0), 1, material=7), "material 7 does not exist"),
+        (lambda s: s.add_spheres([[0, 0, 0], [1, 0, 0]], [1, 0], material=canopy.dielectric(1.5)), "sphere 1"),
+        (lambda s: s.add_box((1, 1, 1), (0, 0, 0), material=canopy.dielectric(1.5)), "`min`"),
+        (lambda s: s.add_mesh([[0, 0, 0], [1, 0, 0], [0, np.nan, 0]], [[0, 1, 2]]), "vertices[2]"),
+        (lambda s: s.add_mesh([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 3]]), "faces[0]"),
+        (lambda s: s.add_mesh([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]], transform=np.zeros((4, 4))), "last row"),
+        (lambda s: s.add_mesh([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]], transform=np.zeros((3, 4))), "invertible"),
+        (lambda s: s.add_instance(5), "mesh 5 does not exist"),
+        (lambda s: s.camera(look_from=(0, 0, 0), look_at=(0, 0, 0)), "same point"),
+        (lambda s: s.background("night"), "background must be"),
+        (lambda s: s.background(environment="/no/such/sky.hdr"), "sky.hdr"),
+        (lambda s: s.settings(size=(0, 4), spp=1), "settings"),
+    ],
+)
+def test_a_refused_call_names_its_fault_and_changes_nothing(call, words):
+    scene = canopy.Scene(size=(8, 8), spp=1)
+    before = repr(scene)
+    with pytest.raises(ValueError) as e:
+        call(scene)
+    assert words in str(e.value), str(e.value)
+    assert repr(scene) == before
+
+
+def test_a_python_scene_resumes_from_its_checkpoint(tmp_path):
+    checkpoint = tmp_path / "table.checkpoint"
+    scene = table_scene()
+    whole = canopy.render(scene, spp=4)
+
+    def stop(done, total):
+        if done == 1:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        canopy.render(scene, spp=4, checkpoint=checkpoint, progress=stop)
+    resumed = canopy.render(scene, resume=checkpoint)
+    np.testing.assert_array_equal(resumed, whole)
+    # Another scene is not continued from it.
+    with pytest.raises(KeyboardInterrupt):
+        canopy.render(scene, spp=4, checkpoint=checkpoint, progress=stop)
+    other = table_scene()
+    other.add_sphere((0, 5, 0), 1, material=canopy.emissive((4, 4, 4)))
+    with pytest.raises(ValueError, match="different scene"):
+        canopy.render(other, resume=checkpoint)
+
+
+def test_the_documented_examples_run():
+    import doctest
+
+    import canopy.ray_scene
+    import canopy.scene
+
+    for module in (canopy.scene, canopy.ray_scene):
+        result = doctest.testmod(module)
+        assert result.attempted > 0 and result.failed == 0, (module.__name__, result)

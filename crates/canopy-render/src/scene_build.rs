@@ -1,0 +1,400 @@
+//! Scenes built in code (Rust callers, the Python `canopy.Scene`), checked as the scene
+//! file parser checks its entries: every call refuses what a scene file would, with a
+//! message that names the argument at fault, and leaves the scene unchanged when it does.
+
+use crate::background::{decode_environment, Background};
+use crate::camera::CameraSpec;
+use crate::geometry::{Cuboid, Shape, Sphere, Triangle};
+use crate::material::Material;
+use crate::mesh::MeshData;
+use crate::scene::{MeshInstance, Primitive, Scene, SceneMesh};
+use crate::scene_file::{instances::MAX_INSTANCES, MAX_COORDINATE, MAX_RADIANCE};
+use canopy_bvh::{Aabb, Instance, TriangleMesh};
+use glam::{Affine3A, EulerRot, Mat3, Quat, Vec3};
+use std::path::Path;
+use std::sync::Arc;
+
+/// Finite and within [`MAX_COORDINATE`] in magnitude.
+pub(crate) fn in_range(values: &[f32]) -> bool {
+    values.iter().all(|v| v.abs() <= MAX_COORDINATE)
+}
+
+/// A radiance: every component in [0, MAX_RADIANCE].
+pub(crate) fn radiance_ok(c: Vec3) -> bool {
+    c.to_array()
+        .iter()
+        .all(|v| (0.0..=MAX_RADIANCE).contains(v))
+}
+
+/// Rotation by Euler angles in degrees: about x first, then y, then z.
+pub fn rotation_from_degrees(degrees: [f32; 3]) -> Quat {
+    let [x, y, z] = degrees.map(f32::to_radians);
+    Quat::from_euler(EulerRot::ZYX, z, y, x)
+}
+
+impl CameraSpec {
+    /// Why this camera cannot see, if it cannot.
+    pub fn check(&self) -> Result<(), String> {
+        let c = self;
+        let numbers = [
+            &c.look_from.to_array()[..],
+            &c.look_at.to_array(),
+            &c.up.to_array(),
+            &[c.vfov, c.aperture],
+        ]
+        .concat();
+        if !in_range(&numbers) || c.focus_distance.is_some_and(|f| !in_range(&[f])) {
+            return Err(format!(
+                "every number must be finite and within ±{MAX_COORDINATE:e}"
+            ));
+        }
+        if c.look_from == c.look_at {
+            return Err("`look_from` and `look_at` are the same point".into());
+        }
+        if c.up.cross(c.look_at - c.look_from).length_squared() == 0.0 {
+            return Err("`up` is parallel to the viewing direction".into());
+        }
+        if !(c.vfov > 0.0 && c.vfov < 180.0) {
+            return Err(format!(
+                "`vfov` must be in (0, 180) degrees, not {}",
+                c.vfov
+            ));
+        }
+        if c.aperture < 0.0 || c.focus_distance.is_some_and(|f| f <= 0.0) {
+            return Err("`aperture` must be >= 0 and `focus_distance` > 0".into());
+        }
+        Ok(())
+    }
+}
+
+impl Material {
+    /// Why this material is not physical, if it is not: a surface cannot reflect more
+    /// light than it receives.
+    pub fn check(&self) -> Result<(), String> {
+        let albedo_ok = |c: Vec3| c.to_array().iter().all(|v| (0.0..=1.0).contains(v));
+        let ok = match *self {
+            Material::Lambertian { albedo } => albedo_ok(albedo),
+            Material::Metal { albedo, fuzz } => albedo_ok(albedo) && (0.0..=1.0).contains(&fuzz),
+            Material::Dielectric { ior } => ior.is_finite() && ior > 0.0,
+            Material::Emissive { radiance } => radiance_ok(radiance),
+        };
+        if ok {
+            Ok(())
+        } else {
+            Err(format!("`albedo` components must be in [0, 1], `radiance` in [0, {MAX_RADIANCE:e}], `fuzz` in [0, 1], `ior` finite and > 0 (got {self:?})"))
+        }
+    }
+}
+
+impl Scene {
+    /// Sets the camera, if it can see.
+    pub fn set_camera(&mut self, camera: CameraSpec) -> Result<(), String> {
+        camera.check()?;
+        self.camera = camera;
+        Ok(())
+    }
+
+    /// Lights the scene by an environment map (`.hdr` or `.exr`), rotated by Euler
+    /// angles in degrees and scaled by `strength`; the file becomes an input of the scene.
+    pub fn set_environment(
+        &mut self,
+        path: &Path,
+        rotate_degrees: [f32; 3],
+        strength: f32,
+    ) -> Result<(), String> {
+        if !rotate_degrees.iter().all(|d| d.is_finite()) {
+            return Err("`rotate` must be finite".into());
+        }
+        if !(strength.is_finite() && (0.0..=MAX_RADIANCE).contains(&strength)) {
+            return Err(format!("`strength` must be in [0, {MAX_RADIANCE:e}]"));
+        }
+        let name = path.display().to_string();
+        let bytes =
+            crate::files::read_regular_file(path, crate::background::MAX_ENVIRONMENT_PIXELS * 16)
+                .map_err(|e| format!("`{name}`: {e}"))?;
+        let to_world = Mat3::from_quat(rotation_from_degrees(rotate_degrees));
+        let map = decode_environment(&name, &bytes, to_world, strength)?;
+        self.background = Background::Environment(Arc::new(map));
+        self.inputs.push(path.to_owned());
+        Ok(())
+    }
+
+    /// A uniform background of `radiance`.
+    pub fn set_background_color(&mut self, radiance: Vec3) -> Result<(), String> {
+        if !radiance_ok(radiance) {
+            return Err(format!(
+                "a background colour's components must be in [0, {MAX_RADIANCE:e}], not {radiance}"
+            ));
+        }
+        self.background = Background::Constant(radiance);
+        Ok(())
+    }
+
+    /// Adds a material; returns its index.
+    pub fn add_material(&mut self, material: Material) -> Result<u32, String> {
+        material.check()?;
+        self.materials.push(material);
+        Ok(self.materials.len() as u32 - 1)
+    }
+
+    fn check_material_index(&self, material: u32) -> Result<(), String> {
+        if (material as usize) < self.materials.len() {
+            Ok(())
+        } else {
+            Err(format!(
+                "material {material} does not exist (the scene has {})",
+                self.materials.len()
+            ))
+        }
+    }
+
+    fn push_primitive(&mut self, shape: Shape, material: u32) {
+        Arc::make_mut(&mut self.primitives).push(Primitive { shape, material });
+    }
+
+    /// Adds a sphere of material `material` (an index from [`add_material`](Self::add_material)).
+    pub fn add_sphere(&mut self, center: Vec3, radius: f32, material: u32) -> Result<(), String> {
+        if !(in_range(&center.to_array()) && radius > 0.0 && radius <= MAX_COORDINATE) {
+            return Err(format!(
+                "`center` must be within ±{MAX_COORDINATE:e} and `radius` in (0, {MAX_COORDINATE:e}] (got {center}, {radius})"
+            ));
+        }
+        self.check_material_index(material)?;
+        self.push_primitive(Shape::Sphere(Sphere::new(center, radius)), material);
+        Ok(())
+    }
+
+    /// Adds the box `min..max`, rotated by Euler angles in degrees (about x, then y, then
+    /// z) and then translated.
+    pub fn add_cuboid(
+        &mut self,
+        min: Vec3,
+        max: Vec3,
+        rotate_degrees: [f32; 3],
+        translate: Vec3,
+        material: u32,
+    ) -> Result<(), String> {
+        if !rotate_degrees.iter().all(|d| d.is_finite())
+            || !in_range(&[min.to_array(), max.to_array(), translate.to_array()].concat())
+        {
+            return Err(format!(
+                "every number must be finite, and positions within ±{MAX_COORDINATE:e}"
+            ));
+        }
+        if min.cmpgt(max).any() {
+            return Err("`min` must not exceed `max` on any axis".into());
+        }
+        self.check_material_index(material)?;
+        let cuboid = Cuboid {
+            local: Aabb::new(min, max),
+            rotation: Mat3::from_quat(rotation_from_degrees(rotate_degrees)),
+            translation: translate,
+        };
+        self.push_primitive(Shape::Cuboid(cuboid), material);
+        Ok(())
+    }
+
+    /// Adds a mesh to be placed by instances ([`add_instance`](Self::add_instance));
+    /// returns its index. `normals` are per vertex (smooth shading) or empty (flat);
+    /// `smooth` with no normals computes them. Triangles without area are left out (and
+    /// counted, see [`Scene::warnings`]).
+    pub fn add_mesh(
+        &mut self,
+        name: &str,
+        vertices: Vec<Vec3>,
+        triangles: Vec<[u32; 3]>,
+        normals: Vec<Vec3>,
+        smooth: bool,
+    ) -> Result<u32, String> {
+        if let Some(i) = vertices.iter().position(|p| !in_range(&p.to_array())) {
+            return Err(format!(
+                "vertex {i} lies at {}, beyond ±{MAX_COORDINATE:e}",
+                vertices[i]
+            ));
+        }
+        if !normals.is_empty() && normals.len() != vertices.len() {
+            return Err(format!(
+                "{} normals for {} vertices: give one per vertex, or none",
+                normals.len(),
+                vertices.len()
+            ));
+        }
+        if let Some(i) = normals.iter().position(|n| !n.is_finite()) {
+            return Err(format!("normal {i} is not finite ({})", normals[i]));
+        }
+        let mut data = MeshData {
+            positions: vertices,
+            normals,
+            triangles,
+        };
+        if let Some(i) = data
+            .triangles
+            .iter()
+            .position(|t| t.iter().any(|&v| v as usize >= data.positions.len()))
+        {
+            return Err(format!(
+                "triangle {i} uses vertex {:?}, past the last of {} vertices",
+                data.triangles[i],
+                data.positions.len()
+            ));
+        }
+        if smooth && data.normals.is_empty() {
+            data.compute_vertex_normals();
+        }
+        let before = data.triangles.len();
+        let positions = &data.positions;
+        data.triangles.retain(|t| {
+            let [a, b, c] = t.map(|i| positions[i as usize]);
+            Triangle::new(a, b, c).area() != 0.0
+        });
+        let skipped = before - data.triangles.len();
+        let mesh = TriangleMesh::new(data.positions, data.triangles).map_err(|e| e.to_string())?;
+        self.skipped_degenerate += skipped;
+        self.meshes.push(SceneMesh {
+            name: name.to_owned(),
+            mesh: Arc::new(mesh),
+            normals: data.normals,
+        });
+        Ok(self.meshes.len() as u32 - 1)
+    }
+
+    /// Places mesh `mesh` by the affine transform `to_world` (any invertible one:
+    /// rotations, mirrors, non-uniform scale); returns the instance's index.
+    pub fn add_instance(
+        &mut self,
+        mesh: u32,
+        to_world: Affine3A,
+        material: u32,
+    ) -> Result<u32, String> {
+        let Some(local) = self
+            .meshes
+            .get(mesh as usize)
+            .map(|m| m.mesh.bounding_box())
+        else {
+            return Err(format!(
+                "mesh {mesh} does not exist (the scene has {})",
+                self.meshes.len()
+            ));
+        };
+        self.check_material_index(material)?;
+        if self.instances.len() as u64 >= MAX_INSTANCES {
+            return Err(format!("a scene holds at most {MAX_INSTANCES} instances"));
+        }
+        let determinant = to_world.matrix3.determinant();
+        if !to_world.is_finite() || determinant == 0.0 || !to_world.inverse().is_finite() {
+            return Err(format!(
+                "the transform must be finite and invertible (determinant {determinant:e})"
+            ));
+        }
+        let world = Instance::new(0, to_world).world_bounds(local);
+        if !local.is_empty() && !in_range(&[world.min.to_array(), world.max.to_array()].concat()) {
+            return Err(format!(
+                "the instance reaches {} .. {}, beyond ±{MAX_COORDINATE:e}",
+                world.min, world.max
+            ));
+        }
+        self.instances.push(MeshInstance {
+            mesh,
+            to_world,
+            material,
+        });
+        Ok(self.instances.len() as u32 - 1)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn grey(scene: &mut Scene) -> u32 {
+        scene
+            .add_material(Material::Lambertian {
+                albedo: Vec3::splat(0.5),
+            })
+            .unwrap()
+    }
+
+    #[test]
+    fn a_scene_built_in_code_is_checked_call_by_call() {
+        let mut scene = Scene::default();
+        let m = grey(&mut scene);
+        assert!(scene
+            .add_material(Material::Lambertian {
+                albedo: Vec3::splat(1.5)
+            })
+            .unwrap_err()
+            .contains("[0, 1]"));
+        scene.add_sphere(Vec3::ZERO, 1.0, m).unwrap();
+        assert!(scene
+            .add_sphere(Vec3::ZERO, -1.0, m)
+            .unwrap_err()
+            .contains("radius"));
+        assert!(scene
+            .add_sphere(Vec3::ZERO, 1.0, 7)
+            .unwrap_err()
+            .contains("material 7"));
+        scene
+            .add_cuboid(Vec3::ZERO, Vec3::ONE, [0.0, 45.0, 0.0], Vec3::X, m)
+            .unwrap();
+        assert!(scene
+            .add_cuboid(Vec3::ONE, Vec3::ZERO, [0.0; 3], Vec3::ZERO, m)
+            .unwrap_err()
+            .contains("`min`"));
+        assert_eq!(scene.primitives.len(), 2, "refused calls add nothing");
+
+        let square = vec![Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::ONE, Vec3::ZERO];
+        let mesh = scene
+            .add_mesh(
+                "quad",
+                square.clone(),
+                vec![[0, 1, 2], [1, 3, 2], [0, 4, 1]],
+                vec![],
+                true,
+            )
+            .unwrap();
+        assert_eq!(
+            scene.meshes[0].mesh.indices().len(),
+            2,
+            "the degenerate one is left out"
+        );
+        assert_eq!(scene.skipped_degenerate, 1);
+        assert_eq!(scene.meshes[0].normals.len(), 5, "smooth: normals computed");
+        assert!(scene
+            .add_mesh("bad", square.clone(), vec![[0, 1, 9]], vec![], false)
+            .unwrap_err()
+            .contains("triangle 0"));
+        assert!(scene
+            .add_mesh("bad", square, vec![[0, 1, 2]], vec![Vec3::Z], false)
+            .unwrap_err()
+            .contains("1 normals for 5 vertices"));
+
+        let mirror = Affine3A::from_scale(Vec3::new(-1.0, 2.0, 1.0));
+        assert_eq!(scene.add_instance(mesh, mirror, m), Ok(0));
+        let flat = Affine3A::from_scale(Vec3::new(1.0, 0.0, 1.0));
+        assert!(scene
+            .add_instance(mesh, flat, m)
+            .unwrap_err()
+            .contains("invertible"));
+        assert!(scene
+            .add_instance(3, Affine3A::IDENTITY, m)
+            .unwrap_err()
+            .contains("mesh 3"));
+        let far = Affine3A::from_translation(Vec3::splat(2e12));
+        assert!(scene
+            .add_instance(mesh, far, m)
+            .unwrap_err()
+            .contains("beyond"));
+        assert_eq!(scene.instances.len(), 1);
+
+        let blind = CameraSpec {
+            look_at: scene.camera.look_from,
+            ..scene.camera
+        };
+        assert!(scene.set_camera(blind).unwrap_err().contains("same point"));
+        assert!(scene
+            .set_background_color(Vec3::new(1.0, -1.0, 0.0))
+            .is_err());
+        let missing = scene.set_environment(Path::new("/no/such/sky.hdr"), [0.0; 3], 1.0);
+        assert!(missing.unwrap_err().contains("sky.hdr"));
+    }
+}
