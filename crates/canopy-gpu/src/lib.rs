@@ -20,6 +20,7 @@
 
 mod chunked;
 mod context;
+mod instances;
 mod render;
 mod rng_check;
 mod scene;

@@ -3,13 +3,14 @@
 //! to a CPU [`Accumulator`] dispatch by dispatch.
 
 use crate::chunked::ChunkedBuffer;
-use crate::scene::{GpuScene, NODE_BINDINGS, PRIM_BINDINGS};
+use crate::instances::Flat;
+use crate::scene::{NODE_BINDINGS, PRIM_BINDINGS};
 use crate::{Gpu, GpuError};
 use bytemuck::{Pod, Zeroable};
 use canopy_bvh::Bvh2;
 use canopy_render::camera::Camera;
 use canopy_render::material::Material;
-use canopy_render::{Accumulator, Background, Integrator, Scene};
+use canopy_render::{Accel, Accumulator, Background, Integrator, Scene};
 use glam::Vec3;
 use std::time::{Duration, Instant};
 
@@ -38,7 +39,7 @@ impl GpuMaterial {
     }
 }
 
-/// The per-dispatch constants: 224 bytes; WGSL `Frame` in `render.wgsl`.
+/// The per-dispatch constants: 256 bytes; WGSL `Frame` in `render.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
 struct Frame {
@@ -65,6 +66,8 @@ struct Frame {
     env_size: [u32; 4],
     /// The region of the image rendered: x, y, width, height.
     region: [u32; 4],
+    /// Two-level traversal (1) or one tree from node 0 (0), and the top tree's root.
+    top: [u32; 4],
 }
 
 /// An environment map as the GPU reads it: pixels, and per pixel the end of its slice of
@@ -108,38 +111,14 @@ fn environment_tables(map: &canopy_render::EnvironmentMap) -> EnvironmentTables 
 /// A light for the GPU: 16 bytes; WGSL `Light` in `path.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
-struct GpuLight {
-    prim: u32,
+pub(crate) struct GpuLight {
+    /// The primitive record it samples (world space).
+    pub prim: u32,
     /// Probability of choosing it.
-    pmf: f32,
+    pub pmf: f32,
     /// End of its slice of the cumulative distribution, normalised to 1.
-    cdf_end: f32,
-    unused: u32,
-}
-
-/// The scene's emitters as the GPU samples them: `canopy_render::lights::Lights`'s,
-/// with their CDF normalised to f32, and each primitive's light index (or `u32::MAX`).
-fn gpu_lights(scene: &Scene) -> (Vec<GpuLight>, Vec<u32>) {
-    let lights = canopy_render::lights::Lights::new(scene);
-    let mut light_of_prim = vec![u32::MAX; scene.primitives.len()];
-    let Some(choice) = lights.choice() else {
-        return (Vec::new(), light_of_prim);
-    };
-    let table = lights
-        .emitters()
-        .iter()
-        .enumerate()
-        .map(|(light, &(_, prim))| {
-            light_of_prim[prim as usize] = light as u32;
-            GpuLight {
-                prim,
-                pmf: choice.pmf(light),
-                cdf_end: (choice.cdf()[light + 1] / choice.total()) as f32,
-                unused: 0,
-            }
-        })
-        .collect();
-    (table, light_of_prim)
+    pub cdf_end: f32,
+    pub unused: u32,
 }
 
 fn vec4(v: Vec3, w: f32) -> [f32; 4] {
@@ -173,41 +152,60 @@ pub struct Renderer<'g> {
 }
 
 impl<'g> Renderer<'g> {
-    /// Uploads `scene` with the tree `bvh` built over its primitives.
+    /// Uploads `scene`, which has no mesh instances, with the tree `bvh` built over its
+    /// primitives.
     pub fn new(gpu: &'g Gpu, scene: &Scene, bvh: &Bvh2) -> Result<Self, GpuError> {
         if !scene.instances.is_empty() {
-            // Two-level traversal in WGSL is still to come; callers bake instances
-            // (`Scene::with_instances_baked`) for the GPU until then.
             return Err(GpuError::Unsupported(
-                "mesh instances (bake them into the scene's primitives first)",
+                "mesh instances with one tree (use `Renderer::for_accel`)",
             ));
         }
+        Self::upload(gpu, scene, Flat::single(scene, bvh)?)
+    }
+
+    /// Uploads `scene` with the structures of `accel` (built over it with width 2):
+    /// mesh instances are traced in two levels, the top tree over the instances, then
+    /// the instance's mesh in its own space, as on the CPU.
+    pub fn for_accel(gpu: &'g Gpu, scene: &Scene, accel: &Accel) -> Result<Self, GpuError> {
+        let flat = match (scene.instances.is_empty(), accel.tree()) {
+            (true, Some(canopy_bvh::Tree::Binary(bvh))) => Flat::single(scene, bvh)?,
+            (true, _) => {
+                return Err(GpuError::Unsupported(
+                    "a structure that is not a binary tree (build with width 2)",
+                ))
+            }
+            (false, _) => Flat::two_level(scene, accel)?,
+        };
+        Self::upload(gpu, scene, flat)
+    }
+
+    fn upload(gpu: &'g Gpu, scene: &Scene, flat: Flat) -> Result<Self, GpuError> {
         let (background_kind, background, env) = match &scene.background {
             Background::Sky => (0, Vec3::ZERO, EnvironmentTables::default()),
             Background::Constant(c) => (1, *c, EnvironmentTables::default()),
             Background::Environment(map) => (2, Vec3::ZERO, environment_tables(map)),
         };
-        let flat = GpuScene::with_bvh(&scene.primitives, bvh)?;
         let device = &gpu.device;
         let (width, height) = (scene.settings.width, scene.settings.height);
         let storage = |label, bytes: &[u8], extra| gpu.storage(label, bytes, extra);
         let none = wgpu::BufferUsages::empty();
-        let nodes = ChunkedBuffer::new(gpu, "NODE", "BVH nodes", &flat.upload_nodes())?;
+        let nodes = ChunkedBuffer::new(gpu, "NODE", "BVH nodes", &flat.nodes)?;
+        // A binding cannot be empty.
+        let prim_indices = match flat.prim_indices.is_empty() {
+            true => vec![0],
+            false => flat.prim_indices,
+        };
         let indices = storage(
             "primitive indices",
-            bytemuck::cast_slice(flat.bvh.prim_indices()),
+            bytemuck::cast_slice(&prim_indices),
             none,
         )?;
+        let instances = storage("instances", bytemuck::cast_slice(&flat.instances), none)?;
         let primitives = ChunkedBuffer::new(gpu, "PRIM", "primitives", &flat.primitives)?;
         let materials: Vec<GpuMaterial> = scene.materials.iter().map(GpuMaterial::new).collect();
         let materials = storage("materials", bytemuck::cast_slice(&materials), none)?;
-        let normals: Vec<[f32; 4]> = scene
-            .vertex_normals
-            .iter()
-            .flat_map(|n| n.map(|v| vec4(v, 0.0)))
-            .collect();
-        let normals = ChunkedBuffer::new(gpu, "NORMAL", "vertex normals", &normals)?;
-        let (light_table, light_of_prim) = gpu_lights(scene);
+        let normals = ChunkedBuffer::new(gpu, "NORMAL", "vertex normals", &flat.normals)?;
+        let (light_table, light_of_prim) = (flat.lights, flat.light_of_prim);
         let lights = storage("lights", bytemuck::cast_slice(&light_table), none)?;
         let light_of_prim = storage(
             "light of each primitive",
@@ -270,6 +268,10 @@ impl<'g> Renderer<'g> {
             env_z: vec4(env.to_world.z_axis, 0.0),
             env_size: [env.size[0].max(1), env.size[1].max(1), 0, 0],
             region: [0, 0, width, height],
+            top: match flat.top {
+                Some(root) => [1, root, 0, 0],
+                None => [0, 0, 0, 0],
+            },
         };
         let frame_buffer = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("frame"),
@@ -285,6 +287,7 @@ impl<'g> Renderer<'g> {
                 include_str!("shaders/render.wgsl"),
                 include_str!("shaders/path.wgsl"),
                 include_str!("shaders/environment.wgsl"),
+                include_str!("shaders/instances.wgsl"),
             ],
             &[
                 nodes.constants(),
@@ -308,6 +311,7 @@ impl<'g> Renderer<'g> {
                 (10, &env_pixels),
                 (11, &env_cells),
                 (12, &env_rows),
+                (22, &instances),
             ]
             .into_iter()
             .chain(nodes.entries(NODE_BINDINGS))

@@ -154,8 +154,13 @@ impl GpuScene {
         if !self.bvh.nodes().is_empty() {
             return Cow::Borrowed(self.bvh.nodes());
         }
+        Cow::Owned(Self::empty_nodes())
+    }
+
+    /// One node with two empty slots, for a binding that has no tree to hold.
+    pub(crate) fn empty_nodes() -> Vec<GpuNode> {
         let empty = Aabb::EMPTY;
-        Cow::Owned(vec![GpuNode {
+        vec![GpuNode {
             left_min: empty.min,
             left: GPU_EMPTY,
             left_max: empty.max,
@@ -164,7 +169,7 @@ impl GpuScene {
             right: GPU_EMPTY,
             right_max: empty.max,
             right_count: 0,
-        }])
+        }]
     }
 
     /// Bytes of the buffers this scene uploads.

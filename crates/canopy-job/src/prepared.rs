@@ -5,7 +5,7 @@ use crate::engine::Engine;
 use crate::observer::Observer;
 use crate::{Device, JobError, RenderJob};
 use canopy_render::checkpoint::Checkpoint;
-use canopy_render::{Accel, AccelKind, Accumulator, BvhWidth, RenderStats, Scene};
+use canopy_render::{Accel, AccelKind, Accumulator, BvhWidth, RenderStats};
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
@@ -21,14 +21,7 @@ pub struct Prepared<'j> {
     job: &'j RenderJob<'j>,
     pool: Option<rayon::ThreadPool>,
     accel: Accel,
-    gpu: Option<GpuPlan>,
-}
-
-/// The GPU, and the scene it renders when that is not the job's own: the GPU has no
-/// two-level traversal yet, so instances are baked into world-space triangles for it.
-struct GpuPlan {
-    gpu: canopy_gpu::Gpu,
-    baked: Option<(Scene, Accel)>,
+    gpu: Option<canopy_gpu::Gpu>,
 }
 
 /// What a run produced.
@@ -120,16 +113,6 @@ impl<'s> RenderJob<'s> {
                 structure.optimize,
             )
         });
-        let gpu = gpu.map(|gpu| GpuPlan {
-            gpu,
-            baked: (!scene.instances.is_empty()).then(|| {
-                let baked = scene.with_instances_baked();
-                let accel = install(&|| {
-                    Accel::build(structure.kind, width, &baked.primitives, &structure.params)
-                });
-                (baked, accel)
-            }),
-        });
         Ok(Prepared {
             job: self,
             pool,
@@ -160,7 +143,7 @@ impl Prepared<'_> {
     /// `cpu`, or the GPU adapter in words.
     pub fn device_name(&self) -> String {
         match &self.gpu {
-            Some(plan) => plan.gpu.describe(),
+            Some(gpu) => gpu.describe(),
             None => "cpu".into(),
         }
     }
@@ -190,16 +173,13 @@ impl Prepared<'_> {
                 scene,
                 accel: &self.accel,
             },
-            Some(plan) => {
-                let (scene, accel) = match &plan.baked {
-                    Some((scene, accel)) => (scene, accel),
-                    None => (scene, &self.accel),
-                };
-                let Some(canopy_bvh::Tree::Binary(bvh)) = accel.tree() else {
-                    unreachable!("the GPU's structure is a binary tree, checked in prepare")
-                };
-                Engine::Gpu(Box::new(canopy_gpu::Renderer::new(&plan.gpu, scene, bvh)?))
-            }
+            // Mesh instances in two levels, as on the CPU (the structures are binary
+            // trees: built with width 2 above).
+            Some(gpu) => Engine::Gpu(Box::new(canopy_gpu::Renderer::for_accel(
+                gpu,
+                scene,
+                &self.accel,
+            )?)),
         };
         let mut accumulator = job
             .resume

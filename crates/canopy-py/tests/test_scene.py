@@ -157,3 +157,15 @@ def test_the_documented_examples_run():
     for module in (canopy.scene, canopy.ray_scene):
         result = doctest.testmod(module)
         assert result.attempted > 0 and result.failed == 0, (module.__name__, result)
+
+
+def test_instances_render_on_the_gpu_as_on_the_cpu():
+    if not canopy.devices():
+        pytest.skip("no GPU adapter (not even a software one)")
+    scene = table_scene()
+    cpu = canopy.render(scene, spp=8)
+    gpu = canopy.render(scene, spp=8, device="gpu")
+    # The same random streams through two-level traversal on both: close means, and
+    # most pixels the same to rounding.
+    assert abs(gpu.mean() - cpu.mean()) < 0.03 * cpu.mean()
+    assert np.mean(np.isclose(gpu, cpu, rtol=1e-2, atol=1e-3)) > 0.8

@@ -55,22 +55,15 @@ pub fn run(args: &GpuArgs) -> anyhow::Result<()> {
     let params = BuildParams::default();
     let mut rows = Vec::new();
     for name in &scenes {
+        // Mesh instances stay instances on both devices (two-level traversal).
         let mut scene = load_scene(name)?;
-        if !scene.instances.is_empty() {
-            // The GPU renders instances baked; so does the CPU here, for the same work.
-            scene = scene.with_instances_baked();
-        }
         (scene.settings.width, scene.settings.height) = args.size;
         scene.settings.spp = args.spp;
         scene.settings.max_depth = args.depth;
         scene.settings.integrator = args.integrator;
         let cpu = pool.install(|| {
-            let accel = Accel::build(
-                AccelKind::default(),
-                BvhWidth::Eight,
-                &scene.primitives,
-                &params,
-            );
+            let accel =
+                Accel::for_scene(&scene, AccelKind::default(), BvhWidth::Eight, &params, None);
             let start = Instant::now();
             let (_, stats) = render(&scene, &accel, &|| {});
             (start.elapsed().as_secs_f64(), stats.rays)
@@ -111,9 +104,8 @@ fn render_on_gpu(
     scene: &Scene,
     params: &BuildParams,
 ) -> anyhow::Result<(f64, u64)> {
-    let boxes: Vec<_> = scene.primitives.iter().map(|p| p.shape.bounds()).collect();
-    let bvh = canopy_bvh::build(canopy_bvh::Builder::BinnedSah, &boxes, params);
-    let renderer = canopy_gpu::Renderer::new(gpu, scene, &bvh)?;
+    let accel = Accel::for_scene(scene, AccelKind::default(), BvhWidth::Two, params, None);
+    let renderer = canopy_gpu::Renderer::for_accel(gpu, scene, &accel)?;
     let mut accumulator = Accumulator::new(scene.settings.width, scene.settings.height);
     let start = Instant::now();
     while accumulator.samples < scene.settings.spp {

@@ -257,11 +257,16 @@ fn hit_primitive(index: u32, q: Query, t_max: f32) -> vec3<f32> {
 // The closest hit (ties to the lower primitive index), or with `first_ends` the first
 // hit found (for occlusion): the node stack walk both queries share.
 fn walk(r: RayIn, first_ends: bool) -> HitOut {
-    var best = HitOut(r.t_max, NO_PRIM, 0.0, 0.0);
-    let q = make_query(r);
+    return walk_tree(0u, make_query(r), HitOut(r.t_max, NO_PRIM, 0.0, 0.0), first_ends);
+}
+
+// `walk` of the tree whose root is node `root`, for a hit before `best` (its t the
+// range's end; NO_PRIM when there is none yet).
+fn walk_tree(root: u32, q: Query, start: HitOut, first_ends: bool) -> HitOut {
+    var best = start;
     var stack: array<u32, STACK>;
     var sp = 0u;
-    var node = 0u;
+    var node = root;
     loop {
         let n = node_at(node);
         var children = array<vec3<u32>, 2>(

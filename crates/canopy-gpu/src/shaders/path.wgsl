@@ -211,12 +211,16 @@ fn pdf_toward(index: u32, reference: vec3<f32>, point: vec3<f32>, normal: vec3<f
     return area_to_solid_angle(1.0 / shape_area(p), reference, point, normal);
 }
 
-fn light_pdf(prim: u32, reference: vec3<f32>, point: vec3<f32>, normal: vec3<f32>) -> f32 {
-    let light = light_of_prim[prim];
-    if (frame.options.x == 0u || light == NO_LIGHT) {
+fn light_pdf(hit: SceneHit, reference: vec3<f32>, point: vec3<f32>, normal: vec3<f32>) -> f32 {
+    if (frame.options.x == 0u) {
         return 0.0;
     }
-    return lights[light].pmf * pdf_toward(prim, reference, point, normal);
+    let light = light_of(hit);
+    if (light == NO_LIGHT) {
+        return 0.0;
+    }
+    // The light's own record: the primitive, or an instance's triangle in world space.
+    return lights[light].pmf * pdf_toward(lights[light].prim, reference, point, normal);
 }
 
 // A direction towards the background (xyz) and its density (w; zero for none): uniform
@@ -328,7 +332,7 @@ fn sample_lights(m: Material, dir: vec3<f32>, s: Surface, rng: ptr<function, Rng
                 }
                 let origin = offset_origin(s, wi);
                 *rays += vec2<u32>(1u, 1u);
-                if (!occluded(RayIn(origin, 0.0, aim - origin, 1.0 - SHADOW_SHORTENING))) {
+                if (!scene_occluded(RayIn(origin, 0.0, aim - origin, 1.0 - SHADOW_SHORTENING))) {
                     let radiance = emitted(materials[prim_at(light.prim).header.y]);
                     let weight = power_heuristic(pdf, material_pdf(m, dir, s, wi));
                     direct += f * radiance * (weight / pdf);
@@ -344,7 +348,7 @@ fn sample_lights(m: Material, dir: vec3<f32>, s: Surface, rng: ptr<function, Rng
         if (any(f != vec3<f32>(0.0))) {
             let origin = offset_origin(s, direction);
             *rays += vec2<u32>(1u, 1u);
-            if (!occluded(RayIn(origin, 0.0, direction, INF))) {
+            if (!scene_occluded(RayIn(origin, 0.0, direction, INF))) {
                 let weight = power_heuristic(sky.w, material_pdf(m, dir, s, direction));
                 direct += f * background(direction) * (weight / sky.w);
             }
@@ -365,8 +369,8 @@ fn radiance_path(camera_origin: vec3<f32>, camera_dir: vec3<f32>, rng: ptr<funct
     var previous_pdf = 0.0;
     for (var segments = 1u; segments <= frame.size.w; segments++) {
         *rays += vec2<u32>(1u, 0u);
-        let hit = closest(RayIn(origin, 0.0, dir, INF));
-        if (hit.prim == NO_PRIM) {
+        let hit = scene_closest(RayIn(origin, 0.0, dir, INF));
+        if (hit.hit.prim == NO_PRIM) {
             var weight = 1.0;
             if (has_previous && sample_background) {
                 weight = power_heuristic(previous_pdf, background_pdf(dir));
@@ -374,13 +378,13 @@ fn radiance_path(camera_origin: vec3<f32>, camera_dir: vec3<f32>, rng: ptr<funct
             total += throughput * weight * background(dir);
             break;
         }
-        let material = materials[prim_at(hit.prim).header.y];
-        let s = surface_of(hit.prim, origin, dir, hit);
+        let material = scene_material(hit);
+        let s = scene_surface(origin, dir, hit);
         let light = emitted(material);
         if (any(light != vec3<f32>(0.0))) {
             var weight = 1.0;
             if (has_previous) {
-                weight = power_heuristic(previous_pdf, light_pdf(hit.prim, previous_p, s.p, s.geometric));
+                weight = power_heuristic(previous_pdf, light_pdf(hit, previous_p, s.p, s.geometric));
             }
             total += throughput * weight * light;
         }

@@ -34,6 +34,8 @@ struct Frame {
     env_size: vec4<u32>,
     // The region of the image rendered: x, y, width, height.
     region: vec4<u32>,
+    // Two-level traversal (1) or one tree from node 0 (0); the top tree's root node.
+    top: vec4<u32>,
 }
 
 @group(0) @binding(3) var<storage, read> materials: array<Material>;
@@ -41,7 +43,7 @@ struct Frame {
 // Per pixel of the band being rendered: radiance sums (xyz) and samples that were not
 // finite (w).
 @group(0) @binding(5) var<storage, read_write> accum: array<vec4<f32>>;
-// Three per smooth triangle (`header.z` indexes them; FLAT = none), in up to four
+// Three per shaded triangle (`header.z` indexes them; FLAT = none), in up to four
 // bindings as nodes and primitives are (common.wgsl).
 override NORMAL_BITS: u32 = 31u;
 override NORMAL_CHUNKS: u32 = 1u;
@@ -89,24 +91,37 @@ fn normalize_or(v: vec3<f32>, fallback: vec3<f32>) -> vec3<f32> {
     return fallback;
 }
 
+// The surface of a world triangle a, b, c at barycentrics (u, v), shaded by its vertex
+// normals when it is shaded.
+fn triangle_surface(a: vec3<f32>, b: vec3<f32>, c: vec3<f32>, shaded: bool, normals: array<vec3<f32>, 3>, u: f32, v: f32) -> Surface {
+    var s: Surface;
+    let w0 = 1.0 - u - v;
+    s.p = w0 * a + u * b + v * c;
+    s.geometric = normalize_or(cross(b - a, c - a), vec3<f32>(0.0, 1.0, 0.0));
+    s.shading = s.geometric;
+    if (shaded) {
+        let interpolated = w0 * normals[0] + u * normals[1] + v * normals[2];
+        s.shading = normalize_or(interpolated, s.geometric);
+        if (dot(s.shading, s.geometric) < 0.0) {
+            s.shading = -s.shading;
+        }
+    }
+    s.error = POINT_ERROR_ULPS * max(max(max_abs(a), max_abs(b)), max_abs(c));
+    return s;
+}
+
 fn surface_of(index: u32, origin: vec3<f32>, dir: vec3<f32>, hit: HitOut) -> Surface {
     let p = prim_at(index);
     var s: Surface;
     switch p.header.x {
         case 0u: {
-            let w0 = 1.0 - hit.u - hit.v;
-            s.p = w0 * p.d0.xyz + hit.u * p.d1.xyz + hit.v * p.d2.xyz;
-            s.geometric = normalize_or(cross(p.d1.xyz - p.d0.xyz, p.d2.xyz - p.d0.xyz), vec3<f32>(0.0, 1.0, 0.0));
-            s.shading = s.geometric;
-            if (p.header.z != FLAT) {
+            var normals = array<vec3<f32>, 3>(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0));
+            let shaded = p.header.z != FLAT;
+            if (shaded) {
                 let n = 3u * p.header.z;
-                let interpolated = w0 * normal_at(n).xyz + hit.u * normal_at(n + 1u).xyz + hit.v * normal_at(n + 2u).xyz;
-                s.shading = normalize_or(interpolated, s.geometric);
-                if (dot(s.shading, s.geometric) < 0.0) {
-                    s.shading = -s.shading;
-                }
+                normals = array<vec3<f32>, 3>(normal_at(n).xyz, normal_at(n + 1u).xyz, normal_at(n + 2u).xyz);
             }
-            s.error = POINT_ERROR_ULPS * max(max(max_abs(p.d0.xyz), max_abs(p.d1.xyz)), max_abs(p.d2.xyz));
+            s = triangle_surface(p.d0.xyz, p.d1.xyz, p.d2.xyz, shaded, normals, hit.u, hit.v);
         }
         case 1u: {
             let center = p.d0.xyz;
@@ -294,13 +309,13 @@ fn radiance_bsdf(camera_origin: vec3<f32>, camera_dir: vec3<f32>, rng: ptr<funct
     var total = vec3<f32>(0.0);
     for (var depth = 0u; depth < frame.size.w; depth++) {
         *rays += vec2<u32>(1u, 0u);
-        let hit = closest(RayIn(origin, 0.0, dir, INF));
-        if (hit.prim == NO_PRIM) {
+        let hit = scene_closest(RayIn(origin, 0.0, dir, INF));
+        if (hit.hit.prim == NO_PRIM) {
             total += throughput * background(dir);
             break;
         }
-        let material = materials[prim_at(hit.prim).header.y];
-        let s = surface_of(hit.prim, origin, dir, hit);
+        let material = scene_material(hit);
+        let s = scene_surface(origin, dir, hit);
         total += throughput * emitted(material);
         let next = scatter(material, dir, s, rng);
         if (!next.ok) {
