@@ -7,33 +7,11 @@ use canopy_render::checkpoint::Checkpoint;
 use canopy_render::files::available_memory;
 use std::path::{Path, PathBuf};
 
+pub use canopy_render::files::same_file;
+
 /// The directory a file at `path` lives in (`.` for a bare file name).
 fn directory_of(path: &Path) -> &Path {
-    match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    }
-}
-
-/// The absolute form of a path that may not exist yet: its directory resolved (links
-/// followed), its file name kept. `None` when the directory does not exist.
-fn resolved(path: &Path) -> Option<PathBuf> {
-    if let Ok(full) = std::fs::canonicalize(path) {
-        return Some(full);
-    }
-    Some(
-        std::fs::canonicalize(directory_of(path))
-            .ok()?
-            .join(path.file_name()?),
-    )
-}
-
-/// Whether two paths name the same file (or would, once created).
-pub fn same_file(a: &Path, b: &Path) -> bool {
-    match (resolved(a), resolved(b)) {
-        (Some(a), Some(b)) => a == b,
-        _ => a == b,
-    }
+    canopy_render::files::directory_of(path)
 }
 
 /// Refuses to write `what` to `path` when it is one of the scene's input files.
@@ -63,6 +41,17 @@ pub fn check_checkpoint_slot(path: &Path) -> anyhow::Result<()> {
 /// Fails unless a file can be created next to `path` (its directory exists and is
 /// writable): found at the start, not after the render.
 pub fn check_writable_dir(path: &Path, what: &str) -> anyhow::Result<()> {
+    // `o.png/` names a directory: no file can ever be renamed to it.
+    if path
+        .as_os_str()
+        .to_string_lossy()
+        .ends_with(std::path::is_separator)
+    {
+        bail!(
+            "{}: cannot write the {what}: the path ends with a separator, so it names a directory",
+            path.display()
+        );
+    }
     let dir = directory_of(path);
     if !dir.is_dir() {
         bail!(

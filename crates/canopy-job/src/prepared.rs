@@ -59,6 +59,12 @@ impl<'s> RenderJob<'s> {
                 )));
             }
         }
+        for path in [&self.checkpoint.periodic, &self.checkpoint.on_interrupt]
+            .into_iter()
+            .flatten()
+        {
+            check_checkpoint_path(path, self.scene)?;
+        }
         if let Some(resumed) = &self.resume {
             if resumed.samples > settings.spp {
                 return Err(JobError::Invalid(format!(
@@ -120,6 +126,32 @@ impl<'s> RenderJob<'s> {
             gpu,
         })
     }
+}
+
+/// A checkpoint may be written to `path` only if it is no input of the scene and holds
+/// nothing, or a canopy checkpoint: anything else there is the user's.
+fn check_checkpoint_path(
+    path: &std::path::Path,
+    scene: &canopy_render::Scene,
+) -> Result<(), JobError> {
+    if let Some(input) = scene
+        .inputs
+        .iter()
+        .find(|i| canopy_render::files::same_file(path, i))
+    {
+        return Err(JobError::Invalid(format!(
+            "{}: refusing to write the checkpoint over an input of the scene ({})",
+            path.display(),
+            input.display()
+        )));
+    }
+    if std::fs::symlink_metadata(path).is_ok() && !Checkpoint::is_checkpoint_file(path) {
+        return Err(JobError::Invalid(format!(
+            "{}: exists and is not a canopy checkpoint; refusing to overwrite it",
+            path.display()
+        )));
+    }
+    Ok(())
 }
 
 impl Prepared<'_> {

@@ -269,3 +269,41 @@ fn on_the_gpu_a_region_is_the_whole_images_pixels_too() {
         .film();
     assert_eq!(part.pixels, pixels_of(&image, region));
 }
+
+#[test]
+fn a_checkpoint_never_goes_over_an_input_or_a_users_file() {
+    let dir = temp_dir("inputs");
+    let scene_file = dir.join("s.toml");
+    std::fs::write(
+        &scene_file,
+        "[camera]\nlook_from = [0, 0, 5]\nlook_at = [0, 0, 0]\n[render]\nwidth = 4\nheight = 4\nspp = 2\n[[spheres]]\ncenter = [0, 0, 0]\nradius = 1\nmaterial = { type = \"lambertian\", albedo = [0.5, 0.5, 0.5] }\n",
+    )
+    .unwrap();
+    let notes = dir.join("notes.txt");
+    std::fs::write(&notes, "my notes").unwrap();
+    let scene = load_scene(scene_file.to_str().unwrap()).unwrap();
+    for (path, words) in [
+        (scene_file.clone(), "over an input of the scene"),
+        (dir.join(".").join("s.toml"), "over an input of the scene"),
+        (notes.clone(), "is not a canopy checkpoint"),
+    ] {
+        for periodic in [true, false] {
+            let mut job = RenderJob::new(&scene, "s.toml");
+            if periodic {
+                job.checkpoint.periodic = Some(path.clone());
+            } else {
+                job.checkpoint.on_interrupt = Some(path.clone());
+            }
+            match job.prepare() {
+                Err(e @ JobError::Invalid(_)) => assert!(e.to_string().contains(words), "{e}"),
+                Err(e) => panic!("{e}"),
+                Ok(_) => panic!("{}: accepted", path.display()),
+            }
+        }
+    }
+    assert!(std::fs::read_to_string(&scene_file)
+        .unwrap()
+        .starts_with("[camera]"));
+    assert_eq!(std::fs::read_to_string(&notes).unwrap(), "my notes");
+    std::fs::remove_dir_all(dir).unwrap();
+}

@@ -140,3 +140,15 @@ def test_load_mesh_reads_obj_and_ply_alike():
         canopy.load_mesh("mesh.stl")
     with pytest.raises(OSError):
         canopy.load_mesh(MESHES / "missing.ply")
+
+
+def test_a_checkpoint_never_goes_over_the_scene_or_a_users_file(tmp_path):
+    scene = tmp_path / "s.toml"
+    text = '[camera]\nlook_from = [0, 0, 5]\nlook_at = [0, 0, 0]\n[[spheres]]\ncenter = [0, 0, 0]\nradius = 1\nmaterial = { type = "lambertian", albedo = [0.5, 0.5, 0.5] }\n'
+    scene.write_text(text)
+    notes = tmp_path / "notes.txt"
+    notes.write_text("my notes")
+    for target, words in [(scene, "over an input of the scene"), (notes, "not a canopy checkpoint")]:
+        with pytest.raises(ValueError, match=words):
+            canopy.render(str(scene), size=(4, 4), spp=1, checkpoint=target)
+    assert scene.read_text() == text and notes.read_text() == "my notes"

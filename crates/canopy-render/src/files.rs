@@ -1,4 +1,5 @@
-//! Reading input files safely: only regular files, and never more bytes than a limit.
+//! Reading input files safely (only regular files, never more bytes than a limit), and
+//! telling whether an output path names one of them.
 //!
 //! A path may name a device (`/dev/zero`, `/dev/urandom`), a FIFO or a directory. Reading
 //! such a thing either never ends or never stops growing, so every reader in canopy goes
@@ -97,6 +98,36 @@ pub fn available_memory() -> Option<u64> {
     let line = info.lines().find(|l| l.starts_with("MemAvailable:"))?;
     let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
     Some(kib * 1024)
+}
+
+/// The directory a file at `path` lives in (`.` for a bare file name).
+pub fn directory_of(path: &Path) -> &Path {
+    match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    }
+}
+
+/// The absolute form of a path that may not exist yet: its directory resolved (links
+/// followed), its file name kept. `None` when the directory does not exist.
+fn resolved(path: &Path) -> Option<std::path::PathBuf> {
+    if let Ok(full) = std::fs::canonicalize(path) {
+        return Some(full);
+    }
+    Some(
+        std::fs::canonicalize(directory_of(path))
+            .ok()?
+            .join(path.file_name()?),
+    )
+}
+
+/// Whether two paths name the same file (or would, once created): the one test every
+/// writer makes of its outputs against the inputs it read.
+pub fn same_file(a: &Path, b: &Path) -> bool {
+    match (resolved(a), resolved(b)) {
+        (Some(a), Some(b)) => a == b,
+        _ => a == b,
+    }
 }
 
 #[cfg(test)]

@@ -7,7 +7,7 @@ use crate::film::Film;
 use image::{ImageBuffer, ImageFormat, Rgb};
 use std::fs::File;
 use std::io::{BufWriter, Cursor, Write};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// The image format for a path, from its extension.
 pub fn image_format(path: &Path) -> Result<ImageFormat, OutputError> {
@@ -58,17 +58,18 @@ fn encode(film: &Film, format: ImageFormat) -> Result<Vec<u8>, image::ImageError
 /// Writes a file through a hidden temporary sibling, synced and then renamed over
 /// `path`: readers see the old file or the whole new one, never a part. On failure the
 /// temporary file is removed.
+///
+/// The temporary file is created new (`O_CREAT | O_EXCL`, which follows no link) under a
+/// name nobody can predict, retried on a collision: a link planted where it would be
+/// (to the scene, say) is never written through, and only a file this call made is
+/// ever removed.
 pub fn write_atomically(
     path: &Path,
     write: impl FnOnce(&mut BufWriter<File>) -> std::io::Result<()>,
 ) -> std::io::Result<()> {
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy())
-        .unwrap_or_default();
-    let temp = path.with_file_name(format!(".{name}.{}.tmp", std::process::id()));
+    let (temp, file) = create_temporary_sibling(path)?;
     let result = (|| {
-        let mut out = BufWriter::new(File::create(&temp)?);
+        let mut out = BufWriter::new(file);
         write(&mut out)?;
         let file = out.into_inner().map_err(|e| e.into_error())?;
         file.sync_all()?;
@@ -81,11 +82,45 @@ pub fn write_atomically(
     result
 }
 
+/// Tries at creating the temporary file before giving up: a collision of two random
+/// 64-bit names is already next to impossible.
+const TEMPORARY_TRIES: u32 = 16;
+
+/// A new, empty file beside `path` named `.<name>.<random>.tmp`, and its path.
+fn create_temporary_sibling(path: &Path) -> std::io::Result<(PathBuf, File)> {
+    use std::hash::{BuildHasher, Hasher};
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy())
+        .unwrap_or_default();
+    let mut last = None;
+    for attempt in 0..TEMPORARY_TRIES {
+        // std's per-process random hasher keys, mixed with the time and the attempt.
+        let mut hasher = std::collections::hash_map::RandomState::new().build_hasher();
+        hasher.write_u32(std::process::id());
+        hasher.write_u32(attempt);
+        let now = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .unwrap_or_default();
+        hasher.write_u128(now.as_nanos());
+        let temp = path.with_file_name(format!(".{name}.{:016x}.tmp", hasher.finish()));
+        match std::fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(&temp)
+        {
+            Ok(file) => return Ok((temp, file)),
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => last = Some(e),
+            Err(e) => return Err(e),
+        }
+    }
+    Err(last.expect("at least one try"))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use glam::Vec3;
-    use std::path::PathBuf;
 
     fn film() -> Film {
         let mut f = Film::new(3, 2);
@@ -129,6 +164,57 @@ mod tests {
             Err(OutputError::UnsupportedFormat { .. })
         ));
         assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 0);
+        std::fs::remove_dir_all(dir).unwrap();
+    }
+
+    /// The temporary names this canopy's writer could pick are unpredictable; an older
+    /// one used `.<name>.<pid>.tmp`, and a link planted there was written through.
+    #[cfg(unix)]
+    #[test]
+    fn a_link_where_the_temporary_file_would_be_is_never_written_through() {
+        let dir = temp_dir("links");
+        let scene = dir.join("scene.toml");
+        std::fs::write(&scene, "my scene").unwrap();
+        let path = dir.join("o.png");
+        let planted = dir.join(format!(".o.png.{}.tmp", std::process::id()));
+        std::os::unix::fs::symlink(&scene, &planted).unwrap();
+        let hard = dir.join(format!(".o.png.{}.tmp.hard", std::process::id()));
+        std::fs::hard_link(&scene, &hard).unwrap();
+        write_image(&film(), &path).unwrap();
+        assert_eq!(std::fs::read_to_string(&scene).unwrap(), "my scene");
+        assert!(image::open(&path).is_ok());
+        // Only the image is new; the planted names are left as they were.
+        let mut names: Vec<String> = std::fs::read_dir(&dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        names.sort();
+        let pid = std::process::id();
+        let mut expected = vec![
+            format!(".o.png.{pid}.tmp"),
+            format!(".o.png.{pid}.tmp.hard"),
+            "o.png".to_string(),
+            "scene.toml".to_string(),
+        ];
+        expected.sort();
+        assert_eq!(names, expected);
+        std::fs::remove_dir_all(dir).unwrap();
+    }
+
+    #[test]
+    fn temporary_names_differ_from_call_to_call() {
+        let dir = temp_dir("names");
+        let path = dir.join("x.bin");
+        let (a, _) = create_temporary_sibling(&path).unwrap();
+        let (b, _) = create_temporary_sibling(&path).unwrap();
+        assert_ne!(a, b);
+        for p in [&a, &b] {
+            let name = p.file_name().unwrap().to_string_lossy().into_owned();
+            assert!(
+                name.starts_with(".x.bin.") && name.ends_with(".tmp"),
+                "{name}"
+            );
+        }
         std::fs::remove_dir_all(dir).unwrap();
     }
 

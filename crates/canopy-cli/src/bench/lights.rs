@@ -68,6 +68,9 @@ pub fn run(args: &LightsArgs) -> anyhow::Result<()> {
     let mut rows = Vec::new();
     for name in &scenes {
         let mut scene = load_scene(name)?;
+        if let Some(out) = &args.out {
+            crate::safety::refuse_inputs(out, &scene.inputs, "table")?;
+        }
         let name = if scene.name.is_empty() {
             name.clone()
         } else {
