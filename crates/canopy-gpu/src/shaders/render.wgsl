@@ -43,7 +43,7 @@ struct Frame {
 // Per pixel of the band being rendered: radiance sums (xyz) and samples that were not
 // finite (w).
 @group(0) @binding(5) var<storage, read_write> accum: array<vec4<f32>>;
-// Three per shaded triangle (`header.z` indexes them; FLAT = none), in up to four
+// Three per smooth-shaded triangle (`header.z` indexes them; FLAT = none), in up to four
 // bindings as nodes and primitives are (common.wgsl).
 override NORMAL_BITS: u32 = 31u;
 override NORMAL_CHUNKS: u32 = 1u;
@@ -91,8 +91,8 @@ fn normalize_or(v: vec3<f32>, fallback: vec3<f32>) -> vec3<f32> {
     return fallback;
 }
 
-// The surface of a world triangle a, b, c at barycentrics (u, v), shaded by its vertex
-// normals when it is shaded.
+// The surface of a world triangle a, b, c at barycentrics (u, v); with `shaded`, its
+// shading normal interpolates the vertex `normals`.
 fn triangle_surface(a: vec3<f32>, b: vec3<f32>, c: vec3<f32>, shaded: bool, normals: array<vec3<f32>, 3>, u: f32, v: f32) -> Surface {
     var s: Surface;
     let w0 = 1.0 - u - v;
