@@ -91,8 +91,9 @@ impl Instance {
         self.identity
     }
 
-    /// Why this instance (number `index`) cannot be traced, if it cannot.
-    pub(crate) fn check(&self, index: usize) -> Result<(), InstanceError> {
+    /// Why this instance (number `index`) cannot be traced, if it cannot: a transform
+    /// that is not finite, or cannot be inverted.
+    pub fn check(&self, index: usize) -> Result<(), InstanceError> {
         let finite = |a: &Affine3A| a.matrix3.is_finite() && a.translation.is_finite();
         if !finite(&self.to_world) {
             return Err(InstanceError::NonFinite { instance: index });

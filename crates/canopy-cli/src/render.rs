@@ -10,7 +10,7 @@ use crate::safety::{
 use crate::scene_facts::SceneFacts;
 use crate::Interrupted;
 use anyhow::bail;
-use canopy_job::{CheckpointPolicy, Device, JobError, Observer, RenderJob, Structure};
+use canopy_job::{CheckpointPolicy, Device, Observer, RenderJob, Structure};
 use canopy_render::camera::Camera;
 use canopy_render::checkpoint::Checkpoint;
 use canopy_render::visualize::{draw_bvh, render_heatmap, LevelRange};
@@ -272,6 +272,9 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     if args.device == Device::Gpu && args.heatmap {
         bail!("--heatmap counts CPU traversal work; drop --device gpu");
     }
+    if args.device == Device::Gpu && args.bvh == AccelKind::None {
+        bail!("--device gpu traces through a BVH; choose a builder with --bvh");
+    }
     let render_job = RenderJob {
         scene,
         source: job.source.clone(),
@@ -291,12 +294,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         },
         resume: job.accumulator.clone(),
     };
-    let prepared = render_job.prepare().map_err(|e| match e {
-        JobError::Invalid(why) if args.device == Device::Gpu => {
-            anyhow::anyhow!("--device gpu: {why} with --bvh")
-        }
-        e => e.into(),
-    })?;
+    let prepared = render_job.prepare()?;
     let accel = prepared.accel();
     if args.show_bvh && accel.tree().is_none() {
         bail!("--show-bvh needs a BVH; choose a builder with --bvh");

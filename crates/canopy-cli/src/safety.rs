@@ -16,26 +16,13 @@ fn directory_of(path: &Path) -> &Path {
 
 /// Refuses to write `what` to `path` when it is one of the scene's input files.
 pub fn refuse_inputs(path: &Path, inputs: &[PathBuf], what: &str) -> anyhow::Result<()> {
-    if let Some(input) = inputs.iter().find(|i| same_file(path, i)) {
-        bail!(
-            "{}: refusing to write the {what} over an input of the scene ({})",
-            path.display(),
-            input.display()
-        );
-    }
-    Ok(())
+    canopy_render::files::refuse_inputs(path, inputs, what).map_err(anyhow::Error::msg)
 }
 
-/// Refuses a checkpoint path that holds something other than a canopy checkpoint: such
-/// a file is the user's, and would be overwritten by the first save.
+/// Refuses a checkpoint path that holds something other than a canopy checkpoint.
 pub fn check_checkpoint_slot(path: &Path) -> anyhow::Result<()> {
-    if std::fs::symlink_metadata(path).is_ok() && !Checkpoint::is_checkpoint_file(path) {
-        bail!(
-            "{}: exists and is not a canopy checkpoint; refusing to overwrite it (choose another --checkpoint path)",
-            path.display()
-        );
-    }
-    Ok(())
+    Checkpoint::check_slot(path)
+        .map_err(|e| anyhow::anyhow!("{e} (choose another --checkpoint path)"))
 }
 
 /// Fails unless a file can be created next to `path` (its directory exists and is

@@ -134,24 +134,9 @@ fn check_checkpoint_path(
     path: &std::path::Path,
     scene: &canopy_render::Scene,
 ) -> Result<(), JobError> {
-    if let Some(input) = scene
-        .inputs
-        .iter()
-        .find(|i| canopy_render::files::same_file(path, i))
-    {
-        return Err(JobError::Invalid(format!(
-            "{}: refusing to write the checkpoint over an input of the scene ({})",
-            path.display(),
-            input.display()
-        )));
-    }
-    if std::fs::symlink_metadata(path).is_ok() && !Checkpoint::is_checkpoint_file(path) {
-        return Err(JobError::Invalid(format!(
-            "{}: exists and is not a canopy checkpoint; refusing to overwrite it",
-            path.display()
-        )));
-    }
-    Ok(())
+    canopy_render::files::refuse_inputs(path, &scene.inputs, "checkpoint")
+        .and_then(|()| Checkpoint::check_slot(path))
+        .map_err(JobError::Invalid)
 }
 
 impl Prepared<'_> {

@@ -116,6 +116,23 @@ pub fn per_ray<'a>(
     Ok(values)
 }
 
+/// An affine transform from the rows of a (3, 4) float32 matrix (the top of a 4x4 matrix
+/// acting on column vectors, as numpy, trimesh and Open3D write them).
+pub fn affine(array: &PyReadonlyArray2<'_, f32>) -> PyResult<glam::Affine3A> {
+    if array.shape() != [3, 4] {
+        return error(format!(
+            "transform must be a 4x4 or 3x4 matrix, not {:?}",
+            array.shape()
+        ));
+    }
+    let m = array.as_array();
+    let column = |j: usize| glam::Vec3::new(m[[0, j]], m[[1, j]], m[[2, j]]);
+    Ok(glam::Affine3A::from_mat3_translation(
+        glam::Mat3::from_cols(column(0), column(1), column(2)),
+        column(3),
+    ))
+}
+
 /// Rows of `N` values of a flat array whose last dimensions hold `N` (checked above).
 fn rows<T, const N: usize>(flat: &[T]) -> &[[T; N]] {
     let (rows, rest) = flat.as_chunks::<N>();

@@ -7,8 +7,8 @@ use crate::arrays;
 use crate::bvh::batch;
 use crate::pools;
 use canopy_bvh::{Blas, BlasParams, Hit, Instance, Ray, RayQuery, Tlas, TriangleMesh};
-use glam::{Affine3A, Mat3, Vec3};
-use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray2, PyUntypedArrayMethods};
+use glam::Vec3;
+use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray2};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use rayon::prelude::*;
@@ -50,20 +50,13 @@ impl RayScene {
     }
 }
 
-/// The rows of a (3, 4) float32 matrix as an affine transform.
-fn affine(array: &PyReadonlyArray2<'_, f32>) -> PyResult<Affine3A> {
-    if array.shape() != [3, 4] {
-        return Err(PyValueError::new_err(format!(
-            "transform must be a 4x4 or 3x4 matrix, not {:?}",
-            array.shape()
-        )));
-    }
-    let m = array.as_array();
-    let column = |j: usize| Vec3::new(m[[0, j]], m[[1, j]], m[[2, j]]);
-    Ok(Affine3A::from_mat3_translation(
-        Mat3::from_cols(column(0), column(1), column(2)),
-        column(3),
-    ))
+/// Why `instance` (number `index`) cannot be placed, as the call `what` says it.
+fn check_transform(instance: &Instance, index: usize, what: &str) -> PyResult<()> {
+    instance.check(index).map_err(|e| {
+        PyValueError::new_err(format!(
+            "{what}: the transform must be finite and invertible: {e}"
+        ))
+    })
 }
 
 /// The world-space unit normal of the triangle `hit` names, (v1 - v0) x (v2 - v0) in its
@@ -141,22 +134,15 @@ impl RayScene {
                 self.meshes.len()
             )));
         }
-        let to_world = affine(&transform)?;
-        let determinant = to_world.matrix3.determinant();
-        if !to_world.is_finite() || determinant == 0.0 || !to_world.inverse().is_finite() {
-            return Err(PyValueError::new_err(format!(
-                "add_instance: the transform must be finite and invertible (determinant {determinant:e})"
-            )));
-        }
         if self.instances.len() >= u32::MAX as usize {
             return Err(PyValueError::new_err("add_instance: too many instances"));
         }
         let id = self.instances.len() as u32;
-        self.instances.push(
-            Instance::new(geometry, to_world)
-                .with_mask(mask)
-                .with_id(id),
-        );
+        let instance = Instance::new(geometry, arrays::affine(&transform)?)
+            .with_mask(mask)
+            .with_id(id);
+        check_transform(&instance, id as usize, "add_instance")?;
+        self.instances.push(instance);
         self.changed();
         Ok(id)
     }
@@ -168,21 +154,15 @@ impl RayScene {
         transform: PyReadonlyArray2<'_, f32>,
     ) -> PyResult<()> {
         let count = self.instances.len();
-        let to_world = affine(&transform)?;
+        let to_world = arrays::affine(&transform)?;
         let Some(slot) = self.instances.get_mut(instance as usize) else {
             return Err(PyValueError::new_err(format!(
                 "set_transform: instance {instance} does not exist (the scene has {count})"
             )));
         };
-        if !to_world.is_finite()
-            || to_world.matrix3.determinant() == 0.0
-            || !to_world.inverse().is_finite()
-        {
-            return Err(PyValueError::new_err(
-                "set_transform: the transform must be finite and invertible",
-            ));
-        }
-        *slot = slot.with_transform(to_world);
+        let moved = slot.with_transform(to_world);
+        check_transform(&moved, instance as usize, "set_transform")?;
+        *slot = moved;
         self.changed();
         Ok(())
     }

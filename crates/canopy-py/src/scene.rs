@@ -6,8 +6,8 @@ use crate::render::SceneInfo;
 use canopy_render::camera::CameraSpec;
 use canopy_render::material::Material;
 use canopy_render::{Background, Scene};
-use glam::{Affine3A, Mat3, Vec3};
-use numpy::{PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
+use glam::Vec3;
+use numpy::{PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyDictMethods};
@@ -86,23 +86,6 @@ fn material_from_dict(table: &Bound<'_, PyDict>) -> PyResult<Material> {
             radiance: colour("radiance")?,
         },
     })
-}
-
-/// An affine transform from the rows of a (3, 4) float32 matrix (the top of a 4x4
-/// matrix acting on column vectors, as numpy, trimesh and Open3D write them).
-fn affine_from_rows(array: &PyReadonlyArray2<'_, f32>) -> PyResult<Affine3A> {
-    let shape = array.shape();
-    if shape != [3, 4] {
-        return Err(PyValueError::new_err(format!(
-            "transform must be a 4x4 or 3x4 matrix, not {shape:?}"
-        )));
-    }
-    let m = array.as_array();
-    let column = |j: usize| Vec3::new(m[[0, j]], m[[1, j]], m[[2, j]]);
-    Ok(Affine3A::from_mat3_translation(
-        Mat3::from_cols(column(0), column(1), column(2)),
-        column(3),
-    ))
 }
 
 /// A material argument: an index from `add_material`, or a table added with the call
@@ -301,7 +284,7 @@ impl PyScene {
         transform: PyReadonlyArray2<'_, f32>,
         material: MaterialArg<'_>,
     ) -> PyResult<(u32, u32)> {
-        let to_world = affine_from_rows(&transform)?;
+        let to_world = arrays::affine(&transform)?;
         let positions: Vec<Vec3> = arrays::points("vertices", &vertices)?
             .iter()
             .map(|&p| p.into())
@@ -340,7 +323,7 @@ impl PyScene {
         transform: PyReadonlyArray2<'_, f32>,
         material: MaterialArg<'_>,
     ) -> PyResult<u32> {
-        let to_world = affine_from_rows(&transform)?;
+        let to_world = arrays::affine(&transform)?;
         self.with_material(material, "add_instance", |scene, m| {
             scene.add_instance(mesh, to_world, m)
         })

@@ -275,6 +275,18 @@ impl Checkpoint {
         read_prefix(path, MAGIC.len()).is_some_and(|head| head == MAGIC)
     }
 
+    /// Why no checkpoint may be saved at `path`, if something other than a canopy
+    /// checkpoint is there: such a file is the user's, and the first save would replace it.
+    pub fn check_slot(path: &Path) -> Result<(), String> {
+        if std::fs::symlink_metadata(path).is_ok() && !Self::is_checkpoint_file(path) {
+            return Err(format!(
+                "{}: exists and is not a canopy checkpoint; refusing to overwrite it",
+                path.display()
+            ));
+        }
+        Ok(())
+    }
+
     /// Removes the checkpoint at `path` if it is one; anything else is left alone.
     pub fn remove_if_checkpoint(path: &Path) -> std::io::Result<bool> {
         if Self::is_checkpoint_file(path) {

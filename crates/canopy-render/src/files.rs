@@ -130,6 +130,19 @@ pub fn same_file(a: &Path, b: &Path) -> bool {
     }
 }
 
+/// Why `what` may not be written to `path`, if it is one of `inputs` (the files a scene
+/// was read from): the one check every writer makes of its outputs.
+pub fn refuse_inputs(path: &Path, inputs: &[std::path::PathBuf], what: &str) -> Result<(), String> {
+    match inputs.iter().find(|i| same_file(path, i)) {
+        Some(input) => Err(format!(
+            "{}: refusing to write the {what} over an input of the scene ({})",
+            path.display(),
+            input.display()
+        )),
+        None => Ok(()),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -280,13 +280,11 @@ impl Scene {
         if self.instances.len() as u64 >= MAX_INSTANCES {
             return Err(format!("a scene holds at most {MAX_INSTANCES} instances"));
         }
-        let determinant = to_world.matrix3.determinant();
-        if !to_world.is_finite() || determinant == 0.0 || !to_world.inverse().is_finite() {
-            return Err(format!(
-                "the transform must be finite and invertible (determinant {determinant:e})"
-            ));
-        }
-        let world = Instance::new(0, to_world).world_bounds(local);
+        let placed = Instance::new(0, to_world);
+        placed
+            .check(self.instances.len())
+            .map_err(|e| format!("the transform must be finite and invertible: {e}"))?;
+        let world = placed.world_bounds(local);
         if !local.is_empty() && !in_range(&[world.min.to_array(), world.max.to_array()].concat()) {
             return Err(format!(
                 "the instance reaches {} .. {}, beyond ±{MAX_COORDINATE:e}",
