@@ -5,7 +5,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-cargo test --workspace --release
+cargo test --workspace --release --no-fail-fast
 
 venv=target/py-venv
 if [ ! -x "$venv/bin/python" ]; then

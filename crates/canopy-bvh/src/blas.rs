@@ -217,7 +217,7 @@ impl<G: Geometry> Blas<G> {
             }
             (None, _) => {
                 let sheared = self.sheared(ray);
-                (0..g.len() as u32).any(|p| g.occludes(p, ray, &sheared))
+                ray.is_traceable() && (0..g.len() as u32).any(|p| g.occludes(p, ray, &sheared))
             }
         }
     }
@@ -259,6 +259,9 @@ fn brute_force_closest<G: Geometry, C: TraversalCounter>(
     sheared: &ShearedRay,
     counter: &mut C,
 ) -> Option<Hit> {
+    if !ray.is_traceable() {
+        return None;
+    }
     let mut best: Option<Hit> = None;
     let mut ray = *ray;
     for prim in 0..geometry.len() as u32 {

@@ -198,7 +198,8 @@ impl GpuBvh {
         counter: &mut impl TraversalCounter,
         mut test: impl FnMut(u32, &mut Ray) -> bool,
     ) -> bool {
-        if self.nodes.is_empty() {
+        // A NaN or degenerate ray misses everything (see Ray).
+        if self.nodes.is_empty() || !ray.is_traceable() {
             return false;
         }
         let mut stack = Vec::new();

@@ -6,6 +6,12 @@ use glam::Vec3;
 ///
 /// The reciprocal direction is precomputed for the slab test; a zero direction component
 /// gives an infinite reciprocal, which the slab test handles.
+///
+/// A ray that is not [traceable](Ray::is_traceable) — an origin or direction that is not
+/// finite, a direction with no component of normal size (zero, or denormal in every
+/// component), a NaN end — misses everything, in every structure and layout and in
+/// brute force alike. [`Ray::new`] caps `t_max` at `f32::MAX`, so a hit's `t` is always
+/// finite.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Ray {
     pub origin: Vec3,
@@ -23,8 +29,22 @@ impl Ray {
             dir,
             inv_dir: dir.recip(),
             t_min,
-            t_max,
+            // Not `min`, which would turn a NaN into a number.
+            t_max: if t_max > f32::MAX { f32::MAX } else { t_max },
         }
+    }
+
+    /// Whether the ray can hit anything: finite origin and direction, a direction with
+    /// at least one component of normal size (at least `f32::MIN_POSITIVE`), and no NaN
+    /// end. Every query answers a miss for a ray that is not.
+    #[inline(always)]
+    pub fn is_traceable(&self) -> bool {
+        let d = self.dir.abs();
+        self.origin.is_finite()
+            && d.is_finite()
+            && d.max_element() >= f32::MIN_POSITIVE
+            && !self.t_min.is_nan()
+            && !self.t_max.is_nan()
     }
 
     /// The point at parameter `t`.

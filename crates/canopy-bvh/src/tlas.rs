@@ -203,6 +203,9 @@ where
     C: TraversalCounter,
     F: FnMut(u32, &Ray) -> Option<Hit>,
 {
+    if !ray.is_traceable() {
+        return None;
+    }
     let mut best: Option<Hit> = None;
     let mut ray = *ray;
     for index in 0..count as u32 {
@@ -235,7 +238,7 @@ impl<B: RayQuery> RayQuery for Tlas<B> {
         let test = |i: u32, r: &Ray| self.occluded_in(i, r, mask);
         match &self.tree {
             Some(tree) => tree.occluded(ray, test),
-            None => (0..self.instances.len() as u32).any(|i| test(i, ray)),
+            None => ray.is_traceable() && (0..self.instances.len() as u32).any(|i| test(i, ray)),
         }
     }
 

@@ -172,7 +172,7 @@ impl Bvh2 {
         P: IntoHit,
         C: TraversalCounter,
     {
-        let root = self.nodes.first()?;
+        let root = self.nodes.first().filter(|_| ray.is_traceable())?;
         let mut search = ClosestHitSearch::new(ray);
         if search.slab.entry_or_inf(root.min, root.max) == f32::INFINITY {
             return None;
@@ -227,7 +227,7 @@ impl Bvh2 {
     where
         F: FnMut(u32, &Ray) -> bool,
     {
-        let Some(root) = self.nodes.first() else {
+        let Some(root) = self.nodes.first().filter(|_| ray.is_traceable()) else {
             return false;
         };
         let slab = SlabRay::new(ray);

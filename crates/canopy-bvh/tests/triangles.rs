@@ -517,3 +517,154 @@ fn reordered_batches_answer_each_ray_in_place() {
         .map(|&h| bits(h))
         .eq(hits.iter().map(|&h| bits(h))));
 }
+
+/// Rays that cannot hit anything (NaN or infinite origin or direction, a zero direction,
+/// a direction denormal in every component, a NaN end) miss in every layout, kernel and
+/// structure and in brute force, and any-hit agrees; rays with tiny but normal directions
+/// get brute force's answer, and no hit anywhere has an infinite `t`.
+#[test]
+fn degenerate_rays_miss_everywhere_and_no_hit_is_at_infinity() {
+    let tri = [
+        Vec3::new(-1.0, -1.0, -2.0),
+        Vec3::new(1.0, -1.0, -2.0),
+        Vec3::new(0.0, 1.0, -2.0),
+    ];
+    let mut prims = vec![Prim::Triangle(tri)];
+    // A few more so that the trees have interior nodes and packs of several lanes.
+    for i in 0..40 {
+        let a = Vec3::new(
+            (i % 7) as f32 - 3.0,
+            (i / 7) as f32 - 3.0,
+            -3.0 - i as f32 * 0.1,
+        );
+        prims.push(if i % 5 == 0 {
+            Prim::Box(Aabb::new(a, a + 0.3))
+        } else {
+            Prim::Triangle([a, a + Vec3::X * 0.5, a + Vec3::Y * 0.5])
+        });
+    }
+    let o = Vec3::ZERO;
+    let degenerate = [
+        Ray::new(o, Vec3::new(0.0, 0.0, -1e-45), 0.0, f32::INFINITY),
+        Ray::new(o, Vec3::new(1e-40, -1e-39, -1e-45), 0.0, f32::INFINITY),
+        Ray::new(o, Vec3::ZERO, 0.0, f32::INFINITY),
+        Ray::new(o, Vec3::new(0.0, 0.0, -0.0), 0.0, f32::INFINITY),
+        Ray::new(o, Vec3::new(f32::NAN, 0.0, -1.0), 0.0, f32::INFINITY),
+        Ray::new(Vec3::new(0.0, f32::NAN, 0.0), -Vec3::Z, 0.0, f32::INFINITY),
+        Ray::new(
+            Vec3::new(0.0, 0.0, f32::INFINITY),
+            -Vec3::Z,
+            0.0,
+            f32::INFINITY,
+        ),
+        Ray::new(
+            o,
+            Vec3::new(0.0, 0.0, f32::NEG_INFINITY),
+            0.0,
+            f32::INFINITY,
+        ),
+        Ray::new(o, -Vec3::Z, f32::NAN, f32::INFINITY),
+        Ray::new(o, -Vec3::Z, 0.0, f32::NAN),
+    ];
+    let tiny = [1e-20f32, 1e-30, 1e-36, f32::MIN_POSITIVE]
+        .map(|s| Ray::new(o, Vec3::new(0.0, 0.0, -s), 0.0, f32::INFINITY));
+    for ray in &degenerate {
+        assert!(!ray.is_traceable(), "{ray:?}");
+    }
+    for ray in &tiny {
+        assert!(ray.is_traceable(), "{ray:?}");
+    }
+    // Small directions are rays like any other: t grows as the direction shrinks.
+    assert!(brute_force(&prims, &tiny[0]).is_some_and(|h| (h.t * 1e-20 - 2.0).abs() < 1e-5));
+
+    let boxes: Vec<Aabb> = prims.iter().map(Prim::bounds).collect();
+    let test = |p: u32, r: &Ray| prims[p as usize].hit(r).filter(|_| r.is_traceable());
+    for &builder in Builder::ALL {
+        let bvh = build(builder, &boxes, &BuildParams::default());
+        let layouts = BvhWidth::ALL
+            .map(|width| (format!("{width:?}"), Tree::new(bvh.clone(), width)))
+            .into_iter()
+            .chain([("gpu".to_string(), Tree::Gpu(GpuBvh::from_bvh2(&bvh)))]);
+        for (layout, tree) in layouts {
+            for packed in [false, true] {
+                let mut tree = tree.clone();
+                if packed {
+                    tree.pack_triangles(|p| prims[p as usize].triangle());
+                }
+                for isa in Isa::supported() {
+                    if tree.set_isa(isa).is_err() {
+                        continue;
+                    }
+                    let name = format!("{builder} {layout} packed {packed} {isa}");
+                    for ray in &degenerate {
+                        assert_eq!(
+                            tree.intersect_counted(ray, test, &mut ()),
+                            None,
+                            "{name} {ray:?}"
+                        );
+                        assert!(
+                            !tree.occluded(ray, |p, r| test(p, r).is_some()),
+                            "{name} {ray:?}"
+                        );
+                    }
+                    for ray in &tiny {
+                        let hit = tree.intersect_counted(ray, test, &mut ());
+                        assert_eq!(bits(hit), bits(brute_force(&prims, ray)), "{name} {ray:?}");
+                        assert!(
+                            hit.is_none_or(|h| h.t.is_finite()),
+                            "{name} {ray:?}: {hit:?}"
+                        );
+                    }
+                }
+            }
+        }
+    }
+    // Structures that own their geometry, brute force (`None`) included.
+    for builder in [None, Some(Builder::BinnedSah), Some(Builder::Lbvh)] {
+        for width in BvhWidth::ALL {
+            let blas = Blas::build(
+                Prims(prims.clone()),
+                &BlasParams {
+                    builder,
+                    width,
+                    ..BlasParams::default()
+                },
+            );
+            for ray in &degenerate {
+                assert_eq!(blas.intersect(ray), None, "{builder:?} {width:?} {ray:?}");
+                assert!(!blas.occluded(ray), "{builder:?} {width:?} {ray:?}");
+            }
+            for ray in &tiny {
+                let hit = blas.intersect(ray);
+                assert_eq!(
+                    bits(hit),
+                    bits(brute_force(&prims, ray)),
+                    "{builder:?} {width:?}"
+                );
+                assert!(
+                    hit.is_none_or(|h| h.t.is_finite()),
+                    "{builder:?} {width:?} {hit:?}"
+                );
+            }
+            // Through instances, the top tree built by the same builder.
+            let params = BlasParams {
+                builder,
+                width,
+                ..BlasParams::default()
+            };
+            let instances = vec![
+                canopy_bvh::Instance::new(0, glam::Affine3A::IDENTITY),
+                canopy_bvh::Instance::new(0, glam::Affine3A::from_translation(Vec3::X * 9.0)),
+            ];
+            let tlas = canopy_bvh::Tlas::build(vec![blas], instances, &params).unwrap();
+            for ray in &degenerate {
+                assert_eq!(
+                    tlas.intersect(ray),
+                    None,
+                    "tlas {builder:?} {width:?} {ray:?}"
+                );
+                assert!(!tlas.occluded(ray), "tlas {builder:?} {width:?} {ray:?}");
+            }
+        }
+    }
+}

@@ -43,6 +43,8 @@ struct Description {
     bounds_max: [f32; 3],
     film_bytes: u64,
     geometry_bytes: u64,
+    /// The environment map's pixels and sampling tables (0 without one).
+    environment_bytes: u64,
     warnings: Vec<String>,
 }
 
@@ -79,6 +81,13 @@ fn describe(arg: &str, scene: &Scene) -> Description {
         bounds_min: bounds.min.to_array(),
         bounds_max: bounds.max.to_array(),
         film_bytes: scene.settings.film_bytes(),
+        environment_bytes: match &scene.background {
+            canopy_render::Background::Environment(map) => {
+                let (w, h) = map.size();
+                canopy_render::background::environment_memory(w as u64, h as u64)
+            }
+            _ => 0,
+        },
         geometry_bytes: scene.primitives.len() as u64 * BYTES_PER_PRIMITIVE
             + scene
                 .meshes
@@ -107,9 +116,10 @@ fn lines(scene: &Scene, d: &Description) -> Vec<String> {
         ),
         format!("bounds      {:?} to {:?}", d.bounds_min, d.bounds_max),
         format!(
-            "memory      ~{} of film, ~{} of primitives and BVH",
+            "memory      ~{} of film, ~{} of primitives and BVH, ~{} of environment map",
             human_bytes(d.film_bytes),
-            human_bytes(d.geometry_bytes)
+            human_bytes(d.geometry_bytes),
+            human_bytes(d.environment_bytes)
         ),
     ]
 }

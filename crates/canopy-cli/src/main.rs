@@ -17,6 +17,7 @@ mod limits;
 mod render;
 mod safety;
 mod scene_facts;
+mod signals;
 mod units;
 
 use clap::{Parser, Subcommand};
@@ -68,6 +69,7 @@ impl std::fmt::Display for Interrupted {
 impl std::error::Error for Interrupted {}
 
 fn main() -> ExitCode {
+    signals::install();
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Render(args) => render::run(&args),

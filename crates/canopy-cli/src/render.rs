@@ -8,11 +8,11 @@ use crate::safety::{
     same_file,
 };
 use crate::scene_facts::SceneFacts;
+use crate::signals;
 use crate::Interrupted;
 use anyhow::bail;
 use canopy_job::{CheckpointPolicy, Device, Observer, RenderJob, Structure};
 use canopy_render::camera::Camera;
-use canopy_render::checkpoint::Checkpoint;
 use canopy_render::visualize::{draw_bvh, render_heatmap, LevelRange};
 use canopy_render::{
     output::image_format, write_image, AccelKind, Accumulator, BvhWidth, Integrator, Region, Scene,
@@ -21,8 +21,6 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
 use std::time::Duration;
 
 #[derive(Args)]
@@ -172,8 +170,9 @@ struct Job {
     scene: Scene,
     /// The samples of the checkpoint this render continues, if any.
     accumulator: Option<Accumulator>,
-    /// The checkpoint this render continues, if any.
+    /// The checkpoint this render continues, if any, and the render that wrote it.
     resumed_from: Option<PathBuf>,
+    resume_owner: Option<u64>,
 }
 
 fn load_job(args: &RenderArgs) -> anyhow::Result<Job> {
@@ -184,6 +183,7 @@ fn load_job(args: &RenderArgs) -> anyhow::Result<Job> {
             scene: resumed.scene,
             accumulator: Some(resumed.accumulator),
             resumed_from: Some(resumed.path),
+            resume_owner: Some(resumed.owner),
         });
     }
     let arg = args
@@ -197,6 +197,7 @@ fn load_job(args: &RenderArgs) -> anyhow::Result<Job> {
         scene,
         accumulator: None,
         resumed_from: None,
+        resume_owner: None,
     })
 }
 
@@ -293,6 +294,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
             on_interrupt: Some(dest.on_interrupt.clone()),
         },
         resume: job.accumulator.clone(),
+        resume_owner: job.resume_owner,
     };
     let prepared = render_job.prepare()?;
     let accel = prepared.accel();
@@ -329,6 +331,8 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         return finish(&summary, args.json);
     }
 
+    // From here a first signal stops the render after its pass and keeps the work.
+    signals::render_started();
     let mut observer = Terminal::new(settings.spp, region.height, &mut summary);
     if let Some(resumed) = &job.accumulator {
         observer
@@ -352,8 +356,8 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         // The samples are not lost with the image: keep them where a resume finds them.
         let saved = match &run.saved {
             Some(path) => Some(path.clone()),
-            None => Checkpoint::new(&job.source, scene, run.accumulator.clone())
-                .save(&dest.on_interrupt)
+            None => prepared
+                .save_checkpoint(&run.accumulator, &dest.on_interrupt)
                 .ok()
                 .map(|()| dest.on_interrupt.clone()),
         };
@@ -399,9 +403,9 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
             run.accumulator.invalid_samples
         ));
     }
-    if let Some(saved) = &run.saved {
+    if !run.complete {
         summary.interrupted = true;
-        summary.checkpoint = Some(saved.display().to_string());
+        summary.checkpoint = run.saved.as_ref().map(|p| p.display().to_string());
         say!(
             args.json,
             "partial     {} of {} samples per pixel: the image is noisier than asked",
@@ -409,6 +413,14 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
             settings.spp
         );
         finish(&summary, args.json)?;
+        let Some(saved) = &run.saved else {
+            // The warning said why; the image holds every sample there is.
+            bail!(
+                "interrupted; the checkpoint could not be saved, so the render cannot be resumed (the image {} holds its {} samples per pixel)",
+                dest.image.display(),
+                run.accumulator.samples
+            );
+        };
         return Err(Interrupted(format!(
             "interrupted; the render so far is saved: continue with `canopy render --resume {} -o {}`",
             saved.display(),
@@ -434,20 +446,11 @@ fn finish(summary: &Summary, json: bool) -> anyhow::Result<()> {
 /// a second signal ends the process at once.
 struct Terminal<'a> {
     progress: ProgressBar,
-    interrupted: Arc<AtomicBool>,
     summary: &'a mut Summary,
 }
 
 impl<'a> Terminal<'a> {
     fn new(spp: u32, rows: u32, summary: &'a mut Summary) -> Self {
-        let interrupted = Arc::new(AtomicBool::new(false));
-        let flag = interrupted.clone();
-        // Without a handler (another one is installed) a signal just ends the process.
-        let _ = ctrlc::set_handler(move || {
-            if flag.swap(true, Ordering::SeqCst) {
-                std::process::exit(crate::EXIT_INTERRUPTED);
-            }
-        });
         let progress = ProgressBar::new(spp as u64 * rows as u64).with_style(
             ProgressStyle::with_template(
                 "{spinner} rendering [{bar:40}] {percent:>3}%  {elapsed} elapsed, ETA {eta}",
@@ -455,11 +458,7 @@ impl<'a> Terminal<'a> {
             .expect("valid template")
             .progress_chars("=> "),
         );
-        Self {
-            progress,
-            interrupted,
-            summary,
-        }
+        Self { progress, summary }
     }
 }
 
@@ -469,7 +468,7 @@ impl Observer for Terminal<'_> {
     }
 
     fn keep_going(&mut self) -> bool {
-        !self.interrupted.load(Ordering::SeqCst)
+        !signals::stop_requested()
     }
 
     fn warning(&mut self, message: String) {

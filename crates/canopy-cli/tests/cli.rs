@@ -334,6 +334,54 @@ fn malformed_mesh_is_named_with_what_is_wrong() {
     std::fs::remove_dir_all(dir).unwrap();
 }
 
+/// A bare mesh's errors name the mesh file itself (not a line of a scene the user never
+/// wrote), and a mesh with no triangle of any area is refused by `check` and `render`
+/// alike: nothing to render and nothing to frame (its camera was NaN).
+#[test]
+fn bare_meshes_are_named_by_themselves_and_empty_ones_are_refused() {
+    let dir = scratch("bare-mesh");
+    let header = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n";
+    std::fs::write(
+        dir.join("broken.ply"),
+        format!("{header}0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n"),
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join("flat.ply"),
+        format!("{header}0 0 0\n1 1 1\n2 2 2\n3 0 1 2\n"),
+    )
+    .unwrap();
+    std::fs::write(dir.join("bad.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n").unwrap();
+    let cases = [
+        ("broken.ply", "error: broken.ply: face 0 refers to vertex 7"),
+        ("flat.ply", "error: flat.ply: no triangle with any area"),
+        (
+            "bad.obj",
+            "error: bad.obj: not a valid OBJ file: face vertex index out of bounds",
+        ),
+    ];
+    for (mesh, expected) in cases {
+        for command in ["check", "render"] {
+            let out = canopy(
+                &[command, mesh, "--size", "8x8", "--spp", "1"]
+                    [..if command == "check" { 2 } else { 6 }],
+                &dir,
+            );
+            assert_eq!(out.status.code(), Some(1), "{command} {mesh}");
+            let err = stderr(&out);
+            assert!(err.starts_with(expected), "{command} {mesh}: {err}");
+            let cites_a_line = (0..10).any(|d| err.contains(&format!("{mesh}:{d}")));
+            assert!(
+                !cites_a_line,
+                "{command} {mesh} cites a line of a generated scene: {err}"
+            );
+            assert!(!err.contains("NaN") && !err.contains("panicked"), "{err}");
+        }
+    }
+    assert_eq!(outputs(&dir), Vec::<String>::new());
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
 #[test]
 fn unknown_scene_and_bad_options_fail_cleanly() {
     let dir = scratch("options");

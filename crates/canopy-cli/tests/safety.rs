@@ -4,6 +4,7 @@
 mod common;
 
 use common::{canopy, canopy_within, outputs, scratch, stderr};
+use std::io::{BufRead, BufReader};
 use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::Duration;
@@ -188,42 +189,48 @@ fn the_scene_and_its_meshes_are_never_written_over() {
     std::fs::remove_dir_all(dir).unwrap();
 }
 
+/// A checkpoint belongs to the render that wrote it: a new render given its path is
+/// refused before any work (that checkpoint is someone's unfinished render) and the file
+/// is kept; the render that continues it (`--resume`) finishes and removes it.
 #[test]
-fn a_finished_render_replaces_and_then_removes_an_old_checkpoint_only() {
+fn another_renders_checkpoint_is_refused_and_kept_and_only_its_own_render_removes_it() {
     let dir = scratch("oldck");
-    // An earlier render's checkpoint (a different scene) may be reused and is removed.
-    let first = render(
-        &dir,
-        &[
-            "paper-5",
-            "--size",
-            "64x64",
-            "--spp",
-            "4000",
-            "-o",
-            "a.png",
-            "--checkpoint",
-            "ck",
-            "--every",
-            "0",
-        ],
-    );
-    let _ = first; // finished or not, `ck` is either absent or a checkpoint
-    if !dir.join("ck").exists() {
-        canopy_render::checkpoint::Checkpoint::new(
-            "paper-5",
-            &canopy_render::load_scene("paper-5").unwrap(),
-            canopy_render::Accumulator::new(480, 480),
-        )
-        .save(&dir.join("ck"))
-        .unwrap();
-    }
+    // An earlier render, interrupted: its checkpoint is on disk.
+    let earlier = canopy_render::checkpoint::Checkpoint::new(
+        "cornell",
+        &{
+            let mut scene = canopy_render::load_scene("cornell").unwrap();
+            scene.settings.width = 8;
+            scene.settings.height = 8;
+            scene.settings.spp = 2;
+            scene
+        },
+        canopy_render::Accumulator::new(8, 8),
+    )
+    .owned_by(42);
+    earlier.save(&dir.join("ck")).unwrap();
+    let before = std::fs::read(dir.join("ck")).unwrap();
     let out = render(
         &dir,
-        &[&["cornell", "-o", "b.png", "--checkpoint", "ck"], &TINY[..]].concat(),
+        &[&["paper-5", "-o", "b.png", "--checkpoint", "ck"], &TINY[..]].concat(),
     );
+    assert_eq!(out.status.code(), Some(1));
+    assert!(
+        stderr(&out).contains("holds the checkpoint of another render"),
+        "{}",
+        stderr(&out)
+    );
+    assert!(stderr(&out).contains("--resume ck"), "{}", stderr(&out));
+    assert_eq!(
+        std::fs::read(dir.join("ck")).unwrap(),
+        before,
+        "kept as it was"
+    );
+    assert!(!dir.join("b.png").exists());
+    // The render it holds continues and then removes it.
+    let out = render(&dir, &["--resume", "ck", "-o", "a.png"]);
     assert!(out.status.success(), "{}", stderr(&out));
-    assert!(!dir.join("ck").exists(), "the finished render's checkpoint");
+    assert!(!dir.join("ck").exists());
     std::fs::remove_dir_all(dir).unwrap();
 }
 
@@ -339,18 +346,23 @@ fn an_output_that_cannot_be_written_fails_before_the_render() {
     std::fs::remove_dir_all(dir).unwrap();
 }
 
+/// A periodic save that fails (a full disk, the directory gone) is a warning, once, and
+/// the render goes on; when it is then interrupted and its checkpoint cannot be saved
+/// either, the image of the samples so far is still written and the error says the
+/// render cannot be resumed. Driven by events: the first checkpoint on disk, then the
+/// warning on stderr.
 #[test]
 fn a_failed_checkpoint_save_warns_and_the_render_goes_on() {
     let dir = scratch("diskfull");
     std::fs::create_dir(dir.join("cks")).unwrap();
-    let child = Command::new(env!("CARGO_BIN_EXE_canopy"))
+    let mut child = Command::new(env!("CARGO_BIN_EXE_canopy"))
         .args([
             "render",
             "paper-5",
             "--size",
-            "96x96",
+            "32x32",
             "--spp",
-            "160",
+            "1000000",
             "-o",
             "out.png",
             "--checkpoint",
@@ -359,27 +371,41 @@ fn a_failed_checkpoint_save_warns_and_the_render_goes_on() {
             "0",
         ])
         .current_dir(&dir)
-        .stdout(Stdio::piped())
+        .stdout(Stdio::null())
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
-    std::thread::sleep(Duration::from_millis(200));
+    wait_until("the first checkpoint", &mut child, || {
+        dir.join("cks/ck").exists()
+    });
     // The checkpoint's directory turns into a file: every later save fails, as on a
     // full disk (and unlike permissions, this holds for root too).
     std::fs::rename(dir.join("cks"), dir.join("gone")).unwrap();
     std::fs::write(dir.join("cks"), "in the way").unwrap();
-    let out = child.wait_with_output().unwrap();
-    assert!(out.status.success(), "{}", stderr(&out));
-    assert!(image::open(dir.join("out.png")).is_ok());
-    let err = stderr(&out);
-    if err.contains("cannot write the checkpoint") {
-        assert!(err.contains("rendering goes on"), "{err}");
-        assert_eq!(
-            err.matches("cannot write the checkpoint").count(),
-            1,
-            "{err}"
-        );
-    } // else the render finished before the directory was replaced
+    let mut err = String::new();
+    let mut lines = BufReader::new(child.stderr.take().unwrap()).lines();
+    for line in lines.by_ref() {
+        let line = line.unwrap();
+        err.push_str(&line);
+        err.push('\n');
+        if line.contains("rendering goes on") {
+            break;
+        }
+    }
+    assert!(err.contains("cannot write the checkpoint"), "{err}");
+    signal(&child, "INT");
+    for line in lines {
+        err.push_str(&line.unwrap());
+        err.push('\n');
+    }
+    let status = child.wait().unwrap();
+    assert_eq!(status.code(), Some(1), "{err}");
+    assert_eq!(err.matches("rendering goes on").count(), 1, "{err}");
+    assert!(err.contains("the render cannot be resumed"), "{err}");
+    assert!(
+        image::open(dir.join("out.png")).is_ok(),
+        "the image is written: {err}"
+    );
     std::fs::remove_dir_all(dir).unwrap();
 }
 
@@ -440,10 +466,11 @@ fn a_checkpoint_resumes_from_another_directory_and_refuses_a_changed_scene() {
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
-    std::thread::sleep(Duration::from_millis(400));
-    let _ = Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status();
+    let mut child = child;
+    wait_until("the first checkpoint", &mut child, || {
+        scenes.join("ck").exists()
+    });
+    signal(&child, "INT");
     let out = child.wait_with_output().unwrap();
     if out.status.success() {
         std::fs::remove_dir_all(dir).unwrap();
@@ -579,11 +606,13 @@ fn summaries_are_json_on_request_and_warnings_go_to_stderr() {
     std::fs::remove_dir_all(dir).unwrap();
 }
 
+/// A second Ctrl-C ends the render at once: no image, no checkpoint, although the pass
+/// in flight (seconds long) has not finished. Driven by state: the signals go once the
+/// render has printed its summary, that is once its passes are about to start.
 #[test]
 fn a_second_ctrl_c_ends_the_render_at_once() {
     let dir = scratch("twice");
-    // One pass of this render takes seconds, so the first Ctrl-C alone would wait for it.
-    let child = Command::new(env!("CARGO_BIN_EXE_canopy"))
+    let mut child = Command::new(env!("CARGO_BIN_EXE_canopy"))
         .args([
             "render",
             "paper-1",
@@ -603,24 +632,112 @@ fn a_second_ctrl_c_ends_the_render_at_once() {
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
-    let pid = child.id().to_string();
-    std::thread::sleep(Duration::from_millis(800));
-    let interrupt = || Command::new("kill").args(["-INT", &pid]).status().unwrap();
-    interrupt();
-    std::thread::sleep(Duration::from_millis(100));
-    let second = std::time::Instant::now();
-    interrupt();
-    let out = child.wait_with_output().unwrap();
-    assert_eq!(out.status.code(), Some(130), "{}", stderr(&out));
-    assert!(
-        second.elapsed() < Duration::from_millis(700),
-        "the second Ctrl-C took {:?} to end the render",
-        second.elapsed()
+    let mut stdout = BufReader::new(child.stdout.take().unwrap());
+    let mut line = String::new();
+    while !line.starts_with("bvh") {
+        line.clear();
+        assert!(
+            stdout.read_line(&mut line).unwrap() > 0,
+            "no summary printed"
+        );
+    }
+    signal(&child, "INT");
+    let mut err = BufReader::new(child.stderr.take().unwrap());
+    wait_for_line(&mut err, "stopping after the pass in flight");
+    signal(&child, "INT");
+    let status = child.wait().unwrap();
+    assert_eq!(status.code(), Some(130));
+    assert_eq!(
+        outputs(&dir),
+        Vec::<String>::new(),
+        "nothing after a second Ctrl-C"
     );
-    assert!(
-        !dir.join("out.png").exists(),
-        "no image after a second Ctrl-C"
-    );
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+/// A signal while the scene loads or its BVH is built ends canopy with status 130 (not
+/// the signal's own 143 or 129), writing nothing. Driven by state: each signal is sent
+/// once the process has its handler, during a build that takes seconds.
+#[cfg(target_os = "linux")]
+#[test]
+fn a_signal_while_loading_or_building_exits_130_and_writes_nothing() {
+    let dir = scratch("early-signal");
+    write_grid_obj(&dir.join("grid.obj"), 250);
+    for (name, number) in [("INT", 2), ("TERM", 15), ("HUP", 1)] {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_canopy"))
+            .args([
+                "render",
+                "grid.obj",
+                "--bvh",
+                "agglomerative",
+                "--size",
+                "8x8",
+                "--spp",
+                "1",
+                "-o",
+                "o.png",
+                "--checkpoint",
+                "ck",
+            ])
+            .current_dir(&dir)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        let pid = child.id();
+        wait_until("the signal handler", &mut child, || handles(pid, number));
+        signal(&child, name);
+        let out = child.wait_with_output().unwrap();
+        assert_eq!(out.status.code(), Some(130), "SIG{name}: {}", stderr(&out));
+        assert_eq!(outputs(&dir), Vec::<String>::new(), "SIG{name}");
+    }
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+/// A second signal while the finished image is being written ends canopy at once and
+/// leaves no temporary file behind. Driven by state: the signals go when the temporary
+/// file appears (if the write wins the race, the whole image is there instead).
+#[test]
+fn a_second_signal_during_the_final_write_leaves_no_temporary_file() {
+    let dir = scratch("final-write");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_canopy"))
+        .args([
+            "render",
+            "cornell",
+            "--size",
+            "3000x3000",
+            "--spp",
+            "1",
+            "--depth",
+            "1",
+            "-o",
+            "big.exr",
+        ])
+        .current_dir(&dir)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let temporary = || {
+        std::fs::read_dir(&dir)
+            .unwrap()
+            .any(|e| e.unwrap().file_name().to_string_lossy().ends_with(".tmp"))
+    };
+    wait_until("the image's temporary file", &mut child, temporary);
+    signal(&child, "TERM");
+    let mut err = BufReader::new(child.stderr.take().unwrap());
+    wait_for_line(&mut err, "stopping after the pass in flight");
+    // The write may have finished meanwhile, and the process with it.
+    let _ = Command::new("kill")
+        .args(["-TERM", &child.id().to_string()])
+        .status();
+    let status = child.wait().unwrap();
+    assert!(!temporary(), "a temporary file is left behind");
+    match status.code() {
+        Some(130) => assert_eq!(outputs(&dir), Vec::<String>::new()),
+        Some(0) => assert!(image::open(dir.join("big.exr")).is_ok()),
+        other => panic!("exit {other:?}"),
+    }
     std::fs::remove_dir_all(dir).unwrap();
 }
 
@@ -642,4 +759,71 @@ fn a_closed_stdout_neither_panics_nor_loses_the_image() {
     assert!(!stderr(&out).contains("panicked"), "{}", stderr(&out));
     assert!(image::open(dir.join("out.png")).is_ok());
     std::fs::remove_dir_all(dir).unwrap();
+}
+
+/// Reads lines from `reader` until one contains `text`.
+fn wait_for_line(reader: &mut impl BufRead, text: &str) {
+    let mut line = String::new();
+    while !line.contains(text) {
+        line.clear();
+        assert!(
+            reader.read_line(&mut line).unwrap() > 0,
+            "no line saying {text:?}"
+        );
+    }
+}
+
+/// Sends `SIG<name>` to the child.
+fn signal(child: &std::process::Child, name: &str) {
+    let sent = Command::new("kill")
+        .args([&format!("-{name}"), &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(sent.success(), "kill -{name}");
+}
+
+/// Waits (polling, at most two minutes) until `ready` holds; fails if the child ends
+/// first.
+fn wait_until(what: &str, child: &mut std::process::Child, mut ready: impl FnMut() -> bool) {
+    let start = std::time::Instant::now();
+    while !ready() {
+        if let Some(status) = child.try_wait().unwrap() {
+            panic!("the render ended ({status}) before {what}");
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(120),
+            "no sign of {what}"
+        );
+        std::thread::sleep(Duration::from_millis(1));
+    }
+}
+
+/// Whether process `pid` catches signal `number` (Linux: the SigCgt mask in
+/// /proc/PID/status).
+fn handles(pid: u32, number: u32) -> bool {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).unwrap_or_default();
+    status
+        .lines()
+        .find_map(|l| l.strip_prefix("SigCgt:"))
+        .and_then(|mask| u64::from_str_radix(mask.trim(), 16).ok())
+        .is_some_and(|mask| mask & (1 << (number - 1)) != 0)
+}
+
+/// An OBJ grid of `n` x `n` squares (2n² triangles), slightly bumpy.
+fn write_grid_obj(path: &Path, n: u32) {
+    let mut text = String::new();
+    for j in 0..=n {
+        for i in 0..=n {
+            let z = ((i * 7 + j * 13) % 17) as f32 / 170.0;
+            text += &format!("v {} {} {z}\n", i as f32 / n as f32, j as f32 / n as f32);
+        }
+    }
+    for j in 0..n {
+        for i in 0..n {
+            let a = j * (n + 1) + i + 1;
+            let (b, c) = (a + 1, a + n + 1);
+            text += &format!("f {a} {b} {}\nf {a} {} {c}\n", c + 1, c + 1);
+        }
+    }
+    std::fs::write(path, text).unwrap();
 }

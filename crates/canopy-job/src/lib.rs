@@ -128,6 +128,11 @@ pub struct RenderJob<'s> {
     /// Samples already rendered (a checkpoint's), to continue from; its region replaces
     /// [`region`](Self::region).
     pub resume: Option<Accumulator>,
+    /// The owner of the checkpoint [`resume`](Self::resume) came from
+    /// ([`Checkpoint::owner`](canopy_render::checkpoint::Checkpoint::owner)): this render
+    /// continues it, so it may replace and remove that checkpoint. Any other render's
+    /// checkpoint is never replaced or removed.
+    pub resume_owner: Option<u64>,
 }
 
 impl<'s> RenderJob<'s> {
@@ -144,6 +149,7 @@ impl<'s> RenderJob<'s> {
             region: Region::full(s.width, s.height),
             checkpoint: CheckpointPolicy::default(),
             resume: None,
+            resume_owner: None,
         }
     }
 

@@ -19,6 +19,9 @@ pub const BYTES_PER_PIXEL: u64 = 64;
 /// A job with its acceleration structure built and its device open.
 pub struct Prepared<'j> {
     job: &'j RenderJob<'j>,
+    /// Whose checkpoints this render may replace and remove: its own identity (random),
+    /// then the resumed checkpoint's owner.
+    owners: Vec<u64>,
     pool: Option<rayon::ThreadPool>,
     accel: Accel,
     gpu: Option<canopy_gpu::Gpu>,
@@ -33,7 +36,8 @@ pub struct Outcome {
     pub stats: RenderStats,
     /// Whether every sample asked for is in; false when the observer stopped the render.
     pub complete: bool,
-    /// Where an incomplete render's state was saved (the policy's `on_interrupt`).
+    /// Where an incomplete render's state was saved (the policy's `on_interrupt`);
+    /// `None` when it was not asked for or could not be saved (the observer was warned).
     pub saved: Option<PathBuf>,
 }
 
@@ -59,11 +63,14 @@ impl<'s> RenderJob<'s> {
                 )));
             }
         }
+        let owners: Vec<u64> = std::iter::once(canopy_render::files::random_u64())
+            .chain(self.resume_owner)
+            .collect();
         for path in [&self.checkpoint.periodic, &self.checkpoint.on_interrupt]
             .into_iter()
             .flatten()
         {
-            check_checkpoint_path(path, self.scene)?;
+            check_checkpoint_path(path, self.scene, &owners)?;
         }
         if let Some(resumed) = &self.resume {
             if resumed.samples > settings.spp {
@@ -121,6 +128,7 @@ impl<'s> RenderJob<'s> {
         });
         Ok(Prepared {
             job: self,
+            owners,
             pool,
             accel,
             gpu,
@@ -129,17 +137,34 @@ impl<'s> RenderJob<'s> {
 }
 
 /// A checkpoint may be written to `path` only if it is no input of the scene and holds
-/// nothing, or a canopy checkpoint: anything else there is the user's.
+/// nothing, or a checkpoint of `owners`: anything else there is the user's, or another
+/// render's work.
 fn check_checkpoint_path(
     path: &std::path::Path,
     scene: &canopy_render::Scene,
+    owners: &[u64],
 ) -> Result<(), JobError> {
     canopy_render::files::refuse_inputs(path, &scene.inputs, "checkpoint")
         .and_then(|()| Checkpoint::check_slot(path))
-        .map_err(JobError::Invalid)
+        .map_err(JobError::Invalid)?;
+    Checkpoint::check_owned_slot(path, owners)?;
+    Ok(())
 }
 
 impl Prepared<'_> {
+    /// Saves `accumulator` as this render's checkpoint at `path`, unless something other
+    /// than this render's own checkpoint (or the one it continues) is there.
+    pub fn save_checkpoint(
+        &self,
+        accumulator: &Accumulator,
+        path: &std::path::Path,
+    ) -> Result<(), canopy_render::checkpoint::CheckpointError> {
+        let job = self.job;
+        Checkpoint::new(&job.source, job.scene, accumulator.clone())
+            .owned_by(self.owners[0])
+            .save_owned(path, &self.owners)
+    }
+
     /// The structure over the job's scene (the one the CPU traces).
     pub fn accel(&self) -> &Accel {
         &self.accel
@@ -220,7 +245,7 @@ impl Prepared<'_> {
             if last_save.elapsed() >= policy.every && accumulator.samples < spp {
                 // A failed save (a full disk) must not end hours of rendering: warn once
                 // per run of failures, and try again at the next save.
-                match Checkpoint::new(&job.source, scene, accumulator.clone()).save(path) {
+                match self.save_checkpoint(&accumulator, path) {
                     Ok(()) => save_failing = false,
                     Err(e) if !save_failing => {
                         save_failing = true;
@@ -235,13 +260,17 @@ impl Prepared<'_> {
         let mut saved = None;
         if !complete {
             if let Some(path) = &policy.on_interrupt {
-                Checkpoint::new(&job.source, scene, accumulator.clone()).save(path)?;
-                saved = Some(path.clone());
+                // A failed save must not take the samples with it: they are still in the
+                // outcome (the caller writes the image from them), and `saved` says none.
+                match self.save_checkpoint(&accumulator, path) {
+                    Ok(()) => saved = Some(path.clone()),
+                    Err(e) => observer.warning(format!("{e}; the render cannot be resumed")),
+                }
             }
         } else if let Some(path) = &policy.periodic {
-            // The render is complete: its checkpoint has nothing left to give. Only a
-            // file that is recognisably a checkpoint is removed.
-            let _ = Checkpoint::remove_if_checkpoint(path);
+            // The render is complete: its checkpoint has nothing left to give. Only its
+            // own (or the one it continued) is removed, never another render's.
+            let _ = Checkpoint::remove_owned(path, &self.owners);
         }
         Ok(Outcome {
             accumulator,

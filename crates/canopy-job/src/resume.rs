@@ -14,6 +14,8 @@ pub struct Resumed {
     pub accumulator: Accumulator,
     /// The checkpoint file.
     pub path: PathBuf,
+    /// The render that wrote it (see [`RenderJob::resume_owner`]).
+    pub owner: u64,
 }
 
 impl Resumed {
@@ -42,6 +44,7 @@ impl Resumed {
             source: checkpoint.scene,
             accumulator: checkpoint.accumulator,
             path: path.to_owned(),
+            owner: checkpoint.owner,
         })
     }
 
@@ -51,6 +54,7 @@ impl Resumed {
         let mut job = RenderJob::new(&self.scene, self.source.clone());
         job.region = self.accumulator.region;
         job.resume = Some(self.accumulator.clone());
+        job.resume_owner = Some(self.owner);
         job.checkpoint.periodic = Some(self.path.clone());
         job.checkpoint.on_interrupt = Some(self.path.clone());
         job

@@ -307,3 +307,59 @@ fn a_checkpoint_never_goes_over_an_input_or_a_users_file() {
     assert_eq!(std::fs::read_to_string(&notes).unwrap(), "my notes");
     std::fs::remove_dir_all(dir).unwrap();
 }
+
+/// Two renders given one checkpoint path: a second render started over the first's
+/// checkpoint is refused before any work, and when both were started while the path was
+/// free, the one that saves second neither replaces nor (finishing first) removes the
+/// other's checkpoint: each only ever touches its own, or the one it continues.
+#[test]
+fn two_renders_sharing_a_checkpoint_path_never_destroy_each_others_work() {
+    let dir = temp_dir("shared");
+    let ck = dir.join("shared.checkpoint");
+    let scene = small("cornell", 10, 8, 6);
+    let policy = CheckpointPolicy {
+        periodic: Some(ck.clone()),
+        every: Duration::ZERO,
+        on_interrupt: Some(ck.clone()),
+    };
+    let mut first = RenderJob::new(&scene, "cornell");
+    first.checkpoint = policy.clone();
+    let second = first.clone();
+    // Both prepared while the path is free.
+    let (first, second) = (first.prepare().unwrap(), second.prepare().unwrap());
+    let mut stop = Recorder {
+        stop_after: Some(2),
+        ..Recorder::default()
+    };
+    let stopped = first.run(&mut stop).unwrap();
+    assert_eq!(stopped.saved.as_deref(), Some(ck.as_path()));
+    let saved = Checkpoint::load(&ck).unwrap();
+
+    // The second runs to the end: its saves are refused (a warning, once), and its end
+    // does not remove the first's checkpoint.
+    let mut seen = Recorder::default();
+    let done = second.run(&mut seen).unwrap();
+    assert!(done.complete);
+    assert_eq!(seen.warnings.len(), 1, "{:?}", seen.warnings);
+    assert!(
+        seen.warnings[0].contains("another render"),
+        "{:?}",
+        seen.warnings
+    );
+    assert_eq!(
+        Checkpoint::load(&ck).unwrap(),
+        saved,
+        "the first render's work is kept"
+    );
+
+    // A third render started over it is refused before any work ...
+    let mut third = RenderJob::new(&scene, "cornell");
+    third.checkpoint = policy;
+    let refused = third.prepare().err().expect("refused");
+    assert!(refused.to_string().contains("another render"), "{refused}");
+    // ... and the render that continues it may save over it and remove it.
+    let resumed = Resumed::load(&ck).unwrap();
+    let finished = resumed.job().prepare().unwrap().run(&mut ()).unwrap();
+    assert!(finished.complete && !ck.exists());
+    std::fs::remove_dir_all(dir).unwrap();
+}

@@ -189,13 +189,13 @@ pub fn render<'py>(
         (None, None) => return Err(PyValueError::new_err("render() needs a scene (or resume=)")),
         (None, Some(path)) => {
             let r = py.detach(|| Resumed::load(path)).map_err(job_error)?;
-            (r.scene, r.source, Some(r.accumulator))
+            (r.scene, r.source, Some((r.accumulator, r.owner)))
         }
         (Some((scene, _)), Some(path)) => {
             let r = py
                 .detach(|| Resumed::load_for(path, scene))
                 .map_err(job_error)?;
-            (r.scene, r.source, Some(r.accumulator))
+            (r.scene, r.source, Some((r.accumulator, r.owner)))
         }
         (Some((scene, source)), None) => (scene, source, None),
     };
@@ -229,7 +229,7 @@ pub fn render<'py>(
             height,
         };
     }
-    job.resume = resumed;
+    (job.resume, job.resume_owner) = resumed.unzip();
     let checkpoint = checkpoint.or(resume);
     job.checkpoint = CheckpointPolicy {
         periodic: checkpoint.clone(),
@@ -345,17 +345,17 @@ fn rows_of_three<T>(values: Vec<T>) -> Array2<T> {
 }
 
 /// Reads a PNG (8-bit values / 255, as stored) or EXR (linear float) image as a float32
-/// array of shape (height, width, 3).
+/// array of shape (height, width, 3). Only regular files are read, and the size an image
+/// declares is checked against the memory available before it is decoded.
 #[pyfunction]
 pub fn read_image<'py>(
     py: Python<'py>,
     path: std::path::PathBuf,
 ) -> PyResult<Bound<'py, PyArray3<f32>>> {
-    let image = image::open(&path)
-        .map_err(|e| PyOSError::new_err(format!("{}: {e}", path.display())))?
-        .into_rgb32f();
-    let (w, h) = (image.width() as usize, image.height() as usize);
-    let array = numpy::ndarray::Array3::from_shape_vec((h, w, 3), image.into_raw())
+    let (w, h, rgb) = py
+        .detach(|| canopy_render::output::read_image(&path))
+        .map_err(PyOSError::new_err)?;
+    let array = numpy::ndarray::Array3::from_shape_vec((h as usize, w as usize, 3), rgb)
         .expect("height x width x 3 values");
-    Ok(array.to_pyarray(py))
+    Ok(array.into_pyarray(py))
 }

@@ -1,5 +1,6 @@
 """The renderer from Python: the CLI's pixels exactly, progress, errors."""
 
+import os
 import subprocess
 
 import numpy as np
@@ -152,3 +153,28 @@ def test_a_checkpoint_never_goes_over_the_scene_or_a_users_file(tmp_path):
         with pytest.raises(ValueError, match=words):
             canopy.render(str(scene), size=(4, 4), spp=1, checkpoint=target)
     assert scene.read_text() == text and notes.read_text() == "my notes"
+
+
+def test_read_image_refuses_special_files_and_oversized_images(tmp_path):
+    """read_image opens only regular files (a FIFO would block it forever, beyond the
+    reach of Ctrl-C) and checks the size an image declares before decoding it."""
+    fifo = tmp_path / "pipe.png"
+    os.mkfifo(fifo)
+    with pytest.raises(OSError, match="not a regular file"):
+        canopy.read_image(fifo)
+    with pytest.raises(OSError, match="not a regular file"):
+        canopy.read_image(tmp_path)
+    # A PNG header declaring 20000 x 20000 pixels (400M, past the largest film).
+    import struct
+    import zlib
+
+    def chunk(kind, data):
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+    header = struct.pack(">IIBBBBB", 20000, 20000, 8, 2, 0, 0, 0)
+    huge = tmp_path / "huge.png"
+    huge.write_bytes(
+        b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header) + chunk(b"IDAT", zlib.compress(b"")) + chunk(b"IEND", b"")
+    )
+    with pytest.raises(OSError, match="huge.png: a 20000x20000 image is larger than"):
+        canopy.read_image(huge)

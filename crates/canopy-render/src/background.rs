@@ -89,7 +89,8 @@ pub struct EnvironmentMap {
     pub source: String,
     width: usize,
     height: usize,
-    pixels: Vec<Vec3>,
+    /// RGB triples, rows from the top: the decoder's own buffer, kept without a copy.
+    rgb: Vec<f32>,
     to_world: Mat3,
     distribution: Option<Distribution2D>,
     /// FNV-1a of the pixels, so checkpoints notice a changed image.
@@ -117,8 +118,25 @@ impl EnvironmentMap {
         pixels: Vec<Vec3>,
         to_world: Mat3,
     ) -> Self {
-        assert_eq!(pixels.len(), width * height, "pixels do not fill the image");
+        let rgb = bytemuck::cast_slice::<Vec3, f32>(&pixels).to_vec();
+        Self::from_rgb(source, width, height, rgb, to_world)
+    }
+
+    /// [`EnvironmentMap::new`] from RGB triples (`3 * width * height` values).
+    pub fn from_rgb(
+        source: impl Into<String>,
+        width: usize,
+        height: usize,
+        rgb: Vec<f32>,
+        to_world: Mat3,
+    ) -> Self {
+        assert_eq!(
+            rgb.len(),
+            3 * width * height,
+            "pixels do not fill the image"
+        );
         assert!(width > 0 && height > 0, "an environment map needs pixels");
+        let pixels: &[Vec3] = bytemuck::cast_slice(&rgb);
         // Each pixel's share of the sphere is proportional to sin θ at its row's centre.
         let weights: Vec<f32> = pixels
             .iter()
@@ -128,16 +146,18 @@ impl EnvironmentMap {
                 luminance(c) * theta.sin()
             })
             .collect();
+        let distribution = Distribution2D::new(&weights, width, height);
+        drop(weights);
         let mut content_hash = 0xcbf2_9ce4_8422_2325u64;
-        for byte in bytemuck::cast_slice::<Vec3, u8>(&pixels) {
+        for byte in bytemuck::cast_slice::<f32, u8>(&rgb) {
             content_hash = (content_hash ^ *byte as u64).wrapping_mul(0x0000_0100_0000_01b3);
         }
         Self {
             source: source.into(),
-            distribution: Distribution2D::new(&weights, width, height),
+            distribution,
             width,
             height,
-            pixels,
+            rgb,
             to_world,
             content_hash,
         }
@@ -149,7 +169,7 @@ impl EnvironmentMap {
 
     /// The pixels, rows from the top (for renderers that look the map up themselves).
     pub fn pixels(&self) -> &[Vec3] {
-        &self.pixels
+        bytemuck::cast_slice(&self.rgb)
     }
 
     /// The rotation from the map's frame to the world.
@@ -182,7 +202,7 @@ impl EnvironmentMap {
         let uv = self.uv(dir);
         let column = ((uv.x * self.width as f32) as usize).min(self.width - 1);
         let row = ((uv.y * self.height as f32) as usize).min(self.height - 1);
-        self.pixels[row * self.width + column]
+        self.pixels()[row * self.width + column]
     }
 
     fn sample(&self, u: Vec2) -> Option<(Vec3, f32)> {
@@ -208,10 +228,45 @@ impl EnvironmentMap {
 /// Most pixels an environment map may have (a 16k x 8k map).
 pub const MAX_ENVIRONMENT_PIXELS: u64 = 1 << 27;
 
+/// Peak bytes per pixel of decoding and preparing an environment map: the decoded RGB
+/// floats (kept), a weight, and the sampling distribution's cumulative sums (kept).
+pub const ENVIRONMENT_BYTES_PER_PIXEL: u64 = 12 + 4 + 8;
+
+/// Bytes an environment map of `width` x `height` keeps once loaded (its pixels and
+/// sampling distribution).
+pub fn environment_memory(width: u64, height: u64) -> u64 {
+    width * height * (ENVIRONMENT_BYTES_PER_PIXEL - 4)
+}
+
+/// Why a map declaring `width` x `height` pixels is not decoded: too many pixels, or more
+/// memory than `available` (when known). Checked on the file's header, before decoding.
+pub fn check_environment_size(
+    width: u64,
+    height: u64,
+    available: Option<u64>,
+) -> Result<(), String> {
+    let pixels = width.saturating_mul(height);
+    if pixels == 0 || pixels > MAX_ENVIRONMENT_PIXELS {
+        return Err(format!(
+            "a {width}x{height} environment map is outside 1 to {MAX_ENVIRONMENT_PIXELS} pixels"
+        ));
+    }
+    let needed = pixels * ENVIRONMENT_BYTES_PER_PIXEL;
+    match available {
+        Some(free) if needed > free => Err(format!(
+            "a {width}x{height} environment map needs about {} MiB of memory to load, more than the {} MiB available",
+            needed >> 20,
+            free >> 20
+        )),
+        _ => Ok(()),
+    }
+}
+
 /// Decodes an environment map from the bytes of a Radiance `.hdr` or OpenEXR `.exr` file
 /// (`name` gives the format by its extension), scaling its radiance by `strength`.
 /// Negative pixel values (from image processing) become zero; NaN or infinite ones are
-/// errors naming the pixel.
+/// errors naming the pixel. The size the file declares is checked (pixels, memory)
+/// before anything is decoded.
 pub fn decode_environment(
     name: &str,
     bytes: &[u8],
@@ -230,32 +285,45 @@ pub fn decode_environment(
             ))
         }
     };
-    let mut reader = image::ImageReader::with_format(std::io::Cursor::new(bytes), format);
+    let reader = || image::ImageReader::with_format(std::io::Cursor::new(bytes), format);
+    let fail = |e: image::ImageError| format!("`{name}`: cannot decode the environment map: {e}");
+    let (width, height) = reader().into_dimensions().map_err(fail)?;
+    check_environment_size(
+        width as u64,
+        height as u64,
+        crate::files::available_memory(),
+    )
+    .map_err(|e| format!("`{name}`: {e}"))?;
+    let mut reader = reader();
     let mut limits = image::Limits::default();
     limits.max_alloc = Some(MAX_ENVIRONMENT_PIXELS * 16);
     reader.limits(limits);
-    let image = reader
-        .decode()
-        .map_err(|e| format!("`{name}`: cannot decode the environment map: {e}"))?
-        .into_rgb32f();
-    let (width, height) = (image.width() as usize, image.height() as usize);
-    if width == 0 || height == 0 || (width * height) as u64 > MAX_ENVIRONMENT_PIXELS {
+    let image = reader.decode().map_err(fail)?.into_rgb32f();
+    if image.dimensions() != (width, height) {
         return Err(format!(
-            "`{name}`: a {width}x{height} environment map is outside 1 to {MAX_ENVIRONMENT_PIXELS} pixels"
+            "`{name}`: the image is {}x{}, not the {width}x{height} its header declares",
+            image.width(),
+            image.height()
         ));
     }
-    let mut pixels = Vec::with_capacity(width * height);
-    for (x, y, p) in image.enumerate_pixels() {
-        let c = Vec3::from(p.0) * strength;
-        if !c.is_finite() {
+    let mut rgb = image.into_raw();
+    for (i, c) in rgb.chunks_exact_mut(3).enumerate() {
+        let scaled = Vec3::from_slice(c) * strength;
+        if !scaled.is_finite() {
+            let (x, y) = (i % width as usize, i / width as usize);
             return Err(format!(
-                "`{name}`: pixel ({x}, {y}) is not a finite colour: {:?}",
-                p.0
+                "`{name}`: pixel ({x}, {y}) is not a finite colour: {c:?}"
             ));
         }
-        pixels.push(c.max(Vec3::ZERO));
+        scaled.max(Vec3::ZERO).write_to_slice(c);
     }
-    Ok(EnvironmentMap::new(name, width, height, pixels, to_world))
+    Ok(EnvironmentMap::from_rgb(
+        name,
+        width as usize,
+        height as usize,
+        rgb,
+        to_world,
+    ))
 }
 
 #[cfg(test)]
@@ -333,5 +401,25 @@ mod tests {
         let dark_map = EnvironmentMap::new("dark", 2, 2, vec![Vec3::ZERO; 4], Mat3::IDENTITY);
         assert!(Background::Environment(Arc::new(dark_map)).is_black());
         assert!(!Background::Sky.is_black());
+    }
+
+    /// The size an environment map declares is checked before anything is decoded: too
+    /// many pixels, or more memory than is available, is refused from the header alone.
+    #[test]
+    fn declared_sizes_are_checked_before_decoding() {
+        assert!(check_environment_size(1024, 512, None).is_ok());
+        let e = check_environment_size(16384, 8193, None).unwrap_err();
+        assert!(e.contains("outside 1 to 134217728 pixels"), "{e}");
+        let e = check_environment_size(16384, 8192, Some(1 << 30)).unwrap_err();
+        assert!(e.contains("needs about 3072 MiB of memory"), "{e}");
+        assert!(check_environment_size(16384, 8192, Some(4 << 30)).is_ok());
+        assert!(check_environment_size(0, 8, None).is_err());
+        // A 60-byte file declaring 40000 x 40000 pixels (6.4 GB decoded).
+        let header = b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 40000 +X 40000\n";
+        let e = decode_environment("huge.hdr", header, Mat3::IDENTITY, 1.0).unwrap_err();
+        assert!(
+            e.contains("`huge.hdr`: a 40000x40000 environment map is outside"),
+            "{e}"
+        );
     }
 }

@@ -5,7 +5,7 @@
 //! different one), and the accumulated samples. Layout, all little-endian:
 //!
 //! ```text
-//! b"CANOPYCK" | version u32 | fingerprint u64 | scene: u32 length + UTF-8 |
+//! b"CANOPYCK" | version u32 | fingerprint u64 | owner u64 | scene: u32 length + UTF-8 |
 //! width u32 | height u32 | spp u32 | max_depth u32 | seed u64 |
 //! integrator u32 (0 path, 1 bsdf) | russian_roulette u32 (0 or 1) |
 //! region: x u32 | y u32 | width u32 | height u32 |
@@ -15,6 +15,11 @@
 //! The checksum (FNV-1a over everything before it) catches truncated or damaged files;
 //! writes go through a temporary file and a rename, so a checkpoint on disk is always
 //! whole.
+//!
+//! `owner` is the random identity of the render that wrote the file. A render replaces
+//! or removes a checkpoint only if it is its own, or the one it continues
+//! ([`Checkpoint::save_owned`], [`Checkpoint::remove_owned`]): two renders given one
+//! path never destroy each other's work.
 
 use crate::files::{read_prefix, read_regular_file};
 use crate::geometry::Shape;
@@ -34,7 +39,9 @@ const MAGIC: &[u8; 8] = b"CANOPYCK";
 /// version 3 checkpoint's samples came from other streams).
 /// Version 5: the region of the image rendered (version 4 files, still read, hold the
 /// whole image).
-const VERSION: u32 = 5;
+/// Version 6: the owner, the identity of the render that wrote the file (files of
+/// versions 4 and 5, still read, have owner 0: no render's).
+const VERSION: u32 = 6;
 /// The oldest version whose samples this canopy can continue.
 const OLDEST_READ: u32 = 4;
 
@@ -51,6 +58,24 @@ pub enum CheckpointError {
     Corrupt { file: String, what: String },
     #[error("{file}: the checkpoint was made for a different scene or settings (has the scene or a mesh changed since?)")]
     Mismatch { file: String },
+    #[error("{file}: holds the checkpoint of another render ({samples} samples per pixel of `{scene}`); not replacing it (continue it with `canopy render --resume {file}`, or choose another checkpoint path)")]
+    Taken {
+        file: String,
+        scene: String,
+        samples: u32,
+    },
+}
+
+/// What a checkpoint path holds.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Slot {
+    /// Nothing: a checkpoint may be saved there.
+    Free,
+    /// A canopy checkpoint written by render `owner` (0: an older canopy's, which only
+    /// a render continuing it may replace).
+    Checkpoint { owner: u64 },
+    /// Something that is not a canopy checkpoint: the user's, never touched.
+    Other,
 }
 
 /// A render's state, as saved.
@@ -60,6 +85,8 @@ pub struct Checkpoint {
     pub scene: String,
     pub settings: RenderSettings,
     pub fingerprint: u64,
+    /// The identity of the render that saves it (0: none given).
+    pub owner: u64,
     pub accumulator: Accumulator,
 }
 
@@ -135,8 +162,14 @@ impl Checkpoint {
             scene: scene_arg.to_owned(),
             settings: scene.settings,
             fingerprint: fingerprint(scene),
+            owner: 0,
             accumulator,
         }
+    }
+
+    /// The checkpoint as render `owner` saves it.
+    pub fn owned_by(self, owner: u64) -> Self {
+        Self { owner, ..self }
     }
 
     /// The checkpoint as the bytes of its file.
@@ -147,6 +180,7 @@ impl Checkpoint {
         out.extend(MAGIC);
         out.extend(VERSION.to_le_bytes());
         out.extend(self.fingerprint.to_le_bytes());
+        out.extend(self.owner.to_le_bytes());
         out.extend((self.scene.len() as u32).to_le_bytes());
         out.extend(self.scene.as_bytes());
         for v in [s.width, s.height, s.spp, s.max_depth] {
@@ -217,6 +251,7 @@ impl Checkpoint {
             ));
         }
         let fingerprint = r.u64()?;
+        let owner = if version >= 6 { r.u64()? } else { 0 };
         let scene_len = r.u32()? as usize;
         let scene = String::from_utf8(r.take(scene_len)?.to_vec())
             .map_err(|_| "scene name is not UTF-8")?;
@@ -258,6 +293,7 @@ impl Checkpoint {
             scene,
             settings,
             fingerprint,
+            owner,
             accumulator: Accumulator {
                 region,
                 sums,
@@ -275,16 +311,81 @@ impl Checkpoint {
         read_prefix(path, MAGIC.len()).is_some_and(|head| head == MAGIC)
     }
 
+    /// What `path` holds: nothing, a checkpoint (and whose), or something else.
+    pub fn slot(path: &Path) -> Slot {
+        if std::fs::symlink_metadata(path).is_err() {
+            return Slot::Free;
+        }
+        // Magic, version, fingerprint, owner.
+        let Some(head) = read_prefix(path, 28) else {
+            return Slot::Other;
+        };
+        if head.len() < 12 || &head[..8] != MAGIC {
+            return Slot::Other;
+        }
+        let version = u32::from_le_bytes(head[8..12].try_into().expect("4 bytes"));
+        let owner = match (version, head.get(20..28)) {
+            (6.., Some(owner)) => u64::from_le_bytes(owner.try_into().expect("8 bytes")),
+            _ => 0,
+        };
+        Slot::Checkpoint { owner }
+    }
+
     /// Why no checkpoint may be saved at `path`, if something other than a canopy
     /// checkpoint is there: such a file is the user's, and the first save would replace it.
     pub fn check_slot(path: &Path) -> Result<(), String> {
-        if std::fs::symlink_metadata(path).is_ok() && !Self::is_checkpoint_file(path) {
+        if Self::slot(path) == Slot::Other {
             return Err(format!(
                 "{}: exists and is not a canopy checkpoint; refusing to overwrite it",
                 path.display()
             ));
         }
         Ok(())
+    }
+
+    /// Why a render whose checkpoints are `owners` (its own identity, and that of the
+    /// checkpoint it continues) may not save at `path`: something of the user's is
+    /// there, or another render's checkpoint.
+    pub fn check_owned_slot(path: &Path, owners: &[u64]) -> Result<(), CheckpointError> {
+        match Self::slot(path) {
+            Slot::Free => Ok(()),
+            Slot::Checkpoint { owner } if owners.contains(&owner) => Ok(()),
+            Slot::Checkpoint { .. } => {
+                let (scene, samples) = match Self::load(path) {
+                    Ok(other) => (other.scene, other.accumulator.samples),
+                    Err(_) => ("?".into(), 0),
+                };
+                Err(CheckpointError::Taken {
+                    file: path.display().to_string(),
+                    scene,
+                    samples,
+                })
+            }
+            Slot::Other => Err(CheckpointError::Corrupt {
+                file: path.display().to_string(),
+                what: "exists and is not a canopy checkpoint; refusing to overwrite it".into(),
+            }),
+        }
+    }
+
+    /// Saves the checkpoint, as render `self.owner`, at `path` only if the path is free or
+    /// holds a checkpoint of one of `owners` (checked right before the write): another
+    /// render's checkpoint, or a user's file, is never replaced.
+    pub fn save_owned(&self, path: &Path, owners: &[u64]) -> Result<(), CheckpointError> {
+        Self::check_owned_slot(path, owners)?;
+        self.save(path)
+    }
+
+    /// Removes the checkpoint at `path` if it is one of `owners`'; anything else (another
+    /// render's checkpoint, a user's file) is left alone.
+    pub fn remove_owned(path: &Path, owners: &[u64]) -> std::io::Result<bool> {
+        match Self::slot(path) {
+            Slot::Checkpoint { owner } if owners.contains(&owner) => {
+                std::fs::remove_file(path)?;
+                Ok(true)
+            }
+            _ => Ok(false),
+        }
     }
 
     /// Removes the checkpoint at `path` if it is one; anything else is left alone.
@@ -383,8 +484,9 @@ mod tests {
         let mut bytes = checkpoint.to_bytes();
         bytes.truncate(bytes.len() - 8);
         bytes[8..12].copy_from_slice(&4u32.to_le_bytes());
-        let region_at = 8 + 4 + 8 + 4 + checkpoint.scene.len() + 4 * 4 + 8 + 4 + 4;
+        let region_at = 8 + 4 + 8 + 8 + 4 + checkpoint.scene.len() + 4 * 4 + 8 + 4 + 4;
         bytes.drain(region_at..region_at + 16);
+        bytes.drain(20..28); // no owner before version 6
         let checksum = fnv1a(&bytes, FNV_OFFSET);
         bytes.extend(checksum.to_le_bytes());
         bytes
@@ -460,6 +562,53 @@ mod tests {
         let mut recoloured = scene;
         std::sync::Arc::make_mut(&mut recoloured.primitives)[0].material ^= 1;
         assert!(checkpoint.matches(&recoloured, Path::new("x")).is_err());
+    }
+
+    /// Two renders given one path never destroy each other's work: a checkpoint is
+    /// replaced or removed only by the render that wrote it, or one that continues it.
+    #[test]
+    fn a_checkpoint_is_replaced_and_removed_only_by_its_owners() {
+        let dir = std::env::temp_dir().join(format!("canopy-owner-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let ck = dir.join("ck");
+        let (_, checkpoint) = sample();
+        assert_eq!(Checkpoint::slot(&ck), Slot::Free);
+        checkpoint
+            .clone()
+            .owned_by(7)
+            .save_owned(&ck, &[7])
+            .unwrap();
+        assert_eq!(Checkpoint::slot(&ck), Slot::Checkpoint { owner: 7 });
+        // Render 9 neither replaces nor removes render 7's checkpoint.
+        let taken = checkpoint
+            .clone()
+            .owned_by(9)
+            .save_owned(&ck, &[9])
+            .unwrap_err();
+        assert!(matches!(taken, CheckpointError::Taken { .. }), "{taken}");
+        assert!(
+            taken
+                .to_string()
+                .contains("9 samples per pixel of `cornell`"),
+            "{taken}"
+        );
+        assert!(!Checkpoint::remove_owned(&ck, &[9]).unwrap());
+        assert_eq!(Checkpoint::load(&ck).unwrap().owner, 7);
+        // A render continuing it may do both.
+        checkpoint
+            .clone()
+            .owned_by(9)
+            .save_owned(&ck, &[9, 7])
+            .unwrap();
+        assert_eq!(Checkpoint::load(&ck).unwrap().owner, 9);
+        assert!(Checkpoint::remove_owned(&ck, &[9, 7]).unwrap());
+        // A user's file is no one's to replace.
+        std::fs::write(&ck, "notes").unwrap();
+        assert_eq!(Checkpoint::slot(&ck), Slot::Other);
+        assert!(checkpoint.owned_by(9).save_owned(&ck, &[9]).is_err());
+        assert!(!Checkpoint::remove_owned(&ck, &[9]).unwrap());
+        assert_eq!(std::fs::read_to_string(&ck).unwrap(), "notes");
+        std::fs::remove_dir_all(dir).unwrap();
     }
 
     #[test]

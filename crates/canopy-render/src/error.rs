@@ -33,6 +33,10 @@ pub enum SceneError {
         mesh: String,
         cause: MeshError,
     },
+    /// A bare mesh file given as the scene: the error names the file (and, where the
+    /// format has lines, the line) of the mesh itself.
+    #[error("{file}: {cause}")]
+    MeshFile { file: String, cause: MeshError },
     #[error("unknown scene `{0}`: neither a built-in scene (see `canopy scenes`) nor a file")]
     Unknown(String),
 }

@@ -91,6 +91,22 @@ pub fn read_prefix(path: &Path, n: usize) -> Option<Vec<u8>> {
     Some(bytes)
 }
 
+/// A random non-zero number nobody can predict: std's per-process random hasher keys,
+/// mixed with the process id, the time and a counter.
+pub fn random_u64() -> u64 {
+    use std::hash::{BuildHasher, Hasher};
+    use std::sync::atomic::{AtomicU64, Ordering};
+    static CALLS: AtomicU64 = AtomicU64::new(0);
+    let mut hasher = std::collections::hash_map::RandomState::new().build_hasher();
+    hasher.write_u32(std::process::id());
+    hasher.write_u64(CALLS.fetch_add(1, Ordering::Relaxed));
+    let now = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap_or_default();
+    hasher.write_u128(now.as_nanos());
+    hasher.finish().max(1)
+}
+
 /// `MemAvailable` from /proc/meminfo, where there is one.
 pub fn available_memory() -> Option<u64> {
     // A /proc file reports a size of 0, so it is read as it is; it is a kernel table.

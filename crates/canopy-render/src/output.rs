@@ -6,8 +6,9 @@ use crate::error::OutputError;
 use crate::film::Film;
 use image::{ImageBuffer, ImageFormat, Rgb};
 use std::fs::File;
-use std::io::{BufWriter, Cursor, Write};
+use std::io::BufWriter;
 use std::path::{Path, PathBuf};
+use std::sync::{Mutex, MutexGuard};
 
 /// The image format for a path, from its extension.
 pub fn image_format(path: &Path) -> Result<ImageFormat, OutputError> {
@@ -21,38 +22,120 @@ pub fn image_format(path: &Path) -> Result<ImageFormat, OutputError> {
     }
 }
 
-/// Writes the film to `path` atomically.
+/// Writes the film to `path` atomically, encoding straight into the temporary file.
 pub fn write_image(film: &Film, path: &Path) -> Result<(), OutputError> {
     let format = image_format(path)?;
-    let bytes = encode(film, format).map_err(|cause| OutputError::Encode {
-        path: path.to_owned(),
-        cause,
-    })?;
-    write_atomically(path, |w| w.write_all(&bytes)).map_err(|cause| OutputError::Write {
-        path: path.to_owned(),
-        cause,
-    })
+    let mut encode_error = None;
+    let written = write_atomically(path, |w| {
+        encode(film, format, w).map_err(|e| match e {
+            image::ImageError::IoError(e) => e,
+            other => {
+                encode_error = Some(other);
+                std::io::Error::other("encoding failed")
+            }
+        })
+    });
+    match (written, encode_error) {
+        (Ok(()), _) => Ok(()),
+        (Err(_), Some(cause)) => Err(OutputError::Encode {
+            path: path.to_owned(),
+            cause,
+        }),
+        (Err(cause), None) => Err(OutputError::Write {
+            path: path.to_owned(),
+            cause,
+        }),
+    }
 }
 
-/// The film as the bytes of an image file.
-fn encode(film: &Film, format: ImageFormat) -> Result<Vec<u8>, image::ImageError> {
-    let mut bytes = Cursor::new(Vec::new());
+/// Encodes the film as an image file into `out`.
+fn encode(
+    film: &Film,
+    format: ImageFormat,
+    out: &mut BufWriter<File>,
+) -> Result<(), image::ImageError> {
     match format {
         ImageFormat::OpenExr => {
             let data: Vec<f32> = film.pixels.iter().flat_map(|p| p.to_array()).collect();
             let img: ImageBuffer<Rgb<f32>, _> =
                 ImageBuffer::from_raw(film.width, film.height, data)
                     .expect("film holds width * height pixels");
-            img.write_to(&mut bytes, format)?;
+            img.write_to(out, format)
         }
         _ => {
             let img: ImageBuffer<Rgb<u8>, _> =
                 ImageBuffer::from_raw(film.width, film.height, film.to_srgb8())
                     .expect("film holds width * height pixels");
-            img.write_to(&mut bytes, format)?;
+            img.write_to(out, format)
         }
     }
-    Ok(bytes.into_inner())
+}
+
+/// Peak bytes per pixel of reading an image: the decoded pixels (8-bit or float) and
+/// their float copy.
+pub const READ_BYTES_PER_PIXEL: u64 = 12 + 12;
+
+/// Largest image file read: the largest film as uncompressed float RGB, and some.
+const MAX_IMAGE_FILE_BYTES: u64 = crate::RenderSettings::MAX_PIXELS * 12 + (64 << 20);
+
+/// Reads a PNG (8-bit values / 255, as stored) or EXR (linear float) image as its width,
+/// height and RGB floats, rows from the top. Only a regular file is opened (a FIFO or
+/// device is refused, never waited on), and the size its header declares is checked
+/// against the largest image canopy renders and the memory available before anything
+/// is decoded. Errors name the file.
+pub fn read_image(path: &Path) -> Result<(u32, u32, Vec<f32>), String> {
+    let fail = |e: &dyn std::fmt::Display| format!("{}: {e}", path.display());
+    let bytes =
+        crate::files::read_regular_file(path, MAX_IMAGE_FILE_BYTES).map_err(|e| fail(&e))?;
+    let reader = || {
+        image::ImageReader::new(std::io::Cursor::new(&bytes[..]))
+            .with_guessed_format()
+            .expect("reading from memory cannot fail")
+    };
+    let (width, height) = reader().into_dimensions().map_err(|e| fail(&e))?;
+    let pixels = width as u64 * height as u64;
+    if pixels > crate::RenderSettings::MAX_PIXELS {
+        return Err(fail(&format!(
+            "a {width}x{height} image is larger than the {} pixels canopy reads",
+            crate::RenderSettings::MAX_PIXELS
+        )));
+    }
+    let needed = pixels * READ_BYTES_PER_PIXEL;
+    if let Some(free) = crate::files::available_memory().filter(|&free| needed > free) {
+        return Err(fail(&format!(
+            "a {width}x{height} image needs about {} MiB of memory to read, more than the {} MiB available",
+            needed >> 20,
+            free >> 20
+        )));
+    }
+    let mut reader = reader();
+    reader.no_limits(); // bounded above, by what the header declares
+    let image = reader.decode().map_err(|e| fail(&e))?.into_rgb32f();
+    Ok((image.width(), image.height(), image.into_raw()))
+}
+
+/// The temporary files of writes in flight, so that a program ending on a signal can
+/// remove them ([`abandon_temporary_files`]). Held while a temporary file is created and
+/// while it is renamed into place, so the list is never stale.
+static IN_FLIGHT: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
+
+fn in_flight() -> MutexGuard<'static, Vec<PathBuf>> {
+    IN_FLIGHT
+        .lock()
+        .unwrap_or_else(|poisoned| poisoned.into_inner())
+}
+
+/// For a program about to exit mid-write (a second Ctrl-C): removes the temporary file
+/// of every write in flight and blocks every later write from starting or finishing, so
+/// nothing half-written is left behind. Never returns control to a write in flight: call
+/// it only right before exiting.
+pub fn abandon_temporary_files() {
+    let list = in_flight();
+    for temp in list.iter() {
+        let _ = std::fs::remove_file(temp);
+    }
+    // Keep the lock: no write may create or rename a file after this.
+    std::mem::forget(list);
 }
 
 /// Writes a file through a hidden temporary sibling, synced and then renamed over
@@ -67,16 +150,25 @@ pub fn write_atomically(
     path: &Path,
     write: impl FnOnce(&mut BufWriter<File>) -> std::io::Result<()>,
 ) -> std::io::Result<()> {
-    let (temp, file) = create_temporary_sibling(path)?;
+    let (temp, file) = {
+        let mut list = in_flight();
+        let (temp, file) = create_temporary_sibling(path)?;
+        list.push(temp.clone());
+        (temp, file)
+    };
     let result = (|| {
         let mut out = BufWriter::new(file);
         write(&mut out)?;
         let file = out.into_inner().map_err(|e| e.into_error())?;
         file.sync_all()?;
         drop(file);
+        let mut list = in_flight();
+        list.retain(|t| t != &temp);
         std::fs::rename(&temp, path)
     })();
     if result.is_err() {
+        let mut list = in_flight();
+        list.retain(|t| t != &temp);
         let _ = std::fs::remove_file(&temp);
     }
     result
@@ -88,22 +180,13 @@ const TEMPORARY_TRIES: u32 = 16;
 
 /// A new, empty file beside `path` named `.<name>.<random>.tmp`, and its path.
 fn create_temporary_sibling(path: &Path) -> std::io::Result<(PathBuf, File)> {
-    use std::hash::{BuildHasher, Hasher};
     let name = path
         .file_name()
         .map(|n| n.to_string_lossy())
         .unwrap_or_default();
     let mut last = None;
-    for attempt in 0..TEMPORARY_TRIES {
-        // std's per-process random hasher keys, mixed with the time and the attempt.
-        let mut hasher = std::collections::hash_map::RandomState::new().build_hasher();
-        hasher.write_u32(std::process::id());
-        hasher.write_u32(attempt);
-        let now = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .unwrap_or_default();
-        hasher.write_u128(now.as_nanos());
-        let temp = path.with_file_name(format!(".{name}.{:016x}.tmp", hasher.finish()));
+    for _ in 0..TEMPORARY_TRIES {
+        let temp = path.with_file_name(format!(".{name}.{:016x}.tmp", crate::files::random_u64()));
         match std::fs::OpenOptions::new()
             .write(true)
             .create_new(true)

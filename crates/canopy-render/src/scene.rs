@@ -299,8 +299,8 @@ impl Scene {
                 self.skipped_degenerate
             ));
         }
-        if self.primitives.is_empty() && self.instances.is_empty() {
-            warnings.push("the scene has no primitives".into());
+        if self.primitives.is_empty() && self.instanced_triangles() == 0 {
+            warnings.push("the scene has no primitives: nothing to see".into());
         }
         let emitters = self
             .materials

@@ -207,3 +207,32 @@ fn the_fingerprint_covers_instances() {
     assert_ne!(f(&scene), f(&recoloured));
     assert_eq!(f(&scene), f(&scene.clone()));
 }
+
+/// A bare mesh file is the scene that places it once, grey, under the sky: the same
+/// fingerprint (so its checkpoints resume) as the scene file written out by hand.
+#[test]
+fn a_bare_mesh_is_the_scene_file_that_places_it() {
+    let meshes = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/meshes");
+    for file in ["teapot.ply", "teapot.obj"] {
+        let bare = canopy_render::scene_from_mesh(&meshes.join(file)).unwrap();
+        let source = format!(
+            "name = \"teapot\"\n[camera]\nlook_from = [0, 0, 1]\nlook_at = [0, 0, 0]\n\
+             [geometry.mesh]\nfile = {file:?}\n\
+             [[instances]]\ngeometry = \"mesh\"\nmaterial = {{ type = \"lambertian\", albedo = [0.7, 0.7, 0.7] }}\n"
+        );
+        let mut written = canopy_render::scene_file::parse_scene(
+            &source,
+            "by-hand.toml",
+            &canopy_render::scene_file::DirAssets(meshes.clone()),
+        )
+        .unwrap();
+        written.camera = bare.camera;
+        assert_eq!(
+            canopy_render::checkpoint::fingerprint(&bare),
+            canopy_render::checkpoint::fingerprint(&written),
+            "{file}"
+        );
+        assert_eq!(bare.inputs, [meshes.join(file)]);
+        assert!(bare.camera.look_from.is_finite());
+    }
+}

@@ -342,6 +342,10 @@ where
     L: ClosestLeaves + PrefetchLeaves,
     C: TraversalCounter,
 {
+    // A NaN or degenerate ray would enter empty slots; it misses everything (see Ray).
+    if !ray.is_traceable() {
+        return None;
+    }
     let oct = OctRay::new(ray);
     // SAFETY: the caller guarantees the instruction set.
     let kray = unsafe { K::prepare(&oct) };
@@ -434,6 +438,9 @@ where
     K: NodeKernel<N>,
     L: AnyLeaves + PrefetchLeaves,
 {
+    if !ray.is_traceable() {
+        return false;
+    }
     let oct = OctRay::new(ray);
     // SAFETY: the caller guarantees the instruction set.
     let kray = unsafe { K::prepare(&oct) };
