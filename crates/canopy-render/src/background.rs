@@ -273,6 +273,19 @@ pub fn decode_environment(
     to_world: Mat3,
     strength: f32,
 ) -> Result<EnvironmentMap, String> {
+    let available = crate::files::available_memory();
+    decode_environment_within(name, bytes, to_world, strength, available)
+}
+
+/// [`decode_environment`] with `available` bytes of memory (`None`: unknown), for
+/// callers that set their own bound (a fuzzer).
+pub fn decode_environment_within(
+    name: &str,
+    bytes: &[u8],
+    to_world: Mat3,
+    strength: f32,
+    available: Option<u64>,
+) -> Result<EnvironmentMap, String> {
     let extension = std::path::Path::new(name)
         .extension()
         .map(|e| e.to_string_lossy().to_ascii_lowercase());
@@ -288,12 +301,8 @@ pub fn decode_environment(
     let reader = || image::ImageReader::with_format(std::io::Cursor::new(bytes), format);
     let fail = |e: image::ImageError| format!("`{name}`: cannot decode the environment map: {e}");
     let (width, height) = reader().into_dimensions().map_err(fail)?;
-    check_environment_size(
-        width as u64,
-        height as u64,
-        crate::files::available_memory(),
-    )
-    .map_err(|e| format!("`{name}`: {e}"))?;
+    check_environment_size(width as u64, height as u64, available)
+        .map_err(|e| format!("`{name}`: {e}"))?;
     let mut reader = reader();
     let mut limits = image::Limits::default();
     limits.max_alloc = Some(MAX_ENVIRONMENT_PIXELS * 16);

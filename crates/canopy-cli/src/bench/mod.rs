@@ -213,6 +213,14 @@ fn paper(args: &PaperArgs) -> anyhow::Result<()> {
                 from.display()
             )
         })?;
+        // The run's input is never among what it writes.
+        for name in OUTPUT_FILES {
+            crate::safety::refuse_inputs(
+                &args.out.join(name),
+                std::slice::from_ref(from),
+                "benchmark output",
+            )?;
+        }
         std::fs::create_dir_all(&args.out)
             .with_context(|| format!("cannot create {}", args.out.display()))?;
         write_outputs(&record, &args.out, &params)?;
@@ -309,7 +317,18 @@ fn paper(args: &PaperArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Tables, plots and the Table 3 pictures of a run.
+/// What [`write_outputs`] writes into the output directory (a run also writes
+/// `results.json`, which `--from` reads).
+const OUTPUT_FILES: [&str; 6] = [
+    "results.md",
+    "results.csv",
+    "render_time.png",
+    "speedup.png",
+    "build_vs_sah.png",
+    "table3.png",
+];
+
+/// Tables, plots and the Table 3 pictures of a run: [`OUTPUT_FILES`].
 fn write_outputs(
     record: &RunRecord,
     out: &Path,
