@@ -312,6 +312,11 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         region: (!region.is_full(settings.width, settings.height)).then(|| region.to_string()),
         ..Summary::default()
     };
+    if !args.heatmap {
+        // From here (before the summary says the render starts) a first signal stops the
+        // render after its pass and keeps the work.
+        signals::render_started();
+    }
     print_scene_summary(&summary, args.json);
     for warning in scene.warnings() {
         summary.warn(warning);
@@ -331,8 +336,6 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         return finish(&summary, args.json);
     }
 
-    // From here a first signal stops the render after its pass and keeps the work.
-    signals::render_started();
     let mut observer = Terminal::new(settings.spp, region.height, &mut summary);
     if let Some(resumed) = &job.accumulator {
         observer
@@ -342,6 +345,12 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     let run = prepared.run(&mut observer);
     observer.progress.finish_and_clear();
     let run = run?;
+    if run.accumulator.samples == 0 {
+        // Stopped before its first pass ended: nothing to keep, nothing written.
+        return Err(
+            Interrupted("interrupted before the first sample; nothing was written".into()).into(),
+        );
+    }
     let mut film = run.accumulator.film();
     if let (true, Some(tree)) = (args.show_bvh, accel.tree()) {
         let camera = Camera::new(&scene.camera, settings.width, settings.height);

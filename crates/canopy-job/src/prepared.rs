@@ -37,7 +37,8 @@ pub struct Outcome {
     /// Whether every sample asked for is in; false when the observer stopped the render.
     pub complete: bool,
     /// Where an incomplete render's state was saved (the policy's `on_interrupt`);
-    /// `None` when it was not asked for or could not be saved (the observer was warned).
+    /// `None` when it was not asked for, could not be saved (the observer was warned), or
+    /// there was nothing to save (stopped before the first sample).
     pub saved: Option<PathBuf>,
 }
 
@@ -258,7 +259,8 @@ impl Prepared<'_> {
         }
         let complete = accumulator.samples >= spp;
         let mut saved = None;
-        if !complete {
+        // A render stopped before its first sample has nothing to keep.
+        if !complete && accumulator.samples > 0 {
             if let Some(path) = &policy.on_interrupt {
                 // A failed save must not take the samples with it: they are still in the
                 // outcome (the caller writes the image from them), and `saved` says none.

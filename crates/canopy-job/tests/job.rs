@@ -363,3 +363,23 @@ fn two_renders_sharing_a_checkpoint_path_never_destroy_each_others_work() {
     assert!(finished.complete && !ck.exists());
     std::fs::remove_dir_all(dir).unwrap();
 }
+
+/// A render stopped before its first sample has nothing to keep: no checkpoint is
+/// written (it would only hold someone's place at the path).
+#[test]
+fn a_render_stopped_before_its_first_sample_saves_nothing() {
+    let dir = temp_dir("nothing");
+    let ck = dir.join("ck");
+    let scene = small("cornell", 8, 6, 4);
+    let mut job = RenderJob::new(&scene, "cornell");
+    job.checkpoint.on_interrupt = Some(ck.clone());
+    let mut stop_at_once = Recorder {
+        stop_after: Some(0),
+        ..Recorder::default()
+    };
+    let outcome = job.prepare().unwrap().run(&mut stop_at_once).unwrap();
+    assert_eq!(outcome.accumulator.samples, 0);
+    assert!(!outcome.complete && outcome.saved.is_none());
+    assert!(!ck.exists());
+    std::fs::remove_dir_all(dir).unwrap();
+}

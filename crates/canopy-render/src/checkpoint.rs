@@ -351,10 +351,7 @@ impl Checkpoint {
             Slot::Free => Ok(()),
             Slot::Checkpoint { owner } if owners.contains(&owner) => Ok(()),
             Slot::Checkpoint { .. } => {
-                let (scene, samples) = match Self::load(path) {
-                    Ok(other) => (other.scene, other.accumulator.samples),
-                    Err(_) => ("?".into(), 0),
-                };
+                let (scene, samples) = describe_header(path).unwrap_or(("?".into(), 0));
                 Err(CheckpointError::Taken {
                     file: path.display().to_string(),
                     scene,
@@ -408,6 +405,30 @@ impl Checkpoint {
             })
         }
     }
+}
+
+/// The scene and samples per pixel of the checkpoint at `path`, read from its header
+/// alone (the samples themselves may be gigabytes): for messages about it.
+fn describe_header(path: &Path) -> Option<(String, u32)> {
+    let head = read_prefix(path, 64 << 10)?;
+    let mut r = Reader {
+        bytes: &head,
+        pos: 0,
+    };
+    if r.take(8).ok()? != MAGIC {
+        return None;
+    }
+    let version = r.u32().ok()?;
+    r.u64().ok()?; // fingerprint
+    if version >= 6 {
+        r.u64().ok()?; // owner
+    }
+    let scene_len = r.u32().ok()? as usize;
+    let scene = String::from_utf8_lossy(r.take(scene_len).ok()?).into_owned();
+    // Settings (4 u32, seed u64, 2 u32), then the region (4 u32) from version 5 on.
+    r.take(4 * 4 + 8 + 2 * 4 + if version >= 5 { 16 } else { 0 })
+        .ok()?;
+    Some((scene, r.u32().ok()?))
 }
 
 struct Reader<'a> {
