@@ -65,3 +65,37 @@ def test_contains_points_matches_trimesh():
     # The icosphere is inside the unit sphere: points between the two may differ.
     between = (np.linalg.norm(points, axis=1) > 0.95) & (np.linalg.norm(points, axis=1) < 1.0)
     np.testing.assert_array_equal(ours[~between], expected[~between])
+
+
+def test_the_engine_follows_edits_pickles_and_takes_lazy_and_empty_meshes():
+    """The causes of trimesh's own ray tests failing, each on its own: answers after an
+    edit come from the edited mesh; the intersector pickles (for multiprocessing);
+    trimesh's primitives and an empty mesh work; a small box far from the origin is hit
+    where it is, with the location on its face in float64."""
+    import pickle
+
+    mesh = trimesh.creation.box()
+    ray = canopy.trimesh_ray.RayMeshIntersector(mesh)
+    origin, direction = [[0, 0, 5]], [[0, 0, -1]]
+    assert ray.intersects_any(origin, direction).all()
+    mesh.apply_translation([10, 0, 0])
+    assert not ray.intersects_any(origin, direction).any()
+    assert ray.intersects_any([[10, 0, 5]], direction).all()
+
+    again = pickle.loads(pickle.dumps(mesh))
+    again.ray = pickle.loads(pickle.dumps(ray))
+    assert again.ray.intersects_any([[10, 0, 5]], direction).all()
+
+    primitive = trimesh.primitives.Box(extents=[1, 1, 1])
+    assert canopy.trimesh_ray.RayMeshIntersector(primitive).intersects_any(origin, direction).all()
+    empty = canopy.trimesh_ray.RayMeshIntersector(trimesh.Trimesh())
+    assert list(empty.intersects_first(origin, direction)) == [-1]
+    assert len(empty.intersects_id(origin, direction)[0]) == 0
+
+    far = trimesh.creation.box(extents=[1, 1, 1])
+    far.apply_translation([1e7, 0, 0])
+    locations, index_ray, _ = canopy.trimesh_ray.RayMeshIntersector(far).intersects_location(
+        [[1e7, 0, 100]], direction
+    )
+    assert list(index_ray) == [0, 0]
+    np.testing.assert_allclose(locations[:, 2], [0.5, -0.5], atol=1e-9)

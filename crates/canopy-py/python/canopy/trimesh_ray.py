@@ -7,10 +7,21 @@
 array([...])
 
 It answers the queries of trimesh's own intersectors (``trimesh.ray.ray_triangle`` and
-the Embree-based ``ray_pyembree``) with the same signatures and conventions: directions
-are normalised, so distances and locations are in the mesh's units; triangle and ray
-indices are int64. trimesh is needed only to make the mesh; this module imports nothing
-from it.
+the Embree-based ``ray_pyembree``) with the same signatures and conventions, and passes
+trimesh's own ray tests installed in their place:
+
+- directions are normalised, so distances and locations are in the mesh's units;
+  triangle and ray indices are int64; ``max_hits`` is 100, as with Embree;
+- the BVH is built at the first query, and again whenever the mesh has changed since
+  (keyed on the mesh's content hash, as trimesh's engines are): an edited mesh never
+  answers from its old shape, and meshes trimesh builds lazily (``Box``, ``Sphere``,
+  empty meshes) work;
+- the mesh is moved to its centre and, with ``scale_to_box`` (the default, as with
+  Embree), scaled to a box about 100 units wide before it is stored in float32, so a
+  small part far from the origin is hit as precisely as one at the origin;
+- hit locations are recomputed in float64 on the plane of the face hit, as trimesh does;
+- the intersector pickles (without its BVH, rebuilt on first use), so meshes carrying it
+  go through ``multiprocessing``.
 """
 
 from __future__ import annotations
@@ -21,8 +32,11 @@ import numpy as np
 
 from . import Bvh
 
-# How far past a hit the next search of a ray starts, relative to the scene's size.
-_STEP = 1e-5
+# How far past a hit the next search along a ray starts, relative to the mesh's size (in
+# the scaled space, where the mesh is about 100 units wide with `scale_to_box`); doubled
+# each time the same triangle is found again.
+_STEP = 1e-6
+_STEP_FLOOR = 1e-8
 
 
 def _unit(directions: np.ndarray) -> np.ndarray:
@@ -32,69 +46,133 @@ def _unit(directions: np.ndarray) -> np.ndarray:
         return np.where(length > 0, d / length, 0.0)
 
 
+def _rays(origins, directions):
+    origins = np.array(origins, dtype=np.float64).reshape(-1, 3)
+    directions = np.array(directions, dtype=np.float64).reshape(-1, 3)
+    if origins.shape != directions.shape:
+        raise ValueError("Ray origin and direction don't match!")
+    return origins, _unit(directions)
+
+
 class RayMeshIntersector:
-    """Ray queries on a trimesh ``Trimesh`` through a canopy BVH, built once."""
+    """Ray queries on a trimesh ``Trimesh`` through a canopy BVH, built at the first query
+    and rebuilt when the mesh changes."""
 
-    def __init__(self, mesh, builder: str = "binned-sah", width: int = 8, threads: Optional[int] = None):
-        self.mesh = mesh
+    def __init__(
+        self,
+        geometry,
+        scale_to_box: bool = True,
+        builder: str = "binned-sah",
+        width: int = 8,
+        threads: Optional[int] = None,
+    ):
+        self.mesh = geometry
+        self._scale_to_box = scale_to_box
+        self._builder = builder
+        self._width = width
         self._threads = threads
-        self._bvh = Bvh(
-            np.asarray(mesh.vertices, dtype=np.float32),
-            np.asarray(mesh.faces, dtype=np.int64),
-            builder=builder,
-            width=width,
-            threads=threads,
-        )
-        self._step = _STEP * max(float(np.max(mesh.extents)), 1e-12)
+        self._key = None
+        self._bvh = None
 
-    def _cast(self, origins, directions, tnear=0.0):
-        return self._bvh.intersect(origins, directions, tnear=tnear, threads=self._threads)
+    def __getstate__(self):
+        state = self.__dict__.copy()
+        state["_key"], state["_bvh"] = None, None
+        return state
+
+    def __setstate__(self, state):
+        self.__dict__.update(state)
+
+    def _structure(self):
+        """The BVH of the mesh as it is now (None when it has no faces), its centre and
+        scale: BVH coordinates are ``(world - centre) * scale``."""
+        key = self.mesh.__hash__()
+        if self._key != key:
+            vertices = np.asarray(self.mesh.vertices, dtype=np.float64).reshape(-1, 3)
+            faces = np.asarray(self.mesh.faces, dtype=np.int64).reshape(-1, 3)
+            if len(faces) == 0:
+                self._bvh, self._centre, self._scale = None, np.zeros(3), 1.0
+            else:
+                lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+                size = float(np.linalg.norm(hi - lo))
+                self._centre = (lo + hi) / 2.0
+                self._scale = 100.0 / size if self._scale_to_box and size > 0 else 1.0
+                local = ((vertices - self._centre) * self._scale).astype(np.float32)
+                self._bvh = Bvh(local, faces, builder=self._builder, width=self._width, threads=self._threads)
+            self._key = key
+        return self._bvh
+
+    def _local(self, origins):
+        return (origins - self._centre) * self._scale
 
     def intersects_first(self, ray_origins, ray_directions) -> np.ndarray:
         """Index of the first triangle each ray hits, -1 where it hits none."""
-        hits = self._cast(ray_origins, _unit(ray_directions))
-        return hits.prim
+        origins, directions = _rays(ray_origins, ray_directions)
+        bvh = self._structure()
+        if bvh is None:
+            return np.full(len(origins), -1, dtype=np.int64)
+        return bvh.intersect(self._local(origins), directions, threads=self._threads).prim
 
     def intersects_any(self, ray_origins, ray_directions) -> np.ndarray:
         """Whether each ray hits the mesh at all."""
-        return self._bvh.occluded(ray_origins, _unit(ray_directions), threads=self._threads)
+        origins, directions = _rays(ray_origins, ray_directions)
+        bvh = self._structure()
+        if bvh is None:
+            return np.zeros(len(origins), dtype=bool)
+        return bvh.occluded(self._local(origins), directions, threads=self._threads)
 
     def intersects_id(
         self,
         ray_origins,
         ray_directions,
         multiple_hits: bool = True,
-        max_hits: int = 20,
+        max_hits: int = 100,
         return_locations: bool = False,
     ):
         """Triangle and ray index of every hit (the first only unless ``multiple_hits``,
-        at most ``max_hits`` per ray), and with ``return_locations`` the hit points."""
-        origins = np.asarray(ray_origins, dtype=np.float64)
-        directions = _unit(ray_directions)
-        tnear = np.zeros(len(origins), dtype=np.float32)
-        active = np.arange(len(origins))
-        tris, rays, ts = [], [], []
-        rounds = max_hits if multiple_hits else 1
-        for _ in range(rounds):
-            if len(active) == 0:
-                break
-            hits = self._cast(origins[active], directions[active], tnear[active])
-            hit = hits.prim >= 0
-            tris.append(hits.prim[hit])
-            rays.append(active[hit])
-            ts.append(hits.t[hit].astype(np.float64))
-            # Go on past this hit: a small step relative to the scene, never backwards.
-            tnear[active[hit]] = hits.t[hit] + self._step
-            active = active[hit]
-        index_tri = np.concatenate(tris) if tris else np.zeros(0, dtype=np.int64)
-        index_ray = np.concatenate(rays) if rays else np.zeros(0, dtype=np.int64)
-        order = np.lexsort((np.concatenate(ts) if ts else np.zeros(0), index_ray))
-        index_tri, index_ray = index_tri[order], index_ray[order]
+        at most ``max_hits`` per ray), nearest first along each ray, and with
+        ``return_locations`` the hit points."""
+        origins, directions = _rays(ray_origins, ray_directions)
+        bvh = self._structure()
+        tris, rays, locations = [np.zeros(0, dtype=np.int64)], [np.zeros(0, dtype=np.int64)], [np.zeros((0, 3))]
+        if bvh is not None:
+            local = self._local(origins)
+            # The search along each ray starts at tnear (in BVH units), just past the
+            # last hit; a triangle found twice in a row (a grazing hit, rounding) is
+            # skipped with a step twice as long.
+            base = max(_STEP_FLOOR, _STEP * 100.0 if self._scale_to_box else _STEP * float(self.mesh.scale))
+            tnear = np.zeros(len(origins))
+            step = np.full(len(origins), base)
+            last = np.full(len(origins), -1, dtype=np.int64)
+            live = np.arange(len(origins))
+            vertices = np.asarray(self.mesh.vertices, dtype=np.float64)
+            faces = np.asarray(self.mesh.faces, dtype=np.int64)
+            for _ in range(max_hits if multiple_hits else 1):
+                if len(live) == 0:
+                    break
+                hits = bvh.intersect(local[live], directions[live], tnear=tnear[live], threads=self._threads)
+                found = hits.prim >= 0
+                live, prim, t = live[found], hits.prim[found], hits.t[found].astype(np.float64)
+                again = last[live] == prim
+                last[live] = prim
+                new, new_prim = live[~again], prim[~again]
+                # Where the ray meets the face's plane, in float64 and world units.
+                corner = vertices[faces[new_prim, 0]]
+                normal = np.cross(vertices[faces[new_prim, 1]] - corner, vertices[faces[new_prim, 2]] - corner)
+                with np.errstate(invalid="ignore", divide="ignore"):
+                    along = np.einsum("ij,ij->i", corner - origins[new], normal) / np.einsum(
+                        "ij,ij->i", directions[new], normal
+                    )
+                along = np.where(np.isfinite(along), along, t[~again] / self._scale)
+                tris.append(new_prim)
+                rays.append(new)
+                locations.append(origins[new] + directions[new] * along[:, None])
+                step[live[again]] *= 2.0
+                step[new] = base
+                tnear[live] = t + step[live]
+        index_tri, index_ray = np.concatenate(tris), np.concatenate(rays)
         if not return_locations:
             return index_tri, index_ray
-        t = (np.concatenate(ts) if ts else np.zeros(0))[order]
-        locations = origins[index_ray] + directions[index_ray] * t[:, None]
-        return index_tri, index_ray, locations
+        return index_tri, index_ray, np.concatenate(locations)
 
     def intersects_location(self, ray_origins, ray_directions, multiple_hits: bool = True):
         """Hit points, with the ray and triangle index of each."""
@@ -104,10 +182,8 @@ class RayMeshIntersector:
         return locations, index_ray, index_tri
 
     def contains_points(self, points) -> np.ndarray:
-        """Whether each point is inside the (closed) mesh: an odd number of crossings of a
-        ray from it in a fixed, generic direction."""
-        points = np.asarray(points, dtype=np.float64)
-        direction = np.tile(_unit([[0.4395064455, 0.617598629942, 0.652231566745]]), (len(points), 1))
-        _, index_ray = self.intersects_id(points, direction, multiple_hits=True, max_hits=1000)
-        crossings = np.bincount(index_ray, minlength=len(points))
-        return crossings % 2 == 1
+        """Whether each point is inside the (closed) mesh, by trimesh's own ray test run
+        through this intersector."""
+        from trimesh.ray.ray_util import contains_points
+
+        return contains_points(self, points)
