@@ -90,16 +90,7 @@ pub fn check_writable_dir(path: &Path, what: &str) -> anyhow::Result<()> {
 
 /// Refuses work that needs more memory than is available (where that is known).
 pub fn check_memory(needed: u64, what: &str) -> anyhow::Result<()> {
-    if let Some(free) = available_memory() {
-        if needed > free {
-            bail!(
-                "{what} needs about {} MiB of memory, more than the {} MiB available",
-                needed >> 20,
-                free >> 20
-            );
-        }
-    }
-    Ok(())
+    canopy_render::files::check_memory(needed, available_memory(), what).map_err(anyhow::Error::msg)
 }
 
 /// A scene's name made into a plain file name in the current directory: path

@@ -52,18 +52,12 @@ impl<'s> RenderJob<'s> {
             .check_within(settings.width, settings.height)
             .map_err(JobError::Invalid)?;
         let region = self.region();
-        let needed = region.pixels() as u64 * BYTES_PER_PIXEL;
-        if let Some(free) = canopy_render::files::available_memory() {
-            if needed > free {
-                return Err(JobError::Invalid(format!(
-                    "a {}x{} image needs about {} MiB of memory, more than the {} MiB available",
-                    region.width,
-                    region.height,
-                    needed >> 20,
-                    free >> 20
-                )));
-            }
-        }
+        canopy_render::files::check_memory(
+            region.pixels() as u64 * BYTES_PER_PIXEL,
+            canopy_render::files::available_memory(),
+            &format!("a {}x{} image", region.width, region.height),
+        )
+        .map_err(JobError::Invalid)?;
         let owners: Vec<u64> = std::iter::once(canopy_render::files::random_u64())
             .chain(self.resume_owner)
             .collect();

@@ -251,15 +251,11 @@ pub fn check_environment_size(
             "a {width}x{height} environment map is outside 1 to {MAX_ENVIRONMENT_PIXELS} pixels"
         ));
     }
-    let needed = pixels * ENVIRONMENT_BYTES_PER_PIXEL;
-    match available {
-        Some(free) if needed > free => Err(format!(
-            "a {width}x{height} environment map needs about {} MiB of memory to load, more than the {} MiB available",
-            needed >> 20,
-            free >> 20
-        )),
-        _ => Ok(()),
-    }
+    crate::files::check_memory(
+        pixels * ENVIRONMENT_BYTES_PER_PIXEL,
+        available,
+        &format!("loading a {width}x{height} environment map"),
+    )
 }
 
 /// Decodes an environment map from the bytes of a Radiance `.hdr` or OpenEXR `.exr` file

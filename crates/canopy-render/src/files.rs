@@ -107,6 +107,19 @@ pub fn random_u64() -> u64 {
     hasher.finish().max(1)
 }
 
+/// Why `what` cannot be done: it needs `needed` bytes, more than the `available` ones
+/// (when known). The one memory check of every input that decodes to something large.
+pub fn check_memory(needed: u64, available: Option<u64>, what: &str) -> Result<(), String> {
+    match available {
+        Some(free) if needed > free => Err(format!(
+            "{what} needs about {} MiB of memory, more than the {} MiB available",
+            needed >> 20,
+            free >> 20
+        )),
+        _ => Ok(()),
+    }
+}
+
 /// `MemAvailable` from /proc/meminfo, where there is one.
 pub fn available_memory() -> Option<u64> {
     // A /proc file reports a size of 0, so it is read as it is; it is a kernel table.

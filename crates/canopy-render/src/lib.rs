@@ -51,16 +51,11 @@ pub const PARSE_BYTES_PER_FILE_BYTE: u64 = 64;
 /// Why a scene file of `size` bytes is not parsed: more memory than `available` (when
 /// known) would be needed. Checked before the file is read.
 pub fn check_parse_memory(size: u64, available: Option<u64>) -> Result<(), String> {
-    let needed = size.saturating_mul(PARSE_BYTES_PER_FILE_BYTE);
-    match available {
-        Some(free) if needed > free => Err(format!(
-            "a scene file of {} MiB needs about {} MiB of memory to parse, more than the {} MiB available",
-            size >> 20,
-            needed >> 20,
-            free >> 20
-        )),
-        _ => Ok(()),
-    }
+    files::check_memory(
+        size.saturating_mul(PARSE_BYTES_PER_FILE_BYTE),
+        available,
+        &format!("parsing a scene file of {} MiB", size >> 20),
+    )
 }
 
 /// Loads a scene file; its meshes are found relative to its directory. Its size is
@@ -193,6 +188,9 @@ mod tests {
         assert!(super::check_parse_memory(130 * mib, None).is_ok());
         assert!(super::check_parse_memory(130 * mib, Some(16 << 30)).is_ok());
         let e = super::check_parse_memory(130 * mib, Some(4 << 30)).unwrap_err();
-        assert!(e.contains("needs about 8320 MiB of memory to parse"), "{e}");
+        assert!(
+            e.contains("parsing a scene file of 130 MiB needs about 8320 MiB of memory"),
+            "{e}"
+        );
     }
 }

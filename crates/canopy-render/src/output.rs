@@ -100,14 +100,12 @@ pub fn read_image(path: &Path) -> Result<(u32, u32, Vec<f32>), String> {
             crate::RenderSettings::MAX_PIXELS
         )));
     }
-    let needed = pixels * READ_BYTES_PER_PIXEL;
-    if let Some(free) = crate::files::available_memory().filter(|&free| needed > free) {
-        return Err(fail(&format!(
-            "a {width}x{height} image needs about {} MiB of memory to read, more than the {} MiB available",
-            needed >> 20,
-            free >> 20
-        )));
-    }
+    crate::files::check_memory(
+        pixels * READ_BYTES_PER_PIXEL,
+        crate::files::available_memory(),
+        &format!("reading a {width}x{height} image"),
+    )
+    .map_err(|e| fail(&e))?;
     let mut reader = reader();
     reader.no_limits(); // bounded above, by what the header declares
     let image = reader.decode().map_err(|e| fail(&e))?.into_rgb32f();

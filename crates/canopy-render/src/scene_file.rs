@@ -55,16 +55,11 @@ const MEMORY_PER_FILE_BYTE: u64 = 8;
 
 /// Refuses a mesh file whose loaded size would exceed the memory available (when known).
 fn check_fits_in_memory(file_bytes: u64, available: Option<u64>) -> Result<(), String> {
-    let needed = file_bytes.saturating_mul(MEMORY_PER_FILE_BYTE);
-    match available {
-        Some(free) if needed > free => Err(format!(
-            "the file is {} MiB and would need about {} MiB of memory once loaded, more than the {} MiB available",
-            file_bytes >> 20,
-            needed >> 20,
-            free >> 20
-        )),
-        _ => Ok(()),
-    }
+    crate::files::check_memory(
+        file_bytes.saturating_mul(MEMORY_PER_FILE_BYTE),
+        available,
+        &format!("loading a mesh file of {} MiB", file_bytes >> 20),
+    )
 }
 
 #[derive(Deserialize)]
