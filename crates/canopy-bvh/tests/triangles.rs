@@ -5,7 +5,7 @@
 
 use canopy_bvh::{
     build, build_with_clipper, intersect_triangle, split_box, split_triangle, Aabb, Blas,
-    BlasParams, BuildParams, Builder, Bvh4, Bvh8, BvhN, BvhWidth, Geometry, GpuBvh, Hit, Isa,
+    BlasParams, BuildParams, Builder, Bvh2, Bvh4, Bvh8, BvhN, BvhWidth, Geometry, GpuBvh, Hit, Isa,
     PrimHit, Ray, RayQuery, ShearedRay, Tree, TreeView, ALL_MASKS, PREFETCH_ABOVE_BYTES,
 };
 use glam::Vec3;
@@ -82,6 +82,26 @@ fn brute_force(prims: &[Prim], ray: &Ray) -> Option<Hit> {
         }
     }
     best
+}
+
+/// The tree in every layout (binary, 4- and 8-wide, the GPU's), each without and with
+/// triangle packs, named `"<layout> packed <bool>"`.
+fn every_layout(bvh: &Bvh2, prims: &[Prim]) -> Vec<(String, Tree)> {
+    let layouts = BvhWidth::ALL
+        .map(|width| (format!("{width:?}"), Tree::new(bvh.clone(), width)))
+        .into_iter()
+        .chain([("gpu".to_string(), Tree::Gpu(GpuBvh::from_bvh2(bvh)))]);
+    layouts
+        .flat_map(|(layout, tree)| {
+            [false, true].map(|packed| {
+                let mut tree = tree.clone();
+                if packed {
+                    tree.pack_triangles(|p| prims[p as usize].triangle());
+                }
+                (format!("{layout} packed {packed}"), tree)
+            })
+        })
+        .collect()
 }
 
 /// Bit-exact comparison (`-0.0 != 0.0`, same NaN payloads).
@@ -412,45 +432,35 @@ fn each_calls_equal_single_ray_calls_in_every_layout() {
     let expected: Vec<Option<Hit>> = rays.iter().map(|r| brute_force(&prims, r)).collect();
     assert!(expected.iter().filter(|h| h.is_some()).count() > 500);
     let test = |p: u32, r: &Ray| prims[p as usize].hit(r);
-    let layouts = BvhWidth::ALL
-        .map(|width| (format!("{width:?}"), Tree::new(bvh.clone(), width)))
-        .into_iter()
-        .chain([("gpu".to_string(), Tree::Gpu(GpuBvh::from_bvh2(&bvh)))]);
-    for (layout, tree) in layouts {
-        for packed in [false, true] {
-            let mut tree = tree.clone();
-            if packed {
-                tree.pack_triangles(|p| prims[p as usize].triangle());
-            }
-            let mut hits = vec![None; rays.len()];
-            let mut order = Vec::new();
-            tree.intersect_each(
-                rays.len(),
-                |i| rays[i],
-                |i, h| {
-                    order.push(i);
-                    hits[i] = h;
-                },
-                test,
+    for (layout, tree) in every_layout(&bvh, &prims) {
+        let mut hits = vec![None; rays.len()];
+        let mut order = Vec::new();
+        tree.intersect_each(
+            rays.len(),
+            |i| rays[i],
+            |i, h| {
+                order.push(i);
+                hits[i] = h;
+            },
+            test,
+        );
+        assert!(order.iter().copied().eq(0..rays.len()), "answers in order");
+        let mut blocked = vec![false; rays.len()];
+        tree.occluded_each(
+            rays.len(),
+            |i| rays[i],
+            |i, b| blocked[i] = b,
+            |p, r| test(p, r).is_some(),
+        );
+        for (i, ray) in rays.iter().enumerate() {
+            let name = format!("{layout}, ray {i}");
+            assert_eq!(bits(hits[i]), bits(expected[i]), "{name}");
+            assert_eq!(
+                bits(hits[i]),
+                bits(tree.intersect_counted(ray, test, &mut ())),
+                "{name}"
             );
-            assert!(order.iter().copied().eq(0..rays.len()), "answers in order");
-            let mut blocked = vec![false; rays.len()];
-            tree.occluded_each(
-                rays.len(),
-                |i| rays[i],
-                |i, b| blocked[i] = b,
-                |p, r| test(p, r).is_some(),
-            );
-            for (i, ray) in rays.iter().enumerate() {
-                let name = format!("{layout} packed {packed}, ray {i}");
-                assert_eq!(bits(hits[i]), bits(expected[i]), "{name}");
-                assert_eq!(
-                    bits(hits[i]),
-                    bits(tree.intersect_counted(ray, test, &mut ())),
-                    "{name}"
-                );
-                assert_eq!(blocked[i], expected[i].is_some(), "{name}");
-            }
+            assert_eq!(blocked[i], expected[i].is_some(), "{name}");
         }
     }
 }
@@ -581,40 +591,30 @@ fn degenerate_rays_miss_everywhere_and_no_hit_is_at_infinity() {
     let test = |p: u32, r: &Ray| prims[p as usize].hit(r).filter(|_| r.is_traceable());
     for &builder in Builder::ALL {
         let bvh = build(builder, &boxes, &BuildParams::default());
-        let layouts = BvhWidth::ALL
-            .map(|width| (format!("{width:?}"), Tree::new(bvh.clone(), width)))
-            .into_iter()
-            .chain([("gpu".to_string(), Tree::Gpu(GpuBvh::from_bvh2(&bvh)))]);
-        for (layout, tree) in layouts {
-            for packed in [false, true] {
-                let mut tree = tree.clone();
-                if packed {
-                    tree.pack_triangles(|p| prims[p as usize].triangle());
+        for (layout, mut tree) in every_layout(&bvh, &prims) {
+            for isa in Isa::supported() {
+                if tree.set_isa(isa).is_err() {
+                    continue;
                 }
-                for isa in Isa::supported() {
-                    if tree.set_isa(isa).is_err() {
-                        continue;
-                    }
-                    let name = format!("{builder} {layout} packed {packed} {isa}");
-                    for ray in &degenerate {
-                        assert_eq!(
-                            tree.intersect_counted(ray, test, &mut ()),
-                            None,
-                            "{name} {ray:?}"
-                        );
-                        assert!(
-                            !tree.occluded(ray, |p, r| test(p, r).is_some()),
-                            "{name} {ray:?}"
-                        );
-                    }
-                    for ray in &tiny {
-                        let hit = tree.intersect_counted(ray, test, &mut ());
-                        assert_eq!(bits(hit), bits(brute_force(&prims, ray)), "{name} {ray:?}");
-                        assert!(
-                            hit.is_none_or(|h| h.t.is_finite()),
-                            "{name} {ray:?}: {hit:?}"
-                        );
-                    }
+                let name = format!("{builder} {layout} {isa}");
+                for ray in &degenerate {
+                    assert_eq!(
+                        tree.intersect_counted(ray, test, &mut ()),
+                        None,
+                        "{name} {ray:?}"
+                    );
+                    assert!(
+                        !tree.occluded(ray, |p, r| test(p, r).is_some()),
+                        "{name} {ray:?}"
+                    );
+                }
+                for ray in &tiny {
+                    let hit = tree.intersect_counted(ray, test, &mut ());
+                    assert_eq!(bits(hit), bits(brute_force(&prims, ray)), "{name} {ray:?}");
+                    assert!(
+                        hit.is_none_or(|h| h.t.is_finite()),
+                        "{name} {ray:?}: {hit:?}"
+                    );
                 }
             }
         }

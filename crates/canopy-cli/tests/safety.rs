@@ -3,10 +3,10 @@
 
 mod common;
 
-use common::{canopy, canopy_within, outputs, scratch, stderr};
+use common::{canopy, canopy_within, outputs, scratch, spawn, stderr};
 use std::io::{BufRead, BufReader};
 use std::path::Path;
-use std::process::{Command, Stdio};
+use std::process::Command;
 use std::time::Duration;
 
 const CAMERA: &str = "[camera]\nlook_from = [0, 0, 5]\nlook_at = [0, 0, 0]\n";
@@ -45,8 +45,8 @@ fn a_failed_image_write_keeps_the_render_as_a_checkpoint() {
     // and the error says how to get the image from the checkpoint. Driven by events:
     // the directory goes once the first periodic checkpoint is on disk.
     std::fs::create_dir(dir.join("images")).unwrap();
-    let mut child = Command::new(env!("CARGO_BIN_EXE_canopy"))
-        .args([
+    let mut child = spawn(
+        &[
             "render",
             "cornell",
             "--size",
@@ -59,12 +59,9 @@ fn a_failed_image_write_keeps_the_render_as_a_checkpoint() {
             "ck",
             "--every",
             "0s",
-        ])
-        .current_dir(&dir)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+        ],
+        &dir,
+    );
     let start = std::time::Instant::now();
     while !dir.join("ck").exists() {
         assert!(
@@ -355,8 +352,8 @@ fn an_output_that_cannot_be_written_fails_before_the_render() {
 fn a_failed_checkpoint_save_warns_and_the_render_goes_on() {
     let dir = scratch("diskfull");
     std::fs::create_dir(dir.join("cks")).unwrap();
-    let mut child = Command::new(env!("CARGO_BIN_EXE_canopy"))
-        .args([
+    let mut child = spawn(
+        &[
             "render",
             "paper-5",
             "--size",
@@ -369,12 +366,9 @@ fn a_failed_checkpoint_save_warns_and_the_render_goes_on() {
             "cks/ck",
             "--every",
             "0",
-        ])
-        .current_dir(&dir)
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+        ],
+        &dir,
+    );
     wait_until("the first checkpoint", &mut child, || {
         dir.join("cks/ck").exists()
     });
@@ -446,8 +440,8 @@ fn a_checkpoint_resumes_from_another_directory_and_refuses_a_changed_scene() {
     let scenes = dir.join("scenes");
     std::fs::create_dir(&scenes).unwrap();
     interruptible_scene(&scenes, false);
-    let child = Command::new(env!("CARGO_BIN_EXE_canopy"))
-        .args([
+    let child = spawn(
+        &[
             "render",
             "s.toml",
             "--size",
@@ -460,12 +454,9 @@ fn a_checkpoint_resumes_from_another_directory_and_refuses_a_changed_scene() {
             "ck",
             "--every",
             "0",
-        ])
-        .current_dir(&scenes)
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+        ],
+        &scenes,
+    );
     let mut child = child;
     wait_until("the first checkpoint", &mut child, || {
         scenes.join("ck").exists()
@@ -612,8 +603,8 @@ fn summaries_are_json_on_request_and_warnings_go_to_stderr() {
 #[test]
 fn a_second_ctrl_c_ends_the_render_at_once() {
     let dir = scratch("twice");
-    let mut child = Command::new(env!("CARGO_BIN_EXE_canopy"))
-        .args([
+    let mut child = spawn(
+        &[
             "render",
             "paper-1",
             "--size",
@@ -626,12 +617,9 @@ fn a_second_ctrl_c_ends_the_render_at_once() {
             "out.png",
             "--threads",
             "1",
-        ])
-        .current_dir(&dir)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+        ],
+        &dir,
+    );
     let mut stdout = BufReader::new(child.stdout.take().unwrap());
     let mut line = String::new();
     while !line.starts_with("bvh") {
@@ -664,8 +652,8 @@ fn a_signal_while_loading_or_building_exits_130_and_writes_nothing() {
     let dir = scratch("early-signal");
     write_grid_obj(&dir.join("grid.obj"), 250);
     for (name, number) in [("INT", 2), ("TERM", 15), ("HUP", 1)] {
-        let mut child = Command::new(env!("CARGO_BIN_EXE_canopy"))
-            .args([
+        let mut child = spawn(
+            &[
                 "render",
                 "grid.obj",
                 "--bvh",
@@ -678,12 +666,9 @@ fn a_signal_while_loading_or_building_exits_130_and_writes_nothing() {
                 "o.png",
                 "--checkpoint",
                 "ck",
-            ])
-            .current_dir(&dir)
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .unwrap();
+            ],
+            &dir,
+        );
         let pid = child.id();
         wait_until("the signal handler", &mut child, || handles(pid, number));
         signal(&child, name);
@@ -708,8 +693,8 @@ fn a_signal_while_loading_or_building_exits_130_and_writes_nothing() {
 #[test]
 fn a_second_signal_during_the_final_write_leaves_no_temporary_file() {
     let dir = scratch("final-write");
-    let mut child = Command::new(env!("CARGO_BIN_EXE_canopy"))
-        .args([
+    let mut child = spawn(
+        &[
             "render",
             "cornell",
             "--size",
@@ -720,12 +705,9 @@ fn a_second_signal_during_the_final_write_leaves_no_temporary_file() {
             "1",
             "-o",
             "big.exr",
-        ])
-        .current_dir(&dir)
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+        ],
+        &dir,
+    );
     let temporary = || {
         std::fs::read_dir(&dir)
             .unwrap()
@@ -753,15 +735,12 @@ fn a_second_signal_during_the_final_write_leaves_no_temporary_file() {
 #[test]
 fn a_closed_stdout_neither_panics_nor_loses_the_image() {
     let dir = scratch("pipe");
-    let mut child = Command::new(env!("CARGO_BIN_EXE_canopy"))
-        .args([
+    let mut child = spawn(
+        &[
             "render", "cornell", "--size", "8x8", "--spp", "1", "-o", "out.png",
-        ])
-        .current_dir(&dir)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+        ],
+        &dir,
+    );
     drop(child.stdout.take()); // as `| head -0` would
     let out = child.wait_with_output().unwrap();
     assert!(out.status.success(), "{}", stderr(&out));

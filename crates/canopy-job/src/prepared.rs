@@ -4,7 +4,7 @@
 use crate::engine::Engine;
 use crate::observer::Observer;
 use crate::{Device, JobError, RenderJob};
-use canopy_render::checkpoint::Checkpoint;
+use canopy_render::checkpoint::{Checkpoint, CheckpointError};
 use canopy_render::{Accel, AccelKind, Accumulator, BvhWidth, RenderStats};
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
@@ -140,10 +140,12 @@ fn check_checkpoint_path(
     owners: &[u64],
 ) -> Result<(), JobError> {
     canopy_render::files::refuse_inputs(path, &scene.inputs, "checkpoint")
-        .and_then(|()| Checkpoint::check_slot(path))
         .map_err(JobError::Invalid)?;
-    Checkpoint::check_owned_slot(path, owners)?;
-    Ok(())
+    Checkpoint::check_owned_slot(path, owners).map_err(|e| match e {
+        // A user's file there: the job itself is wrong, as with an input.
+        CheckpointError::NotACheckpoint { .. } => JobError::Invalid(e.to_string()),
+        e => e.into(),
+    })
 }
 
 impl Prepared<'_> {
@@ -153,7 +155,7 @@ impl Prepared<'_> {
         &self,
         accumulator: &Accumulator,
         path: &std::path::Path,
-    ) -> Result<(), canopy_render::checkpoint::CheckpointError> {
+    ) -> Result<(), CheckpointError> {
         let job = self.job;
         Checkpoint::new(&job.source, job.scene, accumulator.clone())
             .owned_by(self.owners[0])

@@ -58,6 +58,8 @@ pub enum CheckpointError {
     Corrupt { file: String, what: String },
     #[error("{file}: the checkpoint was made for a different scene or settings (has the scene or a mesh changed since?)")]
     Mismatch { file: String },
+    #[error("{file}: exists and is not a canopy checkpoint; refusing to overwrite it")]
+    NotACheckpoint { file: String },
     #[error("{file}: holds the checkpoint of another render ({samples} samples per pixel of `{scene}`); not replacing it (continue it with `canopy render --resume {file}`, or choose another checkpoint path)")]
     Taken {
         file: String,
@@ -304,14 +306,9 @@ impl Checkpoint {
         })
     }
 
-    /// Whether `path` holds a canopy checkpoint (of any version): a regular file that
-    /// starts with the checkpoint's magic number. Only such files are ever overwritten
-    /// or removed as checkpoints.
-    pub fn is_checkpoint_file(path: &Path) -> bool {
-        read_prefix(path, MAGIC.len()).is_some_and(|head| head == MAGIC)
-    }
-
-    /// What `path` holds: nothing, a checkpoint (and whose), or something else.
+    /// What `path` holds: nothing, a checkpoint (of any version: a regular file that
+    /// starts with the magic number) and whose, or something else. Only checkpoints are
+    /// ever overwritten or removed as such.
     pub fn slot(path: &Path) -> Slot {
         if std::fs::symlink_metadata(path).is_err() {
             return Slot::Free;
@@ -334,13 +331,16 @@ impl Checkpoint {
     /// Why no checkpoint may be saved at `path`, if something other than a canopy
     /// checkpoint is there: such a file is the user's, and the first save would replace it.
     pub fn check_slot(path: &Path) -> Result<(), String> {
-        if Self::slot(path) == Slot::Other {
-            return Err(format!(
-                "{}: exists and is not a canopy checkpoint; refusing to overwrite it",
-                path.display()
-            ));
+        match Self::slot(path) {
+            Slot::Other => Err(Self::not_a_checkpoint(path).to_string()),
+            _ => Ok(()),
         }
-        Ok(())
+    }
+
+    fn not_a_checkpoint(path: &Path) -> CheckpointError {
+        CheckpointError::NotACheckpoint {
+            file: path.display().to_string(),
+        }
     }
 
     /// Why a render whose checkpoints are `owners` (its own identity, and that of the
@@ -358,10 +358,7 @@ impl Checkpoint {
                     samples,
                 })
             }
-            Slot::Other => Err(CheckpointError::Corrupt {
-                file: path.display().to_string(),
-                what: "exists and is not a canopy checkpoint; refusing to overwrite it".into(),
-            }),
+            Slot::Other => Err(Self::not_a_checkpoint(path)),
         }
     }
 
@@ -383,15 +380,6 @@ impl Checkpoint {
             }
             _ => Ok(false),
         }
-    }
-
-    /// Removes the checkpoint at `path` if it is one; anything else is left alone.
-    pub fn remove_if_checkpoint(path: &Path) -> std::io::Result<bool> {
-        if Self::is_checkpoint_file(path) {
-            std::fs::remove_file(path)?;
-            return Ok(true);
-        }
-        Ok(false)
     }
 
     /// Checks that this checkpoint belongs to `scene` (loaded with this checkpoint's
@@ -637,14 +625,14 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("canopy-ck-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let (ck, notes) = (dir.join("ck"), dir.join("notes.txt"));
-        sample().1.save(&ck).unwrap();
+        sample().1.owned_by(3).save(&ck).unwrap();
         std::fs::write(&notes, "my notes").unwrap();
-        assert!(Checkpoint::is_checkpoint_file(&ck));
-        assert!(!Checkpoint::is_checkpoint_file(&notes));
-        assert!(!Checkpoint::is_checkpoint_file(&dir.join("absent")));
-        assert!(!Checkpoint::remove_if_checkpoint(&notes).unwrap());
+        assert!(matches!(Checkpoint::slot(&ck), Slot::Checkpoint { .. }));
+        assert_eq!(Checkpoint::slot(&notes), Slot::Other);
+        assert_eq!(Checkpoint::slot(&dir.join("absent")), Slot::Free);
+        assert!(!Checkpoint::remove_owned(&notes, &[3]).unwrap());
         assert!(notes.exists());
-        assert!(Checkpoint::remove_if_checkpoint(&ck).unwrap());
+        assert!(Checkpoint::remove_owned(&ck, &[3]).unwrap());
         assert!(!ck.exists());
         std::fs::remove_dir_all(dir).unwrap();
     }

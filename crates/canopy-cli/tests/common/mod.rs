@@ -12,6 +12,18 @@ pub fn canopy(args: &[&str], dir: &Path) -> Output {
         .expect("canopy runs")
 }
 
+/// Starts canopy in `dir` with its stdout and stderr piped, for tests that act on the
+/// running process (signals, files appearing).
+pub fn spawn(args: &[&str], dir: &Path) -> std::process::Child {
+    Command::new(env!("CARGO_BIN_EXE_canopy"))
+        .args(args)
+        .current_dir(dir)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("canopy starts")
+}
+
 /// A fresh scratch directory per test.
 pub fn scratch(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("canopy-cli-{name}-{}", std::process::id()));
