@@ -31,6 +31,7 @@ mod instance;
 mod isa;
 mod layout;
 pub mod optimize;
+mod proximity;
 mod query;
 mod ray;
 mod ray_order;
@@ -55,6 +56,10 @@ pub use instance::{Instance, InstanceError, BOX_SLACK_ULPS, EVERY_RAY};
 pub use isa::{Isa, IsaError};
 pub use layout::{BvhWidth, Tree};
 pub use optimize::{optimize, OptimizeBudget, OptimizeReport};
+pub use proximity::{
+    closest_point_on_triangle, solid_angle, Nearest, Placement, SurfaceQuery, TriangleSurface,
+    FAR_FIELD, INSIDE_FAR_FIELD,
+};
 pub use query::{trace_batch, RayQuery, ALL_MASKS, BATCH_CHUNK};
 pub use ray::{Hit, IntoHit, PrimHit, Ray};
 pub use ray_order::{RayOrder, RAY_ORDER_MIN};

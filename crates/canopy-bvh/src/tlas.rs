@@ -8,6 +8,7 @@
 //! times is stored once.
 
 use crate::instance::InstanceError;
+use crate::proximity::Placement;
 use crate::query::RayQuery;
 use crate::{
     build, Aabb, BlasParams, Hit, Instance, IntoHit, Ray, TraversalCounter, TraversalStats, Tree,
@@ -28,6 +29,8 @@ pub struct Tlas<B> {
     bounds: Aabb,
     /// The only instance whose world box holds anything, where it is untransformed.
     alone: Option<u32>,
+    /// Each instance's placement, for point queries.
+    pub(crate) placements: Vec<Placement>,
     build_time: Duration,
 }
 
@@ -57,6 +60,7 @@ impl<B: RayQuery> Tlas<B> {
             params: *params,
             bounds: Aabb::EMPTY,
             alone: None,
+            placements: Vec::new(),
             build_time: Duration::ZERO,
         };
         tlas.rebuild();
@@ -96,6 +100,7 @@ impl<B: RayQuery> Tlas<B> {
             .map(|i| i.world_bounds(self.blases[i.blas as usize].bounds()))
             .collect();
         self.bounds = boxes.iter().copied().fold(Aabb::EMPTY, Aabb::union);
+        self.placements = self.instances.par_iter().map(Placement::of).collect();
         let mut holding = (0..boxes.len()).filter(|&i| !boxes[i].is_empty());
         self.alone = match (holding.next(), holding.next()) {
             (Some(i), None) if self.instances[i].is_identity() => Some(i as u32),
@@ -136,7 +141,7 @@ impl<B: RayQuery> Tlas<B> {
     /// The one structure when the only instance that holds anything is untransformed:
     /// queries go straight to it, at no extra cost. With its index and mask.
     #[inline(always)]
-    fn alone(&self) -> Option<(&B, u32, u32)> {
+    pub(crate) fn alone(&self) -> Option<(&B, u32, u32)> {
         let index = self.alone?;
         let only = &self.instances[index as usize];
         Some((&self.blases[only.blas as usize], index, only.mask))

@@ -6,7 +6,9 @@
 use crate::arrays;
 use crate::bvh::batch;
 use crate::pools;
-use canopy_bvh::{Blas, BlasParams, Hit, Instance, Ray, RayQuery, Tlas, TriangleMesh};
+use canopy_bvh::{
+    Blas, BlasParams, Hit, Instance, Nearest, Ray, RayQuery, SurfaceQuery, Tlas, TriangleMesh,
+};
 use glam::Vec3;
 use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray2};
 use pyo3::exceptions::PyValueError;
@@ -57,6 +59,89 @@ fn check_transform(instance: &Instance, index: usize, what: &str) -> PyResult<()
             "{what}: the transform must be finite and invertible: {e}"
         ))
     })
+}
+
+/// Points per parallel task of the point queries.
+const POINT_CHUNK: usize = 256;
+
+/// The arrays a batch of hits (of rays, or nearest points) is written into, one row
+/// each: instance, geometry and triangle (-1 where there is none), barycentrics and
+/// the world-space unit geometric normal (0 where there is none).
+struct HitRows<'a> {
+    inst: &'a mut [i64],
+    geom: &'a mut [i64],
+    prim: &'a mut [i64],
+    uv: &'a mut [f32],
+    normal: &'a mut [f32],
+}
+
+impl HitRows<'_> {
+    /// Row `i` says what `hit` (instance, triangle, barycentrics) names.
+    #[inline]
+    fn write(&mut self, tlas: &Tlas<MeshBlas>, i: usize, hit: Option<Hit>) {
+        match hit {
+            Some(hit) => {
+                self.inst[i] = hit.inst as i64;
+                self.geom[i] = tlas.instances()[hit.inst as usize].blas as i64;
+                self.prim[i] = hit.prim as i64;
+                self.uv[2 * i..2 * i + 2].copy_from_slice(&[hit.u, hit.v]);
+                let normal = geometric_normal(tlas, &hit).to_array();
+                self.normal[3 * i..3 * i + 3].copy_from_slice(&normal);
+            }
+            None => {
+                (self.inst[i], self.geom[i], self.prim[i]) = (-1, -1, -1);
+                self.uv[2 * i..2 * i + 2].fill(0.0);
+                self.normal[3 * i..3 * i + 3].fill(0.0);
+            }
+        }
+    }
+}
+
+/// The hit record of a nearest point: its triangle, instance and barycentrics.
+fn as_hit(n: &Nearest) -> Hit {
+    Hit {
+        t: n.distance,
+        inst: n.inst,
+        prim: n.prim,
+        u: n.u,
+        v: n.v,
+    }
+}
+
+type Rows<'py> = (
+    Bound<'py, PyArray1<i64>>,
+    Bound<'py, PyArray1<i64>>,
+    Bound<'py, PyArray1<i64>>,
+    Bound<'py, PyArray2<f32>>,
+    Bound<'py, PyArray2<f32>>,
+);
+
+/// Zeroed arrays for `n` rows of [`HitRows`].
+fn hit_arrays(py: Python<'_>, n: usize) -> Rows<'_> {
+    (
+        PyArray1::<i64>::zeros(py, n, false),
+        PyArray1::<i64>::zeros(py, n, false),
+        PyArray1::<i64>::zeros(py, n, false),
+        PyArray2::<f32>::zeros(py, [n, 2], false),
+        PyArray2::<f32>::zeros(py, [n, 3], false),
+    )
+}
+
+/// Mutable views of arrays made by [`hit_arrays`].
+///
+/// # Safety
+/// The arrays must have just been made, with nothing else referring to them.
+unsafe fn hit_rows<'a>(arrays: &'a Rows<'_>) -> HitRows<'a> {
+    // SAFETY: as the caller promises.
+    unsafe {
+        HitRows {
+            inst: arrays.0.as_slice_mut().expect("contiguous"),
+            geom: arrays.1.as_slice_mut().expect("contiguous"),
+            prim: arrays.2.as_slice_mut().expect("contiguous"),
+            uv: arrays.3.as_slice_mut().expect("contiguous"),
+            normal: arrays.4.as_slice_mut().expect("contiguous"),
+        }
+    }
 }
 
 /// The world-space unit normal of the triangle `hit` names, (v1 - v0) x (v2 - v0) in its
@@ -279,6 +364,234 @@ impl RayScene {
             })
         })?;
         Ok(out)
+    }
+
+    /// The nearest point of the surface to each query point no farther than
+    /// `max_distance`: (point, distance, then the rows of [`HitRows`]); inf distance, NaN
+    /// point and -1 indices where nothing is that near.
+    #[pyo3(signature = (points, max_distance, threads=None))]
+    #[allow(clippy::type_complexity)]
+    fn closest_points<'py>(
+        &self,
+        py: Python<'py>,
+        points: PyReadonlyArray2<'py, f32>,
+        max_distance: f32,
+        threads: Option<usize>,
+    ) -> PyResult<(
+        Bound<'py, PyArray2<f32>>,
+        Bound<'py, PyArray1<f32>>,
+        Rows<'py>,
+    )> {
+        let queries = arrays::points("points", &points)?;
+        if max_distance.is_nan() || max_distance < 0.0 {
+            return Err(PyValueError::new_err(format!(
+                "max_distance must be a distance (0 or more), not {max_distance}"
+            )));
+        }
+        let n = queries.len();
+        let tlas = py.detach(|| self.tlas(threads))?;
+        let point_out = PyArray2::<f32>::zeros(py, [n, 3], false);
+        let distance_out = PyArray1::<f32>::zeros(py, n, false);
+        let rows = hit_arrays(py, n);
+        // SAFETY: the arrays were just made here and nothing else refers to them yet.
+        let (point, distance, mut all) = unsafe {
+            (
+                point_out.as_slice_mut().expect("contiguous"),
+                distance_out.as_slice_mut().expect("contiguous"),
+                hit_rows(&rows),
+            )
+        };
+        py.detach(|| {
+            pools::install(threads, || {
+                let nearest: Vec<Option<Nearest>> = queries
+                    .par_iter()
+                    .with_min_len(POINT_CHUNK)
+                    .map(|&q| tlas.closest_point(q.into(), max_distance))
+                    .collect();
+                for (i, found) in nearest.iter().enumerate() {
+                    all.write(&tlas, i, found.as_ref().map(as_hit));
+                    let (p, d) =
+                        found.map_or((Vec3::NAN, f32::INFINITY), |n| (n.point, n.distance));
+                    point[3 * i..3 * i + 3].copy_from_slice(&p.to_array());
+                    distance[i] = d;
+                }
+            })
+        })?;
+        Ok((point_out, distance_out, rows))
+    }
+
+    /// Distance from each point to the surface (inf where there is none); negative
+    /// inside where `signed` (a winding number above one half).
+    #[pyo3(signature = (points, signed, threads=None))]
+    fn distances<'py>(
+        &self,
+        py: Python<'py>,
+        points: PyReadonlyArray2<'py, f32>,
+        signed: bool,
+        threads: Option<usize>,
+    ) -> PyResult<Bound<'py, PyArray1<f32>>> {
+        let queries = arrays::points("points", &points)?;
+        let tlas = py.detach(|| self.tlas(threads))?;
+        let out = PyArray1::<f32>::zeros(py, queries.len(), false);
+        // SAFETY: the array was just made here and nothing else refers to it yet.
+        let distances = unsafe { out.as_slice_mut().expect("contiguous") };
+        py.detach(|| {
+            pools::install(threads, || {
+                distances
+                    .par_iter_mut()
+                    .with_min_len(POINT_CHUNK)
+                    .zip(queries.par_iter())
+                    .for_each(|(d, &q)| {
+                        *d = match signed {
+                            true => tlas.signed_distance(q.into()),
+                            false => tlas.distance(q.into()),
+                        }
+                    })
+            })
+        })?;
+        Ok(out)
+    }
+
+    /// Whether each point lies inside (a winding number above one half).
+    #[pyo3(signature = (points, threads=None))]
+    fn inside<'py>(
+        &self,
+        py: Python<'py>,
+        points: PyReadonlyArray2<'py, f32>,
+        threads: Option<usize>,
+    ) -> PyResult<Bound<'py, PyArray1<bool>>> {
+        let queries = arrays::points("points", &points)?;
+        let tlas = py.detach(|| self.tlas(threads))?;
+        let out = PyArray1::<bool>::zeros(py, queries.len(), false);
+        // SAFETY: the array was just made here and nothing else refers to it yet.
+        let inside = unsafe { out.as_slice_mut().expect("contiguous") };
+        py.detach(|| {
+            pools::install(threads, || {
+                inside
+                    .par_iter_mut()
+                    .with_min_len(POINT_CHUNK)
+                    .zip(queries.par_iter())
+                    .for_each(|(inside, &q)| *inside = tlas.contains(q.into()))
+            })
+        })?;
+        Ok(out)
+    }
+
+    /// The generalised winding number of the surface at each point (1 inside a closed
+    /// surface, 0 outside).
+    #[pyo3(signature = (points, threads=None))]
+    fn winding_numbers<'py>(
+        &self,
+        py: Python<'py>,
+        points: PyReadonlyArray2<'py, f32>,
+        threads: Option<usize>,
+    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let queries = arrays::points("points", &points)?;
+        let tlas = py.detach(|| self.tlas(threads))?;
+        let out = PyArray1::<f64>::zeros(py, queries.len(), false);
+        // SAFETY: the array was just made here and nothing else refers to it yet.
+        let numbers = unsafe { out.as_slice_mut().expect("contiguous") };
+        py.detach(|| {
+            pools::install(threads, || {
+                numbers
+                    .par_iter_mut()
+                    .with_min_len(POINT_CHUNK)
+                    .zip(queries.par_iter())
+                    .for_each(|(w, &q)| *w = tlas.winding_number(q.into()))
+            })
+        })?;
+        Ok(out)
+    }
+
+    /// How many times each ray meets the surface within [tnear, tfar] (each triangle
+    /// once).
+    #[pyo3(signature = (origins, directions, tnear, tfar, mask, threads=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn count_intersections<'py>(
+        &self,
+        py: Python<'py>,
+        origins: PyReadonlyArray2<'py, f32>,
+        directions: PyReadonlyArray2<'py, f32>,
+        tnear: Bound<'py, PyAny>,
+        tfar: Bound<'py, PyAny>,
+        mask: u32,
+        threads: Option<usize>,
+    ) -> PyResult<Bound<'py, PyArray1<i64>>> {
+        let (mut near, mut far) = (None, None);
+        let batch = batch(&origins, &directions, &tnear, &mut near, &tfar, &mut far)?;
+        let tlas = py.detach(|| self.tlas(threads))?;
+        let out = PyArray1::<i64>::zeros(py, batch.len(), false);
+        // SAFETY: the array was just made here and nothing else refers to it yet.
+        let counts = unsafe { out.as_slice_mut().expect("contiguous") };
+        py.detach(|| {
+            pools::install(threads, || {
+                counts
+                    .par_iter_mut()
+                    .with_min_len(POINT_CHUNK)
+                    .enumerate()
+                    .for_each(|(i, c)| *c = tlas.hits(&batch.ray(i), mask).len() as i64)
+            })
+        })?;
+        Ok(out)
+    }
+
+    /// Every hit of each ray within [tnear, tfar], nearest first: (ray_splits, ray, t,
+    /// then the rows of [`HitRows`]); ray i's hits are rows ray_splits[i]..ray_splits[i+1].
+    #[pyo3(signature = (origins, directions, tnear, tfar, mask, threads=None))]
+    #[allow(clippy::type_complexity, clippy::too_many_arguments)]
+    fn list_intersections<'py>(
+        &self,
+        py: Python<'py>,
+        origins: PyReadonlyArray2<'py, f32>,
+        directions: PyReadonlyArray2<'py, f32>,
+        tnear: Bound<'py, PyAny>,
+        tfar: Bound<'py, PyAny>,
+        mask: u32,
+        threads: Option<usize>,
+    ) -> PyResult<(
+        Bound<'py, PyArray1<i64>>,
+        Bound<'py, PyArray1<i64>>,
+        Bound<'py, PyArray1<f32>>,
+        Rows<'py>,
+    )> {
+        let (mut near, mut far) = (None, None);
+        let batch = batch(&origins, &directions, &tnear, &mut near, &tfar, &mut far)?;
+        let n = batch.len();
+        let tlas = py.detach(|| self.tlas(threads))?;
+        let per_ray: Vec<Vec<Hit>> = py.detach(|| {
+            pools::install(threads, || {
+                (0..n)
+                    .into_par_iter()
+                    .with_min_len(POINT_CHUNK)
+                    .map(|i| tlas.hits(&batch.ray(i), mask))
+                    .collect()
+            })
+        })?;
+        let total: usize = per_ray.iter().map(Vec::len).sum();
+        let splits_out = PyArray1::<i64>::zeros(py, n + 1, false);
+        let ray_out = PyArray1::<i64>::zeros(py, total, false);
+        let t_out = PyArray1::<f32>::zeros(py, total, false);
+        let rows = hit_arrays(py, total);
+        // SAFETY: the arrays were just made here and nothing else refers to them yet.
+        let (splits, ray, t, mut all) = unsafe {
+            (
+                splits_out.as_slice_mut().expect("contiguous"),
+                ray_out.as_slice_mut().expect("contiguous"),
+                t_out.as_slice_mut().expect("contiguous"),
+                hit_rows(&rows),
+            )
+        };
+        let mut row = 0;
+        for (i, hits) in per_ray.iter().enumerate() {
+            splits[i] = row as i64;
+            for hit in hits {
+                (ray[row], t[row]) = (i as i64, hit.t);
+                all.write(&tlas, row, Some(*hit));
+                row += 1;
+            }
+        }
+        splits[n] = row as i64;
+        Ok((splits_out, ray_out, t_out, rows))
     }
 
     fn __repr__(&self) -> String {

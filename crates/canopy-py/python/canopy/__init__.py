@@ -24,7 +24,7 @@ import numpy as np
 
 from . import _canopy
 from .scene import Scene, dielectric, emissive, lambertian, metal
-from .ray_scene import RayHits, RayScene
+from .ray_scene import ClosestPoints, RayHitLists, RayHits, RayScene
 
 __version__: str = _canopy.__version__
 
@@ -33,6 +33,8 @@ __all__ = [
     "Hits",
     "RayHits",
     "RayScene",
+    "ClosestPoints",
+    "RayHitLists",
     "Scene",
     "SceneInfo",
     "dielectric",

@@ -1,0 +1,162 @@
+//! [`SurfaceQuery`] for the structures that own their geometry: a [`Blas`] over
+//! triangles (its tree in any layout, or brute force), and a [`Tlas`] of them.
+
+use super::walk::{self, beats, Best};
+use super::{closest_point_on_triangle, solid_angle, Nearest, Placement, SurfaceQuery};
+use super::{TriangleSurface, WindingTree};
+use crate::{intersect_triangle, Blas, Hit, Ray, RayQuery, ShearedRay, Tlas};
+use glam::Vec3;
+
+/// Measures triangle `prim` (vertices `v` in the query's space) against `query`, and
+/// returns it where it beats `best`.
+#[inline(always)]
+fn measure(query: Vec3, prim: u32, v: &[Vec3; 3], best: &Best, limit_sq: f32) -> Best {
+    let (point, [u, v]) = closest_point_on_triangle(query, v);
+    let d2 = point.distance_squared(query);
+    let candidate = Nearest {
+        point,
+        distance: d2.sqrt(),
+        inst: 0,
+        prim,
+        u,
+        v,
+    };
+    beats(d2, &candidate, best, limit_sq).then_some((d2, candidate))
+}
+
+impl<G: TriangleSurface> SurfaceQuery for Blas<G> {
+    fn nearest_placed(&self, query: Vec3, placement: Option<&Placement>, limit_sq: f32) -> Best {
+        let g = self.geometry();
+        // Triangles are measured where the query is (the world, for a placed one); boxes
+        // are pruned in the structure's space.
+        let test = |prim: u32, best: &Best| {
+            let v = g.vertices_of_triangle(prim);
+            let v = match placement {
+                None => v,
+                Some(p) => v.map(|x| p.to_world.transform_point3(x)),
+            };
+            measure(query, prim, &v, best, limit_sq)
+        };
+        match self.tree() {
+            Some(tree) => {
+                let (local, stretch) = match placement {
+                    None => (query, 1.0),
+                    Some(p) => (p.to_local.transform_point3(query), p.stretch),
+                };
+                walk::nearest(tree.view(), local, stretch, limit_sq, test)
+            }
+            None => (0..g.len() as u32).fold(None, |best, prim| test(prim, &best).or(best)),
+        }
+    }
+
+    fn winding_number_within(&self, query: Vec3, far_field: f32) -> f64 {
+        let g = self.geometry();
+        let vertices = |p: u32| g.vertices_of_triangle(p);
+        match self.tree() {
+            Some(tree) => {
+                let view = tree.view();
+                let moments = self
+                    .winding
+                    .get_or_init(|| WindingTree::new(view, g.len(), &vertices));
+                moments.winding_number(view, query, far_field, &vertices)
+            }
+            None => {
+                let total: f64 = (0..g.len() as u32)
+                    .map(|p| solid_angle(query, &vertices(p)))
+                    .sum();
+                total / (4.0 * std::f64::consts::PI)
+            }
+        }
+    }
+
+    fn all_hits(&self, ray: &Ray, _mask: u32, out: &mut Vec<Hit>) {
+        let g = self.geometry();
+        let sheared = ShearedRay::new(ray);
+        let test = |prim: u32| {
+            if let Some(h) = intersect_triangle(&g.vertices_of_triangle(prim), ray, &sheared) {
+                out.push(Hit::new(prim, h));
+            }
+        };
+        match self.tree() {
+            Some(tree) => walk::primitives_along(tree.view(), ray, test),
+            None if ray.is_traceable() => (0..g.len() as u32).for_each(test),
+            None => {}
+        }
+    }
+}
+
+impl<B: RayQuery + SurfaceQuery> SurfaceQuery for Tlas<B> {
+    fn nearest_placed(&self, query: Vec3, placement: Option<&Placement>, limit_sq: f32) -> Best {
+        if let (Some((blas, index, _)), None) = (self.alone(), placement) {
+            return blas
+                .nearest_placed(query, None, limit_sq)
+                .map(|(d2, n)| (d2, Nearest { inst: index, ..n }));
+        }
+        let test = |index: u32, best: &Best| {
+            let instance = &self.instances()[index as usize];
+            let blas = &self.blases()[instance.blas as usize];
+            let inner = match placement {
+                None if instance.is_identity() => None,
+                None => Some(self.placements[index as usize]),
+                Some(outer) => Some(outer.then(instance)),
+            };
+            let within = best.map_or(limit_sq, |(d2, _)| d2);
+            let (d2, found) = blas.nearest_placed(query, inner.as_ref(), within)?;
+            let found = Nearest {
+                inst: index,
+                ..found
+            };
+            beats(d2, &found, best, limit_sq).then_some((d2, found))
+        };
+        match self.tree() {
+            Some(tree) => {
+                let (local, stretch) = match placement {
+                    None => (query, 1.0),
+                    Some(p) => (p.to_local.transform_point3(query), p.stretch),
+                };
+                walk::nearest(tree.view(), local, stretch, limit_sq, test)
+            }
+            None => {
+                (0..self.instances().len() as u32).fold(None, |best, i| test(i, &best).or(best))
+            }
+        }
+    }
+
+    fn winding_number_within(&self, query: Vec3, far_field: f32) -> f64 {
+        if let Some((blas, _, _)) = self.alone() {
+            return blas.winding_number_within(query, far_field);
+        }
+        // The winding number is unchanged by a transform that keeps orientation. A
+        // mirror keeps the instance's inside too: its normals are mirrored with it, as
+        // the renderer's are ([`crate::Instance::normal_to_world`]).
+        self.instances()
+            .iter()
+            .map(|instance| {
+                let blas = &self.blases()[instance.blas as usize];
+                let local = instance.to_local().transform_point3(query);
+                blas.winding_number_within(local, far_field)
+            })
+            .sum()
+    }
+
+    fn all_hits(&self, ray: &Ray, mask: u32, out: &mut Vec<Hit>) {
+        let test = |index: u32| {
+            let instance = &self.instances()[index as usize];
+            if instance.mask & mask == 0 {
+                return;
+            }
+            let blas = &self.blases()[instance.blas as usize];
+            let first = out.len();
+            match instance.is_identity() {
+                true => blas.all_hits(ray, mask, out),
+                false => blas.all_hits(&instance.ray_to_local(ray), mask, out),
+            }
+            out[first..].iter_mut().for_each(|h| h.inst = index);
+        };
+        match self.tree() {
+            Some(tree) => walk::primitives_along(tree.view(), ray, test),
+            None if ray.is_traceable() => (0..self.instances().len() as u32).for_each(test),
+            None => {}
+        }
+    }
+}
