@@ -40,7 +40,7 @@ import time
 for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(var, "1")
 
-import canopy  # noqa: E402
+import canopy_rt as canopy  # noqa: E402
 import numpy as np  # noqa: E402
 from embreex import rtcore_scene as rtcs  # noqa: E402
 from embreex.mesh_construction import TriangleMesh  # noqa: E402

@@ -17,7 +17,7 @@ import time
 
 import numpy as np
 
-import canopy
+import canopy_rt as canopy
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SHARED = os.path.join(ROOT, "..", "shared", "assets", "meshes")

@@ -6,4 +6,4 @@ fi
 bench/.venv/bin/pip install --quiet --disable-pip-version-check "$@" "maturin>=1.9,<2"
 rm -rf target/bench-wheels
 bench/.venv/bin/maturin build --release --quiet -m crates/canopy-py/Cargo.toml -o target/bench-wheels
-bench/.venv/bin/pip install --quiet --disable-pip-version-check --force-reinstall --no-deps target/bench-wheels/canopy-*.whl
+bench/.venv/bin/pip install --quiet --disable-pip-version-check --force-reinstall --no-deps target/bench-wheels/canopy_rt-*.whl

@@ -15,9 +15,8 @@ fi
 "$venv/bin/python" -m pip install --quiet --disable-pip-version-check \
     "maturin>=1.9,<2" numpy pytest "trimesh==5.2.0" rtree scipy shapely networkx manifold3d embreex \
     matplotlib
-rm -rf target/wheels
-"$venv/bin/maturin" build --release --quiet -m crates/canopy-py/Cargo.toml -o target/wheels
-"$venv/bin/python" -m pip install --quiet --disable-pip-version-check --force-reinstall --no-deps target/wheels/canopy-*.whl
+scripts/wheel.sh
+"$venv/bin/python" -m pip install --quiet --disable-pip-version-check --force-reinstall --no-deps target/wheels/canopy_rt-*.whl
 # Both suites run, whatever the first says.
 status=0
 CANOPY_BIN="$PWD/target/release/canopy" "$venv/bin/python" -m pytest -q crates/canopy-py/tests || status=1

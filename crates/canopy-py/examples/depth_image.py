@@ -12,7 +12,7 @@ matplotlib.use("Agg")  # write files; no window needed
 import matplotlib.pyplot as plt
 import numpy as np
 
-import canopy
+import canopy_rt as canopy
 
 here = Path(__file__).resolve().parent
 mesh = sys.argv[1] if len(sys.argv) > 1 else here.parents[2] / "scenes" / "meshes" / "bunny.ply"

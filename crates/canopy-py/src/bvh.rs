@@ -21,7 +21,7 @@ use std::time::Instant;
 const CHUNK: usize = 1024;
 
 /// A BVH over triangles (a mesh) or boxes, built once, queried with batches of rays.
-#[pyclass(frozen, module = "canopy._canopy")]
+#[pyclass(frozen, module = "canopy_rt._canopy")]
 pub struct Bvh {
     accel: Accel,
     /// A builder, or `none` (brute force: the plain loop every tree is checked against).

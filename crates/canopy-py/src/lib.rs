@@ -1,5 +1,5 @@
-//! `canopy._canopy`, the native half of the Python package `canopy` (the Python half, in
-//! `python/canopy`, converts arguments and documents them). Every call that does real
+//! `canopy_rt._canopy`, the native half of the Python package `canopy_rt` (the Python
+//! half, in `python/canopy_rt`, converts arguments and documents them). Every call that does real
 //! work releases the GIL and runs on a rayon pool of the requested size.
 
 mod arrays;

@@ -1,4 +1,4 @@
-//! `canopy._canopy.RayScene`: triangle meshes placed by instances and queried with
+//! `canopy_rt._canopy.RayScene`: triangle meshes placed by instances and queried with
 //! batches of rays, as Embree's and Open3D's ray-casting scenes are. A hit names the
 //! instance, its geometry, the triangle, t, barycentrics and the geometric normal in
 //! world space.
@@ -20,7 +20,7 @@ type MeshBlas = Arc<Blas<TriangleMesh>>;
 
 /// Meshes (each with its own BVH, built once) and the instances placing them; the top
 /// tree over the instances is built at the first query after a change.
-#[pyclass(module = "canopy._canopy")]
+#[pyclass(module = "canopy_rt._canopy")]
 pub struct RayScene {
     meshes: Vec<MeshBlas>,
     instances: Vec<Instance>,

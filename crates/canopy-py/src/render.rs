@@ -1,4 +1,4 @@
-//! `canopy.render`, `canopy.load_scene` and `canopy.read_image`.
+//! `canopy_rt.render`, `canopy_rt.load_scene` and `canopy_rt.read_image`.
 
 use crate::scene::PyScene;
 use canopy_bvh::BvhWidth;
@@ -22,7 +22,7 @@ fn scene_error(e: canopy_render::SceneError) -> PyErr {
 }
 
 /// A loaded scene, described (`canopy.load_scene`).
-#[pyclass(frozen, module = "canopy._canopy")]
+#[pyclass(frozen, module = "canopy_rt._canopy")]
 pub struct SceneInfo {
     scene: Scene,
 }

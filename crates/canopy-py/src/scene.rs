@@ -1,5 +1,5 @@
-//! `canopy._canopy.Scene`: a scene built from Python calls (the Python class
-//! `canopy.Scene` wraps it), each checked as the scene file parser checks its entries.
+//! `canopy_rt._canopy.Scene`: a scene built from Python calls (the Python class
+//! `canopy_rt.Scene` wraps it), each checked as the scene file parser checks its entries.
 
 use crate::arrays;
 use crate::render::SceneInfo;
@@ -14,7 +14,7 @@ use pyo3::types::{PyDict, PyDictMethods};
 
 /// A scene under construction: geometry, instances, materials, camera, background and
 /// render settings.
-#[pyclass(module = "canopy._canopy", name = "Scene")]
+#[pyclass(module = "canopy_rt._canopy", name = "Scene")]
 pub struct PyScene {
     pub scene: Scene,
 }

@@ -9,7 +9,7 @@ import time
 import numpy as np
 import pytest
 
-import canopy
+import canopy_rt as canopy
 from conftest import MESHES, random_rays, random_soup
 
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import trimesh
 
-import canopy
+import canopy_rt as canopy
 from test_ray_scene import random_transform
 
 

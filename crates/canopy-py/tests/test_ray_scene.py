@@ -4,7 +4,7 @@ instance's triangles in world space (float64), with masks, moves and bad input."
 import numpy as np
 import pytest
 
-import canopy
+import canopy_rt as canopy
 from conftest import random_rays, random_soup
 
 

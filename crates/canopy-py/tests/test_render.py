@@ -6,7 +6,7 @@ import subprocess
 import numpy as np
 import pytest
 
-import canopy
+import canopy_rt as canopy
 
 
 def test_render_matches_the_cli_exr_bit_for_bit(canopy_bin, tmp_path):

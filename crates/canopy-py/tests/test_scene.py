@@ -4,7 +4,7 @@ instances with any invertible transform, errors that name the call, and checkpoi
 import numpy as np
 import pytest
 
-import canopy
+import canopy_rt as canopy
 from conftest import MESHES
 
 TEAPOT = MESHES / "teapot.obj"
@@ -151,10 +151,10 @@ def test_a_python_scene_resumes_from_its_checkpoint(tmp_path):
 def test_the_documented_examples_run():
     import doctest
 
-    import canopy.ray_scene
-    import canopy.scene
+    import canopy_rt.ray_scene
+    import canopy_rt.scene
 
-    for module in (canopy.scene, canopy.ray_scene):
+    for module in (canopy_rt.scene, canopy_rt.ray_scene):
         result = doctest.testmod(module)
         assert result.attempted > 0 and result.failed == 0, (module.__name__, result)
 

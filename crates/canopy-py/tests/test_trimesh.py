@@ -5,7 +5,7 @@ import pytest
 
 trimesh = pytest.importorskip("trimesh", reason="trimesh is installed by scripts/test.sh")
 
-import canopy.trimesh_ray  # noqa: E402
+import canopy_rt.trimesh_ray  # noqa: E402
 from conftest import MESHES  # noqa: E402
 
 
@@ -29,7 +29,7 @@ def rays(mesh, n=2000, seed=0):
 def test_queries_match_trimesh(name, mesh):
     origins, directions = rays(mesh)
     theirs = trimesh.ray.ray_triangle.RayMeshIntersector(mesh)
-    ours = canopy.trimesh_ray.RayMeshIntersector(mesh)
+    ours = canopy_rt.trimesh_ray.RayMeshIntersector(mesh)
 
     first_theirs = theirs.intersects_first(origins, directions)
     first_ours = ours.intersects_first(origins, directions)
@@ -60,7 +60,7 @@ def test_queries_match_trimesh(name, mesh):
 def test_contains_points_matches_trimesh():
     mesh = trimesh.creation.icosphere(subdivisions=2)
     points = np.random.default_rng(1).random((500, 3)) * 2.4 - 1.2
-    ours = canopy.trimesh_ray.RayMeshIntersector(mesh).contains_points(points)
+    ours = canopy_rt.trimesh_ray.RayMeshIntersector(mesh).contains_points(points)
     expected = np.linalg.norm(points, axis=1) < 1.0
     # The icosphere is inside the unit sphere: points between the two may differ.
     between = (np.linalg.norm(points, axis=1) > 0.95) & (np.linalg.norm(points, axis=1) < 1.0)
@@ -75,7 +75,7 @@ def test_the_engine_follows_edits_pickles_and_takes_lazy_and_empty_meshes():
     import pickle
 
     mesh = trimesh.creation.box()
-    ray = canopy.trimesh_ray.RayMeshIntersector(mesh)
+    ray = canopy_rt.trimesh_ray.RayMeshIntersector(mesh)
     origin, direction = [[0, 0, 5]], [[0, 0, -1]]
     assert ray.intersects_any(origin, direction).all()
     mesh.apply_translation([10, 0, 0])
@@ -87,14 +87,14 @@ def test_the_engine_follows_edits_pickles_and_takes_lazy_and_empty_meshes():
     assert again.ray.intersects_any([[10, 0, 5]], direction).all()
 
     primitive = trimesh.primitives.Box(extents=[1, 1, 1])
-    assert canopy.trimesh_ray.RayMeshIntersector(primitive).intersects_any(origin, direction).all()
-    empty = canopy.trimesh_ray.RayMeshIntersector(trimesh.Trimesh())
+    assert canopy_rt.trimesh_ray.RayMeshIntersector(primitive).intersects_any(origin, direction).all()
+    empty = canopy_rt.trimesh_ray.RayMeshIntersector(trimesh.Trimesh())
     assert list(empty.intersects_first(origin, direction)) == [-1]
     assert len(empty.intersects_id(origin, direction)[0]) == 0
 
     far = trimesh.creation.box(extents=[1, 1, 1])
     far.apply_translation([1e7, 0, 0])
-    locations, index_ray, _ = canopy.trimesh_ray.RayMeshIntersector(far).intersects_location(
+    locations, index_ray, _ = canopy_rt.trimesh_ray.RayMeshIntersector(far).intersects_location(
         [[1e7, 0, 100]], direction
     )
     assert list(index_ray) == [0, 0]

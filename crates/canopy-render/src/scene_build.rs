@@ -1,4 +1,4 @@
-//! Scenes built in code (Rust callers, the Python `canopy.Scene`), checked as the scene
+//! Scenes built in code (Rust callers, the Python `canopy_rt.Scene`), checked as the scene
 //! file parser checks its entries: every call refuses what a scene file would, with a
 //! message that names the argument at fault, and leaves the scene unchanged when it does.
 

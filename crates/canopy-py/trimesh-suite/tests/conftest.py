@@ -7,12 +7,12 @@ import trimesh
 import trimesh.ray.ray_pyembree
 import trimesh.ray.ray_triangle
 
-import canopy.trimesh_ray
+import canopy_rt.trimesh_ray
 
 _made = []
 
 
-class _Counted(canopy.trimesh_ray.RayMeshIntersector):
+class _Counted(canopy_rt.trimesh_ray.RayMeshIntersector):
     def __init__(self, *args, **kwargs):
         _made.append(1)
         super().__init__(*args, **kwargs)

@@ -7,7 +7,7 @@ Point queries (Open3D's names): nearest points, distances, signed distances and
 occupancy, the inside test by generalised winding number; every hit along a ray,
 counted or listed.
 
->>> import numpy as np, canopy
+>>> import numpy as np, canopy_rt as canopy
 >>> scene = canopy.RayScene()
 >>> tri = scene.add_mesh([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]])
 >>> below = np.eye(4); below[2, 3] = -2
@@ -104,7 +104,7 @@ class RayScene:
 
     def __init__(self, *, builder: str = "binned-sah", width: int = 8):
         if not isinstance(builder, str):
-            raise TypeError(f"builder must be a name (see canopy.builders()), not {builder!r}")
+            raise TypeError(f"builder must be a name (see canopy_rt.builders()), not {builder!r}")
         self._native = _canopy.RayScene(builder, int(width))
 
     def add_geometry(self, vertices, faces, *, threads: Optional[int] = None) -> int:

@@ -3,7 +3,7 @@
 Build a BVH over a triangle mesh (or boxes) from numpy arrays and trace batches of rays
 through it, Embree-style; render canopy's scenes to numpy images.
 
->>> import numpy as np, canopy
+>>> import numpy as np, canopy_rt as canopy
 >>> vertices = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], dtype=np.float32)
 >>> bvh = canopy.Bvh(vertices, np.array([[0, 1, 2]]))
 >>> hits = bvh.intersect([[0.2, 0.2, 1.0]], [[0, 0, -1]])
@@ -104,7 +104,7 @@ def _per_ray(value, name: str, n: int):
 def _options(builder, width, max_leaf_size, sah_traversal, sah_intersection, ploc_radius, max_duplication,
              optimize, threads):
     if not isinstance(builder, str):
-        raise TypeError(f"builder must be a name (see canopy.builders()), not {builder!r}")
+        raise TypeError(f"builder must be a name (see canopy_rt.builders()), not {builder!r}")
     return dict(
         builder=builder,
         width=int(width),

@@ -1,8 +1,8 @@
 """canopy as the ray engine of `trimesh <https://trimesh.org>`_ meshes.
 
->>> import trimesh, canopy.trimesh_ray
+>>> import trimesh, canopy_rt.trimesh_ray
 >>> mesh = trimesh.creation.icosphere()
->>> mesh.ray = canopy.trimesh_ray.RayMeshIntersector(mesh)
+>>> mesh.ray = canopy_rt.trimesh_ray.RayMeshIntersector(mesh)
 >>> mesh.ray.intersects_first([[0, 0, -5]], [[0, 0, 1]])
 array([...])
 

@@ -2,7 +2,7 @@
 boxes, materials, a camera, a background and render settings, rendered by
 ``canopy.render(scene)`` exactly as a scene file with the same contents would be.
 
->>> import numpy as np, canopy
+>>> import numpy as np, canopy_rt as canopy
 >>> scene = canopy.Scene(size=(64, 48), spp=4)
 >>> scene.camera(look_from=(0, 1, 4), look_at=(0, 0, 0))
 >>> quad = scene.add_mesh([[-1, 0, -1], [1, 0, -1], [1, 0, 1], [-1, 0, 1]],
@@ -151,7 +151,7 @@ class Scene:
         """Adds a material (a dict from :func:`lambertian` and friends); returns its index,
         which every ``material=`` argument also takes."""
         if not isinstance(material, dict):
-            raise TypeError(f"a material is a dict such as canopy.lambertian((0.5, 0.5, 0.5)), not {type(material).__name__}")
+            raise TypeError(f"a material is a dict such as canopy_rt.lambertian((0.5, 0.5, 0.5)), not {type(material).__name__}")
         return self._native.add_material(material)
 
     @staticmethod
@@ -160,7 +160,7 @@ class Scene:
         if isinstance(material, (int, np.integer)) and not isinstance(material, bool):
             return int(material)
         if not isinstance(material, dict):
-            raise TypeError(f"a material is a dict such as canopy.lambertian((0.5, 0.5, 0.5)) or an index, not {type(material).__name__}")
+            raise TypeError(f"a material is a dict such as canopy_rt.lambertian((0.5, 0.5, 0.5)) or an index, not {type(material).__name__}")
         return material
 
     def add_sphere(self, center, radius: float, *, material: Material) -> None:
