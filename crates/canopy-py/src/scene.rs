@@ -329,6 +329,22 @@ impl PyScene {
         })
     }
 
+    /// Adds the glTF model at `path`, placed by `transform` (a (3, 4) float32 matrix);
+    /// returns how many instances it placed. Changes nothing when the file is refused.
+    fn add_gltf(
+        &mut self,
+        py: Python<'_>,
+        path: std::path::PathBuf,
+        transform: PyReadonlyArray2<'_, f32>,
+    ) -> PyResult<usize> {
+        let to_world = arrays::affine(&transform)?;
+        let scene = &mut self.scene;
+        let before = scene.instances.len();
+        py.detach(|| scene.add_gltf(&path, to_world))
+            .map_err(refused("add_gltf"))?;
+        Ok(self.scene.instances.len() - before)
+    }
+
     /// The scene described, as `canopy.load_scene` describes a file.
     fn info(&self) -> SceneInfo {
         SceneInfo::new(self.scene.clone())

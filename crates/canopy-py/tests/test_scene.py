@@ -169,3 +169,32 @@ def test_instances_render_on_the_gpu_as_on_the_cpu():
     # most pixels the same to rounding.
     assert abs(gpu.mean() - cpu.mean()) < 0.03 * cpu.mean()
     assert np.mean(np.isclose(gpu, cpu, rtol=1e-2, atol=1e-3)) > 0.8
+
+
+def test_gltf_models_render_as_the_scene_file_places_them(tmp_path):
+    truck = MESHES.parent / "gltf" / "CesiumMilkTruck.glb"
+    path = tmp_path / "truck.toml"
+    path.write_text(f"""
+background = "sky"
+camera = {{ look_from = [6, 3, 8], look_at = [0, 1, 0] }}
+render = {{ width = 32, height = 24, spp = 2 }}
+[[gltf]]
+file = "{truck}"
+rotate = [0, 30, 0]
+""")
+    from_file = canopy.render(str(path))
+    scene = canopy.Scene(size=(32, 24), spp=2)
+    scene.camera(look_from=(6, 3, 8), look_at=(0, 1, 0))
+    turned = np.eye(4)
+    c, s = np.cos(np.radians(30)), np.sin(np.radians(30))
+    turned[[0, 0, 2, 2], [0, 2, 0, 2]] = [c, s, -s, c]
+    placed = scene.add_gltf(truck, turned)
+    assert placed == 5  # the truck's body parts and two wheels, sharing one mesh
+    assert any("textures are not rendered yet" in w for w in scene.info().warnings)
+    np.testing.assert_allclose(canopy.render(scene), from_file, atol=1e-6)
+    # A refused model changes nothing.
+    broken = tmp_path / "broken.glb"
+    broken.write_bytes(b"glTF" + bytes(20))
+    with pytest.raises(ValueError, match="add_gltf: `.*broken.glb`: not a valid glTF 2.0 file"):
+        scene.add_gltf(broken)
+    assert scene.info().counts["instances"] == 5

@@ -37,6 +37,10 @@ pub enum SceneError {
     /// format has lines, the line) of the mesh itself.
     #[error("{file}: {cause}")]
     MeshFile { file: String, cause: MeshError },
+    /// A model file (glTF) given as the scene: the error names the file and the object
+    /// in it at fault.
+    #[error("{file}: {message}")]
+    Model { file: String, message: String },
     #[error("unknown scene `{0}`: neither a built-in scene (see `canopy scenes`) nor a file")]
     Unknown(String),
 }

@@ -13,6 +13,7 @@ pub mod error;
 pub mod files;
 pub mod film;
 pub mod geometry;
+pub mod gltf_scene;
 pub mod integrator;
 pub mod lights;
 pub mod material;
@@ -82,8 +83,8 @@ pub fn load_scene_file(path: &Path) -> Result<Scene, SceneError> {
     Ok(scene)
 }
 
-/// A built-in scene by name, else a scene file by path, else a bare OBJ or PLY mesh
-/// (see [`scene_from_mesh`]).
+/// A built-in scene by name, else a file by path: a glTF model ([`scene_from_gltf`]), a
+/// bare OBJ or PLY mesh ([`scene_from_mesh`]), or a scene file.
 pub fn load_scene(name_or_path: &str) -> Result<Scene, SceneError> {
     if let Some(builtin) = BuiltinScene::find(name_or_path) {
         return builtin.load();
@@ -92,7 +93,9 @@ pub fn load_scene(name_or_path: &str) -> Result<Scene, SceneError> {
     if !path.exists() {
         return Err(SceneError::Unknown(name_or_path.to_owned()));
     }
-    if mesh::MeshFormat::from_path(name_or_path).is_ok() {
+    if is_gltf(path) {
+        scene_from_gltf(path)
+    } else if mesh::MeshFormat::from_path(name_or_path).is_ok() {
         scene_from_mesh(path)
     } else {
         load_scene_file(path)
@@ -145,7 +148,13 @@ pub fn scene_from_mesh(path: &Path) -> Result<Scene, SceneError> {
     scene
         .add_instance(mesh, glam::Affine3A::IDENTITY, grey)
         .map_err(invalid)?;
-    // Frame the mesh: look at its centre from the front, a little above.
+    frame_from_front(&mut scene).map_err(|e| invalid(format!("cannot frame the mesh: {e}")))?;
+    Ok(scene)
+}
+
+/// Points the camera at the whole scene: at its centre, from the front and a little
+/// above, far enough back for a 40° field of view to hold it.
+pub(crate) fn frame_from_front(scene: &mut Scene) -> Result<(), String> {
     let bounds = scene.bounds();
     let radius = 0.5 * bounds.extent().length();
     let centre = bounds.center();
@@ -153,11 +162,38 @@ pub fn scene_from_mesh(path: &Path) -> Result<Scene, SceneError> {
     scene.camera.vfov = 40.0;
     let distance = radius / (0.5 * scene.camera.vfov.to_radians()).tan() * 1.1;
     scene.camera.look_from = centre + distance * glam::Vec3::new(0.0, 0.3, 1.0).normalize();
-    scene
-        .camera
-        .check()
-        .map_err(|e| invalid(format!("cannot frame the mesh: {e}")))?;
+    scene.camera.check()
+}
+
+/// A scene from a glTF 2.0 file (`.glb`, or `.gltf` with its buffers beside it or in
+/// data URIs): see [`gltf_scene`]. Errors name the file and the object at fault.
+pub fn scene_from_gltf(path: &Path) -> Result<Scene, SceneError> {
+    let display = path.display().to_string();
+    let fail = |message: String| SceneError::Model {
+        file: display.clone(),
+        message,
+    };
+    let file = path
+        .file_name()
+        .map(|f| f.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let dir = path.parent().unwrap_or(Path::new(".")).to_owned();
+    let assets = DirAssets(dir.clone());
+    let bytes = scene_file::Assets::read(&assets, &file).map_err(fail)?;
+    let stem = path
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let mut scene = gltf_scene::parse_gltf(&bytes, &assets, &stem).map_err(fail)?;
+    scene.inputs.insert(0, path.to_owned());
     Ok(scene)
+}
+
+/// Whether `path` names a glTF file, by its extension.
+pub fn is_gltf(path: &Path) -> bool {
+    path.extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case("glb") || e.eq_ignore_ascii_case("gltf"))
 }
 
 /// How a checkpoint names a scene so that it can be found again from any directory: a

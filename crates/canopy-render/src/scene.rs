@@ -177,6 +177,9 @@ pub struct Scene {
     pub skipped_degenerate: usize,
     /// The files the scene was read from (scene file, meshes): never to be written over.
     pub inputs: Vec<PathBuf>,
+    /// What a loader left out or read only in part (a model's textures, say), one
+    /// sentence each; reported with the warnings.
+    pub notes: Vec<String>,
 }
 
 impl Scene {
@@ -292,7 +295,7 @@ impl Scene {
 
     /// What is legal but probably not what the author meant, one sentence each.
     pub fn warnings(&self) -> Vec<String> {
-        let mut warnings = Vec::new();
+        let mut warnings = self.notes.clone();
         if self.skipped_degenerate > 0 {
             warnings.push(format!(
                 "{} zero-area mesh triangles were left out",

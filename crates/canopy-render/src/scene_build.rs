@@ -119,6 +119,52 @@ impl Scene {
         Ok(())
     }
 
+    /// Adds the glTF model at `path` (`.glb`, or `.gltf` with its buffers beside it),
+    /// placed by `to_world`: its meshes, materials and instances, and notes of what it
+    /// uses that canopy does not read yet (see [`crate::gltf_scene`]). Returns its
+    /// camera, placed, if it has one (the scene's camera is not changed). Changes
+    /// nothing when it refuses the file.
+    pub fn add_gltf(
+        &mut self,
+        path: &Path,
+        to_world: Affine3A,
+    ) -> Result<Option<crate::gltf_scene::ModelCamera>, String> {
+        let name = path.display().to_string();
+        let fail = |e: String| format!("`{name}`: {e}");
+        let dir = path.parent().unwrap_or(Path::new(".")).to_owned();
+        let file = path
+            .file_name()
+            .map(|f| f.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let assets = crate::scene_file::DirAssets(dir);
+        let bytes = crate::scene_file::Assets::read(&assets, &file).map_err(fail)?;
+        let before = (
+            self.meshes.len(),
+            self.materials.len(),
+            self.instances.len(),
+            self.inputs.len(),
+            self.notes.len(),
+            self.skipped_degenerate,
+        );
+        let added = crate::gltf_scene::add_gltf(self, &bytes, &assets, to_world);
+        match added {
+            Ok(camera) => {
+                self.inputs.push(path.to_owned());
+                Ok(camera)
+            }
+            Err(e) => {
+                let (meshes, materials, instances, inputs, notes, skipped) = before;
+                self.meshes.truncate(meshes);
+                self.materials.truncate(materials);
+                self.instances.truncate(instances);
+                self.inputs.truncate(inputs);
+                self.notes.truncate(notes);
+                self.skipped_degenerate = skipped;
+                Err(fail(e))
+            }
+        }
+    }
+
     /// A uniform background of `radiance`.
     pub fn set_background_color(&mut self, radiance: Vec3) -> Result<(), String> {
         if !radiance_ok(radiance) {

@@ -17,6 +17,7 @@ use std::sync::Arc;
 use toml::Spanned;
 
 pub(crate) mod instances;
+mod models;
 pub use instances::MAX_INSTANCES;
 
 /// Where a scene's mesh files come from.
@@ -83,6 +84,9 @@ struct SceneDoc {
     geometry: BTreeMap<String, Spanned<instances::GeometryDoc>>,
     #[serde(default)]
     instances: Vec<Spanned<instances::InstanceDoc>>,
+    /// Whole glTF models, each placed by a transform.
+    #[serde(default)]
+    gltf: Vec<Spanned<models::GltfDoc>>,
 }
 
 /// `background = { environment = "file.hdr", rotate = 90, strength = 1 }`
@@ -290,6 +294,9 @@ pub fn parse_scene(source: &str, file: &str, assets: &dyn Assets) -> Result<Scen
     }
     for instance in &doc.instances {
         builder.instances(instance)?;
+    }
+    for model in &doc.gltf {
+        builder.gltf(model, assets)?;
     }
     Ok(builder.scene)
 }

@@ -211,6 +211,11 @@ fn fuzz_seeds_read() {
         canopy_render::checkpoint::Checkpoint::from_bytes(&bytes)
             .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     }
+    for path in files("gltf") {
+        let bytes = std::fs::read(&path).unwrap();
+        canopy_render::gltf_scene::parse_gltf(&bytes, &NoAssets, "seed")
+            .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    }
     for target in ["environment_hdr", "environment_exr"] {
         for path in files(target) {
             let bytes = std::fs::read(&path).unwrap();

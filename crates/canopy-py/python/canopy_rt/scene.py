@@ -221,6 +221,15 @@ class Scene:
             material = self._mesh_materials[mesh]
         return self._native.add_instance(int(mesh), _transform(transform), self._material(material))
 
+    def add_gltf(self, path, transform=None) -> int:
+        """Adds the glTF 2.0 model at ``path`` (``.glb``, or ``.gltf`` with its buffers
+        beside it), placed by ``transform`` (any invertible affine matrix; identity by
+        default): its meshes, materials and node hierarchy, each mesh stored once.
+        Returns how many instances it placed. What the model uses that canopy does not
+        render yet (textures, alpha modes, punctual lights) is listed in
+        ``info().warnings``. The scene's camera is kept. A refused file changes nothing."""
+        return self._native.add_gltf(str(path), _transform(transform))
+
     def info(self) -> "_canopy.SceneInfo":
         """The scene described: ``settings``, ``counts``, ``bounds``, ``warnings``."""
         return self._native.info()

@@ -1,0 +1,355 @@
+//! Scenes from glTF 2.0 files (`.glb`, `.gltf` with embedded or external buffers),
+//! through the `gltf` crate: the default scene's node hierarchy becomes instances of
+//! meshes stored once (a mesh primitive used by several nodes is one structure), the
+//! first perspective camera (or a framing of the whole model) the camera, and each
+//! material canopy's nearest ([`materials`]). Every accessor is checked against its
+//! buffer before it is read ([`data`]); errors name the file and the object at fault.
+//!
+//! Not read yet (each named in the scene's warnings where a file uses it): textures,
+//! alpha modes, `KHR_lights_punctual` lights, orthographic cameras, sparse accessors.
+
+mod data;
+mod materials;
+
+use crate::camera::CameraSpec;
+use crate::scene::Scene;
+use crate::scene_file::Assets;
+use data::{check_accessor, describe, Buffers, INDICES, NORMALS, POSITIONS};
+use glam::{Affine3A, Mat4, Vec3};
+use gltf::mesh::Mode;
+use std::collections::HashMap;
+
+/// Extensions whose use is read (or knowingly left out with a note); any other one a
+/// file uses is named in a warning, and one it requires is refused by the parser.
+const KNOWN_EXTENSIONS: &[&str] = &[
+    "KHR_materials_transmission",
+    "KHR_materials_ior",
+    "KHR_materials_emissive_strength",
+    "KHR_lights_punctual",
+];
+
+/// Deepest node hierarchy followed (a cycle, which the specification forbids, is caught
+/// before this; the bound keeps the walk's stack small).
+const MAX_DEPTH: usize = 256;
+
+/// The scene of glTF file `bytes`, its buffers found through `assets`, named `name`:
+/// the model, seen by its first perspective camera (else framed from the front), under
+/// the default sky.
+pub fn parse_gltf(bytes: &[u8], assets: &dyn Assets, name: &str) -> Result<Scene, String> {
+    let mut scene = Scene {
+        name: name.to_owned(),
+        ..Scene::default()
+    };
+    match add_gltf(&mut scene, bytes, assets, Affine3A::IDENTITY)? {
+        Some(camera) => {
+            let aspect = camera.aspect;
+            scene.set_camera(camera.spec)?;
+            if let Some(aspect) = aspect {
+                let height = scene.settings.height as f32;
+                scene.settings.width = (height * aspect).round().clamp(1.0, 16384.0) as u32;
+            }
+        }
+        None => crate::frame_from_front(&mut scene)?,
+    }
+    Ok(scene)
+}
+
+/// A camera a model holds, placed in the world.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ModelCamera {
+    pub spec: CameraSpec,
+    /// Width over height, where the file gives it.
+    pub aspect: Option<f32>,
+}
+
+/// Adds glTF file `bytes` (its buffers found through `assets`) to `scene`, the whole
+/// model placed by `to_world`: its meshes, materials and instances, and a note in
+/// [`Scene::notes`] for each thing it uses that canopy does not read yet. Returns the
+/// model's first perspective camera, placed, if it has one. On an error the scene may
+/// hold part of the model.
+pub fn add_gltf(
+    scene: &mut Scene,
+    bytes: &[u8],
+    assets: &dyn Assets,
+    to_world: Affine3A,
+) -> Result<Option<ModelCamera>, String> {
+    let gltf::Gltf { document, blob } =
+        gltf::Gltf::from_slice(bytes).map_err(|e| format!("not a valid glTF 2.0 file: {e}"))?;
+    let buffers = Buffers::load(&document, blob, assets)?;
+    scene.inputs.extend(buffers.1.iter().cloned());
+    let placed_before = scene.instances.len();
+    let mut loader = Loader {
+        buffers: &buffers,
+        scene,
+        meshes: HashMap::new(),
+        materials: HashMap::new(),
+        camera: None,
+    };
+    for extension in document.extensions_used() {
+        if !KNOWN_EXTENSIONS.contains(&extension) {
+            loader.note(format!("extension {extension} is not read"));
+        }
+    }
+    if document.lights().is_some_and(|mut l| l.next().is_some()) {
+        loader.note("KHR_lights_punctual lights are not rendered yet".into());
+    }
+    let roots: Vec<gltf::Node<'_>> = match document.default_scene().or(document.scenes().next()) {
+        Some(scene) => scene.nodes().collect(),
+        // No scene: every node that is no other's child.
+        None => {
+            let children: Vec<usize> = document
+                .nodes()
+                .flat_map(|n| n.children().map(|c| c.index()))
+                .collect();
+            document
+                .nodes()
+                .filter(|n| !children.contains(&n.index()))
+                .collect()
+        }
+    };
+    let mut visited = vec![false; document.nodes().len()];
+    for root in roots {
+        loader.place(&root, to_world, 0, &mut visited)?;
+    }
+    if loader.scene.instances.len() == placed_before {
+        return Err("the file places no triangles: nothing to render".into());
+    }
+    loader.camera.map(placed_camera).transpose()
+}
+
+/// The camera `camera` placed by `world`, checked.
+fn placed_camera((camera, world): (gltf::Camera<'_>, Affine3A)) -> Result<ModelCamera, String> {
+    let gltf::camera::Projection::Perspective(p) = camera.projection() else {
+        unreachable!("only perspective cameras are kept");
+    };
+    let look_from = world.transform_point3(Vec3::ZERO);
+    let forward = world.transform_vector3(-Vec3::Z).normalize_or_zero();
+    let spec = CameraSpec {
+        look_from,
+        look_at: look_from + forward,
+        up: world.transform_vector3(Vec3::Y).normalize_or_zero(),
+        vfov: p.yfov().to_degrees(),
+        ..CameraSpec::default()
+    };
+    spec.check()
+        .map_err(|e| format!("camera {}: {e}", describe(camera.index(), camera.name())))?;
+    let aspect = p.aspect_ratio().filter(|a| a.is_finite() && *a > 0.0);
+    Ok(ModelCamera { spec, aspect })
+}
+
+struct Loader<'a, 's> {
+    buffers: &'a Buffers,
+    scene: &'s mut Scene,
+    /// canopy's mesh of each (glTF mesh, primitive) already read.
+    meshes: HashMap<(usize, usize), Option<u32>>,
+    /// canopy's material of each glTF material (`None`: the default material).
+    materials: HashMap<Option<usize>, u32>,
+    /// The first perspective camera met, placed.
+    camera: Option<(gltf::Camera<'a>, Affine3A)>,
+}
+
+impl<'a> Loader<'a, '_> {
+    /// Something the file uses that canopy leaves out, said once.
+    fn note(&mut self, note: String) {
+        if !self.scene.notes.contains(&note) {
+            self.scene.notes.push(note);
+        }
+    }
+
+    /// Places `node` (and its children) under `parent`, its world transform.
+    fn place(
+        &mut self,
+        node: &gltf::Node<'a>,
+        parent: Affine3A,
+        depth: usize,
+        visited: &mut [bool],
+    ) -> Result<(), String> {
+        let named = format!("node {}", describe(node.index(), node.name()));
+        if std::mem::replace(&mut visited[node.index()], true) {
+            return Err(format!(
+                "{named} is reached twice in the hierarchy (a cycle, or a node with two parents)"
+            ));
+        }
+        if depth > MAX_DEPTH {
+            return Err(format!("{named} is nested more than {MAX_DEPTH} deep"));
+        }
+        let local = Mat4::from_cols_array_2d(&node.transform().matrix());
+        if !local.is_finite() || local.row(3) != glam::Vec4::W {
+            return Err(format!(
+                "{named}: its transform is not a finite affine matrix"
+            ));
+        }
+        let world = parent * Affine3A::from_mat4(local);
+        if let Some(camera) = node.camera() {
+            match camera.projection() {
+                gltf::camera::Projection::Perspective(_) if self.camera.is_none() => {
+                    self.camera = Some((camera, world))
+                }
+                gltf::camera::Projection::Perspective(_) => {}
+                gltf::camera::Projection::Orthographic(_) => self.note(format!(
+                    "{named}: orthographic cameras are not supported (left out)"
+                )),
+            }
+        }
+        if let Some(mesh) = node.mesh() {
+            if world.matrix3.determinant() == 0.0 {
+                // A zero scale hides a node (a common way to switch parts off).
+                self.note(format!("{named} is scaled to nothing: left out"));
+            } else {
+                self.place_mesh(&mesh, world)
+                    .map_err(|e| format!("{named}: {e}"))?;
+            }
+        }
+        for child in node.children() {
+            self.place(&child, world, depth + 1, visited)?;
+        }
+        Ok(())
+    }
+
+    /// Places every primitive of `mesh` by `world`.
+    fn place_mesh(&mut self, mesh: &gltf::Mesh<'a>, world: Affine3A) -> Result<(), String> {
+        for primitive in mesh.primitives() {
+            let key = (mesh.index(), primitive.index());
+            let index = match self.meshes.get(&key) {
+                Some(&index) => index,
+                None => {
+                    let named = format!(
+                        "mesh {} primitive {}",
+                        describe(mesh.index(), mesh.name()),
+                        primitive.index()
+                    );
+                    let index = self
+                        .read_primitive(&primitive, &named)
+                        .map_err(|e| format!("{named}: {e}"))?;
+                    self.meshes.insert(key, index);
+                    index
+                }
+            };
+            let Some(index) = index else { continue };
+            let material = self.material(&primitive.material())?;
+            self.scene.add_instance(index, world, material)?;
+        }
+        Ok(())
+    }
+
+    /// canopy's mesh of one primitive, or `None` for one that is not made of triangles.
+    fn read_primitive(
+        &mut self,
+        primitive: &gltf::Primitive<'a>,
+        named: &str,
+    ) -> Result<Option<u32>, String> {
+        let mode = primitive.mode();
+        if !matches!(
+            mode,
+            Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan
+        ) {
+            self.note(format!(
+                "{named}: {mode:?} are not rendered (only triangles)"
+            ));
+            return Ok(None);
+        }
+        let buffers = self.buffers;
+        let reader = primitive.reader(|b| buffers.get(b));
+        let positions_accessor = primitive
+            .get(&gltf::Semantic::Positions)
+            .ok_or("it has no POSITION attribute")?;
+        check_accessor(&positions_accessor, &POSITIONS, buffers)?;
+        let positions: Vec<Vec3> = reader
+            .read_positions()
+            .ok_or("its positions cannot be read")?
+            .map(Vec3::from)
+            .collect();
+        let normals: Vec<Vec3> = match primitive.get(&gltf::Semantic::Normals) {
+            Some(accessor) => {
+                check_accessor(&accessor, &NORMALS, buffers)?;
+                if accessor.count() != positions.len() {
+                    return Err(format!(
+                        "{} normals for {} positions",
+                        accessor.count(),
+                        positions.len()
+                    ));
+                }
+                let normals = reader.read_normals().ok_or("its normals cannot be read")?;
+                normals.map(Vec3::from).collect()
+            }
+            // The specification asks for flat shading where normals are not given.
+            None => Vec::new(),
+        };
+        let vertices: Vec<u32> = match primitive.indices() {
+            Some(accessor) => {
+                check_accessor(&accessor, &INDICES, buffers)?;
+                let indices = reader.read_indices().ok_or("its indices cannot be read")?;
+                let indices: Vec<u32> = indices.into_u32().collect();
+                if let Some(&past) = indices.iter().find(|&&i| i as usize >= positions.len()) {
+                    return Err(format!(
+                        "index {past} is past the last of its {} vertices",
+                        positions.len()
+                    ));
+                }
+                indices
+            }
+            None => (0..positions.len() as u32).collect(),
+        };
+        let triangles = assemble(mode, &vertices);
+        let name = named.to_owned();
+        let mesh = self
+            .scene
+            .add_mesh(&name, positions, triangles, normals, false)?;
+        Ok(Some(mesh))
+    }
+
+    /// canopy's material for `material`, converted once.
+    fn material(&mut self, material: &gltf::Material<'a>) -> Result<u32, String> {
+        if let Some(&index) = self.materials.get(&material.index()) {
+            return Ok(index);
+        }
+        let mut notes = Vec::new();
+        let converted = materials::convert(material, &mut notes);
+        notes.into_iter().for_each(|n| self.note(n));
+        let index = self.scene.add_material(converted).map_err(|e| {
+            let name = material.index().map_or("the default material".into(), |i| {
+                format!("material {}", describe(i, material.name()))
+            });
+            format!("{name}: {e}")
+        })?;
+        self.materials.insert(material.index(), index);
+        Ok(index)
+    }
+}
+
+/// Triangles of a primitive drawn in `mode` over `vertices` (glTF 2.0, 3.7.2.1: strips
+/// alternate their winding so that every triangle faces the same way).
+fn assemble(mode: Mode, v: &[u32]) -> Vec<[u32; 3]> {
+    match mode {
+        Mode::TriangleStrip => (0..v.len().saturating_sub(2))
+            .map(|i| match i % 2 {
+                0 => [v[i], v[i + 1], v[i + 2]],
+                _ => [v[i], v[i + 2], v[i + 1]],
+            })
+            .collect(),
+        Mode::TriangleFan => (1..v.len().saturating_sub(1))
+            .map(|i| [v[i], v[i + 1], v[0]])
+            .collect(),
+        _ => v.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn strips_and_fans_keep_one_winding() {
+        let v = [0, 1, 2, 3, 4];
+        assert_eq!(
+            assemble(Mode::TriangleStrip, &v),
+            vec![[0, 1, 2], [1, 3, 2], [2, 3, 4]]
+        );
+        assert_eq!(
+            assemble(Mode::TriangleFan, &v),
+            vec![[1, 2, 0], [2, 3, 0], [3, 4, 0]]
+        );
+        assert_eq!(assemble(Mode::Triangles, &v), vec![[0, 1, 2]]);
+        assert!(assemble(Mode::TriangleStrip, &[0, 1]).is_empty());
+    }
+}

@@ -1,0 +1,279 @@
+//! glTF 2.0 models: every model under `scenes/gltf/` loads and renders; hostile files
+//! (truncated buffers, accessors past their data, indices past the vertices, huge
+//! counts, cycles, required extensions, missing buffers) are errors that name the file
+//! and the object at fault, never panics.
+
+use canopy_bvh::{BuildParams, BvhWidth};
+use canopy_render::accel::{Accel, AccelKind};
+use canopy_render::gltf_scene::parse_gltf;
+use canopy_render::scene_file::Assets;
+use canopy_render::{integrator, load_scene};
+use std::path::{Path, PathBuf};
+
+fn models() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/gltf")
+}
+
+/// Mean of a small render of `path` (and whether every pixel is finite).
+fn render_small(path: &Path) -> f32 {
+    let mut scene = load_scene(path.to_str().unwrap()).unwrap();
+    (
+        scene.settings.width,
+        scene.settings.height,
+        scene.settings.spp,
+    ) = (24, 24, 2);
+    let accel = Accel::for_scene(
+        &scene,
+        AccelKind::default(),
+        BvhWidth::default(),
+        &BuildParams::default(),
+        None,
+    );
+    let (film, _) = integrator::render(&scene, &accel, &|| {});
+    let mut sum = 0.0;
+    for y in 0..24 {
+        for x in 0..24 {
+            let p = film.pixel(x, y);
+            assert!(p.is_finite(), "{}: pixel {x},{y} is {p}", path.display());
+            sum += p.element_sum() / 3.0;
+        }
+    }
+    sum / (24.0 * 24.0)
+}
+
+#[test]
+fn every_model_loads_and_renders() {
+    let mut seen = 0;
+    for entry in std::fs::read_dir(models()).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_some_and(|e| e == "glb") {
+            let mean = render_small(&path);
+            assert!(
+                mean > 0.01,
+                "{}: the render is black ({mean})",
+                path.display()
+            );
+            seen += 1;
+        }
+    }
+    assert_eq!(seen, 6, "the six models of scenes/gltf");
+}
+
+#[test]
+fn nodes_become_instances_of_meshes_stored_once() {
+    let truck = load_scene(models().join("CesiumMilkTruck.glb").to_str().unwrap()).unwrap();
+    assert!(
+        truck.instances.len() > truck.meshes.len(),
+        "the wheels' mesh is placed twice: {} instances of {} meshes",
+        truck.instances.len(),
+        truck.meshes.len()
+    );
+    let nested = load_scene(models().join("nested.glb").to_str().unwrap()).unwrap();
+    let placed: std::collections::HashSet<_> = nested
+        .instances
+        .iter()
+        .map(|i| i.to_world.translation.to_array().map(f32::to_bits))
+        .collect();
+    assert!(placed.len() > 1, "nested nodes are placed apart");
+}
+
+#[test]
+fn a_camera_in_the_file_is_used_and_what_is_not_read_is_named() {
+    let duck = load_scene(models().join("Duck.glb").to_str().unwrap()).unwrap();
+    let camera = duck.camera;
+    let toward = (camera.look_at - camera.look_from).normalize();
+    let to_duck = (duck.bounds().center() - camera.look_from).normalize();
+    assert!(
+        toward.dot(to_duck) > 0.9,
+        "the file's camera looks at the duck"
+    );
+    assert!(duck
+        .warnings()
+        .iter()
+        .any(|w| w.contains("textures are not rendered yet")));
+    let alpha = load_scene(models().join("AlphaBlendModeTest.glb").to_str().unwrap()).unwrap();
+    let warnings = alpha.warnings().join("\n");
+    assert!(
+        warnings.contains("alpha mode Blend") && warnings.contains("alpha mode Mask"),
+        "{warnings}"
+    );
+}
+
+struct NoFiles;
+
+impl Assets for NoFiles {
+    fn read(&self, path: &str) -> Result<Vec<u8>, String> {
+        Err(format!("cannot read {path}: no such file"))
+    }
+}
+
+/// One triangle: positions (36 bytes) then u16 indices (6 bytes, padded to 8).
+fn triangle_bin(indices: [u16; 3]) -> Vec<u8> {
+    let mut bin = Vec::new();
+    for v in [0.0f32, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0] {
+        bin.extend(v.to_le_bytes());
+    }
+    for i in indices {
+        bin.extend(i.to_le_bytes());
+    }
+    bin.extend([0, 0]);
+    bin
+}
+
+const TRIANGLE: &str = r#"{"asset":{"version":"2.0"},"scene":0,"scenes":[{"nodes":[0]}],
+"nodes":[{"mesh":0}],
+"meshes":[{"name":"tri","primitives":[{"attributes":{"POSITION":0},"indices":1}]}],
+"buffers":[{"byteLength":44}],
+"bufferViews":[{"buffer":0,"byteOffset":0,"byteLength":36},{"buffer":0,"byteOffset":36,"byteLength":6}],
+"accessors":[{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[1,1,0]},
+{"bufferView":1,"componentType":5123,"count":3,"type":"SCALAR"}]}"#;
+
+/// A GLB of `json` and the binary chunk `bin`.
+fn glb(json: &str, bin: &[u8]) -> Vec<u8> {
+    let pad = |mut v: Vec<u8>, with: u8| {
+        while !v.len().is_multiple_of(4) {
+            v.push(with);
+        }
+        v
+    };
+    let json = pad(json.as_bytes().to_vec(), b' ');
+    let bin = pad(bin.to_vec(), 0);
+    let mut out = b"glTF".to_vec();
+    out.extend(2u32.to_le_bytes());
+    out.extend(((12 + 8 + json.len() + 8 + bin.len()) as u32).to_le_bytes());
+    out.extend((json.len() as u32).to_le_bytes());
+    out.extend(b"JSON");
+    out.extend(json);
+    out.extend((bin.len() as u32).to_le_bytes());
+    out.extend(b"BIN\0");
+    out.extend(bin);
+    out
+}
+
+#[test]
+fn a_hand_made_triangle_loads() {
+    let scene = parse_gltf(&glb(TRIANGLE, &triangle_bin([0, 1, 2])), &NoFiles, "tri").unwrap();
+    assert_eq!((scene.meshes.len(), scene.instances.len()), (1, 1));
+    assert_eq!(scene.meshes[0].mesh.indices(), &[[0, 1, 2]]);
+    // Strips, fans and a line primitive beside the triangles.
+    let strip = TRIANGLE.replace(
+        r#""indices":1}"#,
+        r#""indices":1,"mode":5},{"attributes":{"POSITION":0},"mode":1}"#,
+    );
+    let scene = parse_gltf(&glb(&strip, &triangle_bin([0, 1, 2])), &NoFiles, "tri").unwrap();
+    assert_eq!(scene.meshes.len(), 1);
+    assert!(scene
+        .warnings()
+        .iter()
+        .any(|w| w.contains("mesh 0 (\"tri\") primitive 1: Lines are not rendered")));
+}
+
+#[test]
+fn hostile_files_are_errors_that_name_the_object() {
+    let good = triangle_bin([0, 1, 2]);
+    let cases: Vec<(String, Vec<u8>, &str)> = vec![
+        (TRIANGLE.into(), good[..20].to_vec(), "buffer 0: declares 44 bytes but holds 20"),
+        (TRIANGLE.replace(r#""count":3,"type":"VEC3""#, r#""count":1000,"type":"VEC3""#), good.clone(),
+         "mesh 0 (\"tri\") primitive 0: positions accessor 0: 1000 elements from byte 0 overrun its buffer view 0 of 36 bytes"),
+        (TRIANGLE.replace(r#""count":3,"type":"VEC3""#, r#""count":4294967295,"type":"VEC3""#), good.clone(),
+         "positions accessor 0: 4294967295 elements"),
+        (TRIANGLE.into(), triangle_bin([0, 1, 7]), "mesh 0 (\"tri\") primitive 0: index 7 is past the last of its 3 vertices"),
+        (TRIANGLE.replace(r#""byteOffset":36,"byteLength":6"#, r#""byteOffset":36,"byteLength":6000"#), good.clone(),
+         "indices accessor 1: buffer view 1 (bytes 36..+6000) overruns buffer 0"),
+        (TRIANGLE.replace(r#""componentType":5123"#, r#""componentType":5126"#), good.clone(),
+         "indices accessor 1 is Scalar F32"),
+        (TRIANGLE.replace(r#""nodes":[{"mesh":0}]"#, r#""nodes":[{"mesh":0,"children":[1]},{"children":[0]}]"#), good.clone(),
+         "reached twice"),
+        (TRIANGLE.replace(r#""asset":{"version":"2.0"}"#, r#""asset":{"version":"2.0"},"extensionsRequired":["KHR_draco_mesh_compression"],"extensionsUsed":["KHR_draco_mesh_compression"]"#), good.clone(),
+         "KHR_draco_mesh_compression"),
+        (TRIANGLE.replace(r#""buffers":[{"byteLength":44}]"#, r#""buffers":[{"byteLength":44,"uri":"gone.bin"}]"#), vec![],
+         "buffer 0: cannot read gone.bin"),
+        (TRIANGLE.replace(r#""nodes":[{"mesh":0}]"#, r#""nodes":[{"mesh":0,"matrix":[1,0,0,1, 0,1,0,0, 0,0,1,0, 0,0,0,1]}]"#), good.clone(),
+         "node 0: its transform is not a finite affine matrix"),
+        (TRIANGLE.replace(r#""attributes":{"POSITION":0},"indices":1"#, r#""attributes":{"POSITION":0},"indices":1,"mode":0"#), good.clone(),
+         "places no triangles"),
+    ];
+    for (json, bin, expected) in cases {
+        let file = glb(&json, &bin);
+        let err = parse_gltf(&file, &NoFiles, "hostile")
+            .map(|_| ())
+            .unwrap_err();
+        assert!(err.contains(expected), "expected {expected:?} in: {err}");
+        // Cut short anywhere, the file is refused without a panic.
+        for cut in [0, 11, 12, 20, file.len() / 2, file.len() - 1] {
+            let _ = parse_gltf(&file[..cut], &NoFiles, "cut");
+        }
+    }
+}
+
+#[test]
+fn errors_through_the_loader_name_the_file() {
+    let dir = std::env::temp_dir().join(format!("canopy-gltf-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("broken.glb");
+    std::fs::write(&path, glb(TRIANGLE, &triangle_bin([0, 1, 9]))).unwrap();
+    let err = load_scene(path.to_str().unwrap())
+        .map(|_| ())
+        .unwrap_err()
+        .to_string();
+    std::fs::remove_dir_all(&dir).unwrap();
+    assert!(
+        err.contains("broken.glb: node 0: mesh 0 (\"tri\") primitive 0: index 9"),
+        "{err}"
+    );
+}
+
+#[test]
+fn scene_files_place_models_and_read_buffers_beside_them() {
+    let dir = std::env::temp_dir().join(format!("canopy-gltf-scene-{}", std::process::id()));
+    std::fs::create_dir_all(dir.join("models")).unwrap();
+    // A .gltf whose buffer is a file beside it, and a .glb, both under models/.
+    let external = TRIANGLE.replace(
+        r#""buffers":[{"byteLength":44}]"#,
+        r#""buffers":[{"byteLength":44,"uri":"tri%20angle.bin"}]"#,
+    );
+    std::fs::write(dir.join("models/tri.gltf"), external).unwrap();
+    std::fs::write(dir.join("models/tri angle.bin"), triangle_bin([0, 1, 2])).unwrap();
+    std::fs::copy(models().join("nested.glb"), dir.join("models/nested.glb")).unwrap();
+    let scene_file = dir.join("scene.toml");
+    std::fs::write(
+        &scene_file,
+        "camera = { look_from = [0, 0, 10], look_at = [0, 0, 0] }\n\n\
+         [[gltf]]\nfile = \"models/tri.gltf\"\ntranslate = [5, 0, 0]\n\n\
+         [[gltf]]\nfile = \"models/nested.glb\"\nscale = 2\n",
+    )
+    .unwrap();
+    let scene = load_scene(scene_file.to_str().unwrap()).unwrap();
+    let alone = load_scene(models().join("nested.glb").to_str().unwrap()).unwrap();
+    assert_eq!(scene.instances.len(), 1 + alone.instances.len());
+    assert_eq!(
+        scene.instances[0].to_world.translation.x, 5.0,
+        "placed by its entry"
+    );
+    assert_eq!(
+        scene.camera.look_from.z, 10.0,
+        "the scene file's camera stays"
+    );
+    for input in [
+        "scene.toml",
+        "models/tri.gltf",
+        "models/tri angle.bin",
+        "models/nested.glb",
+    ] {
+        assert!(
+            scene.inputs.iter().any(|p| p.ends_with(input)),
+            "{input} in {:?}",
+            scene.inputs
+        );
+    }
+    std::fs::write(&scene_file, "camera = { look_from = [0, 0, 10], look_at = [0, 0, 0] }\n\n[[gltf]]\nfile = \"models/gone.glb\"\n").unwrap();
+    let err = load_scene(scene_file.to_str().unwrap())
+        .map(|_| ())
+        .unwrap_err()
+        .to_string();
+    std::fs::remove_dir_all(&dir).unwrap();
+    assert!(
+        err.contains("scene.toml:3: gltf `models/gone.glb`: cannot read"),
+        "{err}"
+    );
+}
