@@ -277,3 +277,24 @@ fn scene_files_place_models_and_read_buffers_beside_them() {
         "{err}"
     );
 }
+
+/// Files the fuzz target found (`fuzz/run.sh gltf`), kept as regressions: each is an
+/// error naming what is wrong, never a panic.
+#[test]
+fn the_fuzzers_finds_are_errors() {
+    let corpus = [(
+        "missing-position-accessor.glb",
+        "mesh 0 primitive 0 names accessor",
+    )];
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/gltf-corpus");
+    assert_eq!(
+        std::fs::read_dir(&dir).unwrap().count(),
+        corpus.len(),
+        "every file is listed"
+    );
+    for (name, expected) in corpus {
+        let bytes = std::fs::read(dir.join(name)).unwrap();
+        let err = parse_gltf(&bytes, &NoFiles, name).map(|_| ()).unwrap_err();
+        assert!(err.contains(expected), "{name}: {err}");
+    }
+}
