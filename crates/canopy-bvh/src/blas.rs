@@ -2,7 +2,7 @@
 //! in any layout, or none (a loop over every primitive, the baseline every tree is
 //! checked against).
 
-use crate::proximity::WindingTree;
+use crate::proximity::PointTree;
 use crate::query::RayQuery;
 use crate::{
     build_with_clipper, Aabb, BuildParams, Builder, BvhWidth, Geometry, Hit, OptimizeBudget, Ray,
@@ -90,9 +90,9 @@ pub struct Blas<G> {
     triangles: bool,
     params: BlasParams,
     build_time: Duration,
-    /// The tree's far-field moments for winding numbers, made at the first such query
-    /// and dropped when the geometry changes.
-    pub(crate) winding: OnceLock<WindingTree>,
+    /// The tree laid out for point queries (nearest points, winding numbers), made at
+    /// the first such query and dropped when the geometry changes.
+    pub(crate) point_tree: OnceLock<PointTree>,
 }
 
 impl<G: Geometry> Blas<G> {
@@ -107,7 +107,7 @@ impl<G: Geometry> Blas<G> {
             triangles: false,
             params: *params,
             build_time: Duration::ZERO,
-            winding: OnceLock::new(),
+            point_tree: OnceLock::new(),
         };
         blas.rebuild();
         blas
@@ -116,7 +116,7 @@ impl<G: Geometry> Blas<G> {
     /// Builds the tree again over the geometry as it is now.
     fn rebuild(&mut self) {
         let start = Instant::now();
-        self.winding = OnceLock::new();
+        self.point_tree = OnceLock::new();
         let (geometry, params) = (&self.geometry, &self.params);
         let boxes = boxes_of(geometry);
         self.bounds = union_of(&boxes);
@@ -187,7 +187,7 @@ impl<G: Geometry> Blas<G> {
             self.rebuild();
             return Ok(());
         }
-        self.winding = OnceLock::new();
+        self.point_tree = OnceLock::new();
         let boxes = boxes_of(&self.geometry);
         self.bounds = union_of(&boxes);
         if let Some(tree) = &mut self.tree {

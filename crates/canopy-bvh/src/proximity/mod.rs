@@ -10,7 +10,7 @@ mod walk;
 mod winding;
 
 pub use triangle::{closest_point_on_triangle, solid_angle};
-pub(crate) use winding::WindingTree;
+pub(crate) use winding::PointTree;
 pub use winding::{FAR_FIELD, INSIDE_FAR_FIELD};
 
 use crate::{Geometry, Hit, Instance, Ray, TriangleMesh};

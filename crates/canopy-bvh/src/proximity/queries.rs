@@ -3,7 +3,7 @@
 
 use super::walk::{self, beats, Best};
 use super::{closest_point_on_triangle, solid_angle, Nearest, Placement, SurfaceQuery};
-use super::{TriangleSurface, WindingTree};
+use super::{PointTree, TriangleSurface};
 use crate::{intersect_triangle, Blas, Hit, Ray, RayQuery, ShearedRay, Tlas};
 use glam::Vec3;
 
@@ -24,6 +24,20 @@ fn measure(query: Vec3, prim: u32, v: &[Vec3; 3], best: &Best, limit_sq: f32) ->
     beats(d2, &candidate, best, limit_sq).then_some((d2, candidate))
 }
 
+impl<G: TriangleSurface> Blas<G> {
+    /// The tree laid out for point queries, made at the first one; `None` for brute
+    /// force.
+    fn point_tree(&self) -> Option<&PointTree> {
+        let tree = self.tree()?;
+        let g = self.geometry();
+        let vertices = |p: u32| g.vertices_of_triangle(p);
+        Some(
+            self.point_tree
+                .get_or_init(|| PointTree::new(tree.view(), g.len(), &vertices)),
+        )
+    }
+}
+
 impl<G: TriangleSurface> SurfaceQuery for Blas<G> {
     fn nearest_placed(&self, query: Vec3, placement: Option<&Placement>, limit_sq: f32) -> Best {
         let g = self.geometry();
@@ -37,13 +51,20 @@ impl<G: TriangleSurface> SurfaceQuery for Blas<G> {
             };
             measure(query, prim, &v, best, limit_sq)
         };
-        match self.tree() {
-            Some(tree) => {
+        match self.point_tree() {
+            Some(flat) => {
                 let (local, stretch) = match placement {
                     None => (query, 1.0),
                     Some(p) => (p.to_local.transform_point3(query), p.stretch),
                 };
-                walk::nearest(tree.view(), local, stretch, limit_sq, test)
+                let measure = |prim: u32, v: &[Vec3; 3], best: &Best| {
+                    let v = match placement {
+                        None => *v,
+                        Some(p) => v.map(|x| p.to_world.transform_point3(x)),
+                    };
+                    self::measure(query, prim, &v, best, limit_sq)
+                };
+                flat.nearest(local, stretch, limit_sq, measure)
             }
             None => (0..g.len() as u32).fold(None, |best, prim| test(prim, &best).or(best)),
         }
@@ -52,14 +73,8 @@ impl<G: TriangleSurface> SurfaceQuery for Blas<G> {
     fn winding_number_within(&self, query: Vec3, far_field: f32) -> f64 {
         let g = self.geometry();
         let vertices = |p: u32| g.vertices_of_triangle(p);
-        match self.tree() {
-            Some(tree) => {
-                let view = tree.view();
-                let moments = self
-                    .winding
-                    .get_or_init(|| WindingTree::new(view, g.len(), &vertices));
-                moments.winding_number(view, query, far_field, &vertices)
-            }
+        match self.point_tree() {
+            Some(flat) => flat.winding_number(query, far_field),
             None => {
                 let total: f64 = (0..g.len() as u32)
                     .map(|p| solid_angle(query, &vertices(p)))

@@ -8,7 +8,9 @@
 //! where ray parity flips on a single missing triangle.
 
 use super::triangle::solid_angle;
+use super::walk::{box_distance_sq, Best};
 use crate::view::{Child, ChildKind, TreeView};
+use crate::Aabb;
 use glam::{DMat3, DVec3, Mat3, Vec3};
 
 /// How many radii away from a node's centre the query point must be for the node to
@@ -103,24 +105,42 @@ impl FarField {
     }
 }
 
-/// The far fields of every inner node (by node index) and every leaf (by where its
-/// range of primitive indices begins) of a tree.
+/// What a node of the flat tree holds below it.
+#[derive(Clone, Copy, Debug)]
+enum Below {
+    /// Children `first..first + count` of [`PointTree::nodes`], side by side.
+    Nodes { first: u32, count: u32 },
+    /// Triangles `first..first + count` of [`PointTree::triangles`].
+    Triangles { first: u32, count: u32 },
+}
+
+#[derive(Clone, Copy, Debug)]
+struct FlatNode {
+    bounds: Aabb,
+    far: FarField,
+    below: Below,
+}
+
+/// The tree laid out for point queries: every node's box and far field with its
+/// children's side by side (one node's children are tested together), and the leaves'
+/// triangles copied in leaf order with their indices (no index or vertex lookups).
+/// Made from any layout once, at the first point query.
 #[derive(Clone, Debug, Default)]
-pub(crate) struct WindingTree {
-    nodes: Vec<FarField>,
-    /// Leaf far fields, and for each primitive index position the one of the leaf
-    /// that begins there.
-    leaves: Vec<FarField>,
-    leaf_at: Vec<u32>,
-    /// Where spatial splits put a triangle in several leaves: each reference's share
-    /// (1 / references), so that every triangle counts once.
+pub(crate) struct PointTree {
+    /// Node 0 is the root.
+    nodes: Vec<FlatNode>,
+    triangles: Vec<[Vec3; 3]>,
+    /// The primitive index of each of `triangles`.
+    prims: Vec<u32>,
+    /// Where spatial splits put a triangle in several leaves: each copy's share
+    /// (1 / references), by position in `triangles`, so that every triangle counts once.
     shares: Option<Vec<f64>>,
 }
 
-impl WindingTree {
-    /// Far fields of `view`'s nodes over triangles `vertices(prim)` (`count` of them).
+impl PointTree {
+    /// The flat tree of `view` over triangles `vertices(prim)` (`count` of them).
     pub fn new(view: &dyn TreeView, count: usize, vertices: &impl Fn(u32) -> [Vec3; 3]) -> Self {
-        let shares = view.has_spatial_splits().then(|| {
+        let references = view.has_spatial_splits().then(|| {
             let mut references = vec![0u32; count];
             // (Entries past the leaves' ranges, padding, name no triangle.)
             for &p in view.prim_indices() {
@@ -128,142 +148,244 @@ impl WindingTree {
                     *r += 1;
                 }
             }
-            references.iter().map(|&r| 1.0 / r.max(1) as f64).collect()
+            references
         });
-        let mut tree = Self {
-            nodes: vec![FarField::OPEN; view.slot_count()],
-            leaves: Vec::new(),
-            leaf_at: vec![u32::MAX; view.prim_indices().len()],
-            shares,
+        let mut builder = Builder {
+            view,
+            vertices,
+            references: references.as_deref(),
+            tree: Self {
+                shares: references.as_ref().map(|_| Vec::new()),
+                ..Self::default()
+            },
         };
         if let Some(root) = view.root() {
-            tree.gather(view, &root, vertices);
+            builder.tree.nodes.push(FlatNode {
+                bounds: root.bounds,
+                far: FarField::OPEN,
+                below: Below::Nodes { first: 0, count: 0 },
+            });
+            let moment = builder.fill(0, &root);
+            builder.tree.nodes[0].far = FarField::of(&moment);
         }
-        tree
+        builder.tree
     }
 
     #[inline(always)]
-    fn share(&self, prim: u32) -> f64 {
-        self.shares.as_ref().map_or(1.0, |s| s[prim as usize])
-    }
-
-    /// The far field of `child`.
-    #[inline(always)]
-    fn far_field(&self, child: &Child) -> &FarField {
-        match child.kind {
-            ChildKind::Inner(node) => self.nodes.get(node).unwrap_or(&FarField::OPEN),
-            ChildKind::Leaf { first, .. } => self
-                .leaf_at
-                .get(first)
-                .and_then(|&i| self.leaves.get(i as usize))
-                .unwrap_or(&FarField::OPEN),
-        }
-    }
-
-    /// The moment of `child`, its far field stored.
-    fn gather(
-        &mut self,
-        view: &dyn TreeView,
-        child: &Child,
-        vertices: &impl Fn(u32) -> [Vec3; 3],
-    ) -> Moment {
-        match child.kind {
-            ChildKind::Leaf { first, count } => {
-                let prims = &view.prim_indices()[first..first + count];
-                let mut m = Moment::default();
-                let mut weighted = DVec3::ZERO;
-                for &p in prims {
-                    let v = vertices(p).map(|v| v.as_dvec3());
-                    let area_vector = 0.5 * (v[1] - v[0]).cross(v[2] - v[0]) * self.share(p);
-                    let area = area_vector.length();
-                    m.area_vector += area_vector;
-                    m.area += area;
-                    weighted += area * (v[0] + v[1] + v[2]) / 3.0;
-                }
-                m.center = match m.area > 0.0 {
-                    true => weighted / m.area,
-                    false => (child.bounds.min.as_dvec3() + child.bounds.max.as_dvec3()) / 2.0,
-                };
-                for &p in prims {
-                    let v = vertices(p).map(|v| v.as_dvec3());
-                    let area_vector = 0.5 * (v[1] - v[0]).cross(v[2] - v[0]) * self.share(p);
-                    let centroid = (v[0] + v[1] + v[2]) / 3.0;
-                    m.spread += outer(area_vector, centroid - m.center);
-                    let farthest = v.iter().map(|v| v.distance(m.center)).fold(0.0, f64::max);
-                    m.radius = m.radius.max(farthest);
-                }
-                if let Some(at) = self.leaf_at.get_mut(first) {
-                    *at = self.leaves.len() as u32;
-                    self.leaves.push(FarField::of(&m));
-                }
-                m
-            }
-            ChildKind::Inner(node) => {
-                let mut children = Vec::with_capacity(8);
-                view.children(node, &mut children);
-                let parts: Vec<Moment> = children
-                    .iter()
-                    .map(|c| self.gather(view, c, vertices))
-                    .collect();
-                let mut m = Moment::default();
-                let mut weighted = DVec3::ZERO;
-                for part in &parts {
-                    m.area_vector += part.area_vector;
-                    m.area += part.area;
-                    weighted += part.area * part.center;
-                }
-                m.center = match m.area > 0.0 {
-                    true => weighted / m.area,
-                    false => (child.bounds.min.as_dvec3() + child.bounds.max.as_dvec3()) / 2.0,
-                };
-                for part in &parts {
-                    m.spread += part.spread + outer(part.area_vector, part.center - m.center);
-                    m.radius = m.radius.max(part.center.distance(m.center) + part.radius);
-                }
-                if let Some(slot) = self.nodes.get_mut(node) {
-                    *slot = FarField::of(&m);
-                }
-                m
-            }
-        }
+    fn share(&self, slot: usize) -> f64 {
+        self.shares.as_ref().map_or(1.0, |s| s[slot])
     }
 
     /// The winding number of the surface at `query`, nodes farther than `far_field`
     /// radii counted by their expansions.
-    pub fn winding_number(
-        &self,
-        view: &dyn TreeView,
-        query: Vec3,
-        far_field: f32,
-        vertices: &impl Fn(u32) -> [Vec3; 3],
-    ) -> f64 {
+    pub fn winding_number(&self, query: Vec3, far_field: f32) -> f64 {
         let reach_sq = far_field * far_field;
-        let Some(root) = view.root() else {
+        let Some(root) = self.nodes.first() else {
             return 0.0;
         };
+        if let Some(term) = root.far.term(query, reach_sq) {
+            return term / (4.0 * std::f64::consts::PI);
+        }
         let mut total = 0.0;
-        let mut stack: Vec<Child> = Vec::with_capacity(64);
-        let mut children = Vec::with_capacity(8);
-        stack.push(root);
-        // Each child is expanded where the query is far from it, else opened: a node
-        // into its children, a leaf into exact solid angles.
-        while let Some(child) = stack.pop() {
-            if let Some(term) = self.far_field(&child).term(query, reach_sq) {
-                total += term;
-                continue;
-            }
-            match child.kind {
-                ChildKind::Leaf { first, count } => {
-                    for &p in &view.prim_indices()[first..first + count] {
-                        total += solid_angle(query, &vertices(p)) * self.share(p);
+        let mut stack: Vec<Below> = Vec::with_capacity(64);
+        stack.push(root.below);
+        // Each node on the stack is near: its children are expanded where the query is
+        // far from them, else opened (nodes onto the stack, triangles exactly).
+        while let Some(below) = stack.pop() {
+            match below {
+                Below::Triangles { first, count } => {
+                    let (first, count) = (first as usize, count as usize);
+                    for (i, v) in self.triangles[first..first + count].iter().enumerate() {
+                        total += solid_angle(query, v) * self.share(first + i);
                     }
                 }
-                ChildKind::Inner(node) => {
-                    view.children(node, &mut children);
-                    stack.extend_from_slice(&children);
+                Below::Nodes { first, count } => {
+                    let (first, count) = (first as usize, count as usize);
+                    for child in &self.nodes[first..first + count] {
+                        match child.far.term(query, reach_sq) {
+                            Some(term) => total += term,
+                            None => stack.push(child.below),
+                        }
+                    }
                 }
             }
         }
         total / (4.0 * std::f64::consts::PI)
     }
+}
+
+impl PointTree {
+    /// The nearest triangle to `query` as [`super::walk::nearest`] finds it in any
+    /// layout: `query_local` in the tree's space, boxes' distances times `stretch`
+    /// bounding the measure, `measure(prim, vertices, best)` returning a triangle that
+    /// beats `best`.
+    pub fn nearest(
+        &self,
+        query_local: Vec3,
+        stretch: f32,
+        limit_sq: f32,
+        mut measure: impl FnMut(u32, &[Vec3; 3], &Best) -> Best,
+    ) -> Best {
+        let root = self.nodes.first()?;
+        let stretch_sq = stretch * stretch;
+        let bound = |node: &FlatNode| box_distance_sq(&node.bounds, query_local) * stretch_sq;
+        let mut best: Best = None;
+        let reach = |best: &Best| best.map_or(limit_sq, |(d2, _)| d2);
+        let mut stack: Vec<(f32, Below)> = Vec::with_capacity(64);
+        stack.push((bound(root), root.below));
+        let mut near: Vec<(f32, Below)> = Vec::with_capacity(8);
+        while let Some((d2, below)) = stack.pop() {
+            // Equal bounds are kept: a tie may still go to a lower index.
+            if d2 > reach(&best) {
+                continue;
+            }
+            match below {
+                Below::Triangles { first, count } => {
+                    let (first, count) = (first as usize, count as usize);
+                    for i in first..first + count {
+                        if let Some(found) = measure(self.prims[i], &self.triangles[i], &best) {
+                            best = Some(found);
+                        }
+                    }
+                }
+                Below::Nodes { first, count } => {
+                    let (first, count) = (first as usize, count as usize);
+                    let within = reach(&best);
+                    near.clear();
+                    near.extend(
+                        self.nodes[first..first + count]
+                            .iter()
+                            .map(|n| (bound(n), n.below))
+                            .filter(|(d2, _)| *d2 <= within),
+                    );
+                    // Farthest first onto the stack, so the nearest is taken next.
+                    near.sort_unstable_by(|a, b| b.0.total_cmp(&a.0));
+                    stack.extend_from_slice(&near);
+                }
+            }
+        }
+        best
+    }
+}
+
+/// Lays a [`TreeView`] out as a [`PointTree`].
+struct Builder<'a, V> {
+    view: &'a dyn TreeView,
+    vertices: &'a V,
+    references: Option<&'a [u32]>,
+    tree: PointTree,
+}
+
+impl<V: Fn(u32) -> [Vec3; 3]> Builder<'_, V> {
+    /// Fills node `at` (already pushed) with what `child` holds, and returns its moment.
+    fn fill(&mut self, at: usize, child: &Child) -> Moment {
+        match child.kind {
+            ChildKind::Leaf { first, count } => {
+                let prims = &self.view.prim_indices()[first..first + count];
+                let start = self.tree.triangles.len();
+                for &p in prims {
+                    self.tree.triangles.push((self.vertices)(p));
+                    self.tree.prims.push(p);
+                    if let (Some(shares), Some(references)) =
+                        (&mut self.tree.shares, self.references)
+                    {
+                        shares.push(1.0 / references[p as usize].max(1) as f64);
+                    }
+                }
+                self.tree.nodes[at].below = Below::Triangles {
+                    first: start as u32,
+                    count: count as u32,
+                };
+                self.leaf_moment(start, child)
+            }
+            ChildKind::Inner(node) => {
+                let mut children = Vec::with_capacity(8);
+                self.view.children(node, &mut children);
+                // The children side by side, then each filled in turn.
+                let first = self.tree.nodes.len();
+                self.tree.nodes.extend(children.iter().map(|c| FlatNode {
+                    bounds: c.bounds,
+                    far: FarField::OPEN,
+                    below: Below::Nodes { first: 0, count: 0 },
+                }));
+                self.tree.nodes[at].below = Below::Nodes {
+                    first: first as u32,
+                    count: children.len() as u32,
+                };
+                let parts: Vec<Moment> = children
+                    .iter()
+                    .enumerate()
+                    .map(|(i, c)| {
+                        let moment = self.fill(first + i, c);
+                        self.tree.nodes[first + i].far = FarField::of(&moment);
+                        moment
+                    })
+                    .collect();
+                combine(&parts, child)
+            }
+        }
+    }
+
+    /// The moment of the triangles from `start` to the end of the list.
+    fn leaf_moment(&self, start: usize, child: &Child) -> Moment {
+        let triangles = &self.tree.triangles[start..];
+        let share = |i: usize| self.tree.share(start + i);
+        let mut m = Moment::default();
+        let mut weighted = DVec3::ZERO;
+        let area_vectors: Vec<DVec3> = triangles
+            .iter()
+            .enumerate()
+            .map(|(i, t)| {
+                let v = t.map(|v| v.as_dvec3());
+                0.5 * (v[1] - v[0]).cross(v[2] - v[0]) * share(i)
+            })
+            .collect();
+        for (t, a) in triangles.iter().zip(&area_vectors) {
+            let area = a.length();
+            m.area_vector += *a;
+            m.area += area;
+            weighted += area * centroid(t);
+        }
+        m.center = match m.area > 0.0 {
+            true => weighted / m.area,
+            false => box_center(child),
+        };
+        for (t, a) in triangles.iter().zip(&area_vectors) {
+            m.spread += outer(*a, centroid(t) - m.center);
+            let farthest = t
+                .iter()
+                .map(|v| v.as_dvec3().distance(m.center))
+                .fold(0.0, f64::max);
+            m.radius = m.radius.max(farthest);
+        }
+        m
+    }
+}
+
+fn centroid(t: &[Vec3; 3]) -> DVec3 {
+    (t[0].as_dvec3() + t[1].as_dvec3() + t[2].as_dvec3()) / 3.0
+}
+
+fn box_center(child: &Child) -> DVec3 {
+    (child.bounds.min.as_dvec3() + child.bounds.max.as_dvec3()) / 2.0
+}
+
+/// The moment of a node from its children's.
+fn combine(parts: &[Moment], child: &Child) -> Moment {
+    let mut m = Moment::default();
+    let mut weighted = DVec3::ZERO;
+    for part in parts {
+        m.area_vector += part.area_vector;
+        m.area += part.area;
+        weighted += part.area * part.center;
+    }
+    m.center = match m.area > 0.0 {
+        true => weighted / m.area,
+        false => box_center(child),
+    };
+    for part in parts {
+        m.spread += part.spread + outer(part.area_vector, part.center - m.center);
+        m.radius = m.radius.max(part.center.distance(m.center) + part.radius);
+    }
+    m
 }
