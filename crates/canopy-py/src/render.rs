@@ -94,6 +94,12 @@ impl SceneInfo {
         (b.min.to_array(), b.max.to_array())
     }
 
+    /// The files the scene reads (scene file, meshes, models, environment map).
+    #[getter]
+    fn inputs(&self) -> Vec<std::path::PathBuf> {
+        self.scene.inputs.clone()
+    }
+
     /// What is legal but probably unintended.
     #[getter]
     fn warnings(&self) -> Vec<String> {

@@ -1,0 +1,85 @@
+"""canopy_rt.distributed on a real local Ray instance (two CPUs): tiles rendered by Ray
+tasks give canopy's single-process image bit for bit, scene files ship with the files
+they read, and bad set-ups are refused before any work."""
+
+import numpy as np
+import pytest
+
+import canopy_rt as canopy
+import canopy_rt.distributed as distributed
+from conftest import MESHES
+
+ray = pytest.importorskip("ray")
+
+
+@pytest.fixture(scope="module", autouse=True)
+def local_ray():
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    try:
+        yield
+    finally:
+        ray.shutdown()
+
+
+def test_tiles_cover_the_image_once():
+    regions = distributed.tiles(50, 33, 16)
+    covered = np.zeros((33, 50), int)
+    for x, y, w, h in regions:
+        covered[y:y + h, x:x + w] += 1
+    assert (covered == 1).all() and len(regions) == 4 * 3
+
+
+def test_a_scene_file_and_its_mesh_render_as_in_one_process(tmp_path):
+    (tmp_path / "meshes").mkdir()
+    (tmp_path / "meshes" / "teapot.ply").write_bytes((MESHES / "teapot.ply").read_bytes())
+    scene = tmp_path / "scenes" / "teapot.toml"
+    scene.parent.mkdir()
+    scene.write_text("""
+background = "sky"
+camera = { look_from = [0, 3, 8], look_at = [0, 0.5, 0] }
+render = { width = 45, height = 30, spp = 2, seed = 3 }
+[[meshes]]
+file = "../meshes/teapot.ply"
+material = { type = "lambertian", albedo = [0.8, 0.3, 0.2] }
+""")
+    calls = []
+    image = distributed.render(scene, tile=16, progress=lambda done, total: calls.append((done, total)))
+    np.testing.assert_array_equal(image, canopy.render(str(scene)))
+    assert calls == [(i, 6) for i in range(1, 7)]
+
+
+def test_a_built_in_scene_with_overrides_renders_as_in_one_process():
+    image = distributed.render("paper-3", size=(40, 28), spp=2, seed=9, tile=13)
+    np.testing.assert_array_equal(image, canopy.render("paper-3", size=(40, 28), spp=2, seed=9))
+
+
+def test_bad_set_ups_are_refused_before_work(tmp_path):
+    with pytest.raises(ValueError, match="gone.toml"):
+        distributed.render(tmp_path / "gone.toml")
+    with pytest.raises(TypeError, match="cannot be shipped"):
+        distributed.render(canopy.Scene())
+    with pytest.raises(ValueError, match="tile"):
+        distributed.render("paper-3", tile=0)
+    with pytest.raises(RuntimeError, match="same version on every node"):
+        distributed.render_tile(("paper-3", {}), (0, 0, 1, 1), {}, "0.0.0-elsewhere")
+
+
+def test_workers_render_from_the_shipped_files_alone(tmp_path):
+    (tmp_path / "meshes").mkdir()
+    (tmp_path / "meshes" / "teapot.ply").write_bytes((MESHES / "teapot.ply").read_bytes())
+    scene = tmp_path / "teapot.toml"
+    scene.write_text("""
+camera = { look_from = [0, 3, 8], look_at = [0, 0.5, 0] }
+render = { width = 24, height = 16, spp = 2 }
+[[meshes]]
+file = "meshes/teapot.ply"
+material = { type = "lambertian", albedo = [0.8, 0.3, 0.2] }
+""")
+    expected = canopy.render(str(scene))
+    bundle = distributed._bundle(str(scene))
+    assert sorted(bundle[1]) == sorted(str(p) for p in [scene, tmp_path / "meshes" / "teapot.ply"])
+    (tmp_path / "meshes" / "teapot.ply").unlink()
+    scene.unlink()
+    task = ray.remote(distributed.render_tile)
+    tile = ray.get(task.remote(bundle, (0, 0, 24, 16), {}, canopy.__version__))
+    np.testing.assert_array_equal(tile, expected)
