@@ -44,6 +44,32 @@ impl RayScene {
         Ok(tlas)
     }
 
+    /// `answer(tlas, i)` for rows `0..n`, in parallel with the GIL released, as a new
+    /// (n,) array.
+    fn per_row<'py, T: numpy::Element + Copy + Send>(
+        &self,
+        py: Python<'py>,
+        n: usize,
+        threads: Option<usize>,
+        answer: impl Fn(&Tlas<MeshBlas>, usize) -> T + Sync + Send,
+    ) -> PyResult<Bound<'py, PyArray1<T>>> {
+        let tlas = py.detach(|| self.tlas(threads))?;
+        // SAFETY (both): the array is made here, and every element is written below
+        // before it is returned; nothing else refers to it yet.
+        let out = unsafe { PyArray1::<T>::new(py, n, false) };
+        let values = unsafe { out.as_slice_mut().expect("contiguous") };
+        py.detach(|| {
+            pools::install(threads, || {
+                values
+                    .par_iter_mut()
+                    .with_min_len(POINT_CHUNK)
+                    .enumerate()
+                    .for_each(|(i, v)| *v = answer(&tlas, i))
+            })
+        })?;
+        Ok(out)
+    }
+
     fn changed(&mut self) {
         *self
             .tlas
@@ -431,25 +457,13 @@ impl RayScene {
         threads: Option<usize>,
     ) -> PyResult<Bound<'py, PyArray1<f32>>> {
         let queries = arrays::points("points", &points)?;
-        let tlas = py.detach(|| self.tlas(threads))?;
-        let out = PyArray1::<f32>::zeros(py, queries.len(), false);
-        // SAFETY: the array was just made here and nothing else refers to it yet.
-        let distances = unsafe { out.as_slice_mut().expect("contiguous") };
-        py.detach(|| {
-            pools::install(threads, || {
-                distances
-                    .par_iter_mut()
-                    .with_min_len(POINT_CHUNK)
-                    .zip(queries.par_iter())
-                    .for_each(|(d, &q)| {
-                        *d = match signed {
-                            true => tlas.signed_distance(q.into()),
-                            false => tlas.distance(q.into()),
-                        }
-                    })
-            })
-        })?;
-        Ok(out)
+        self.per_row(py, queries.len(), threads, |tlas, i| {
+            let q = queries[i].into();
+            match signed {
+                true => tlas.signed_distance(q),
+                false => tlas.distance(q),
+            }
+        })
     }
 
     /// Whether each point lies inside (a winding number above one half).
@@ -461,20 +475,9 @@ impl RayScene {
         threads: Option<usize>,
     ) -> PyResult<Bound<'py, PyArray1<bool>>> {
         let queries = arrays::points("points", &points)?;
-        let tlas = py.detach(|| self.tlas(threads))?;
-        let out = PyArray1::<bool>::zeros(py, queries.len(), false);
-        // SAFETY: the array was just made here and nothing else refers to it yet.
-        let inside = unsafe { out.as_slice_mut().expect("contiguous") };
-        py.detach(|| {
-            pools::install(threads, || {
-                inside
-                    .par_iter_mut()
-                    .with_min_len(POINT_CHUNK)
-                    .zip(queries.par_iter())
-                    .for_each(|(inside, &q)| *inside = tlas.contains(q.into()))
-            })
-        })?;
-        Ok(out)
+        self.per_row(py, queries.len(), threads, |tlas, i| {
+            tlas.contains(queries[i].into())
+        })
     }
 
     /// The generalised winding number of the surface at each point (1 inside a closed
@@ -487,20 +490,9 @@ impl RayScene {
         threads: Option<usize>,
     ) -> PyResult<Bound<'py, PyArray1<f64>>> {
         let queries = arrays::points("points", &points)?;
-        let tlas = py.detach(|| self.tlas(threads))?;
-        let out = PyArray1::<f64>::zeros(py, queries.len(), false);
-        // SAFETY: the array was just made here and nothing else refers to it yet.
-        let numbers = unsafe { out.as_slice_mut().expect("contiguous") };
-        py.detach(|| {
-            pools::install(threads, || {
-                numbers
-                    .par_iter_mut()
-                    .with_min_len(POINT_CHUNK)
-                    .zip(queries.par_iter())
-                    .for_each(|(w, &q)| *w = tlas.winding_number(q.into()))
-            })
-        })?;
-        Ok(out)
+        self.per_row(py, queries.len(), threads, |tlas, i| {
+            tlas.winding_number(queries[i].into())
+        })
     }
 
     /// How many times each ray meets the surface within [tnear, tfar] (each triangle
@@ -519,20 +511,9 @@ impl RayScene {
     ) -> PyResult<Bound<'py, PyArray1<i64>>> {
         let (mut near, mut far) = (None, None);
         let batch = batch(&origins, &directions, &tnear, &mut near, &tfar, &mut far)?;
-        let tlas = py.detach(|| self.tlas(threads))?;
-        let out = PyArray1::<i64>::zeros(py, batch.len(), false);
-        // SAFETY: the array was just made here and nothing else refers to it yet.
-        let counts = unsafe { out.as_slice_mut().expect("contiguous") };
-        py.detach(|| {
-            pools::install(threads, || {
-                counts
-                    .par_iter_mut()
-                    .with_min_len(POINT_CHUNK)
-                    .enumerate()
-                    .for_each(|(i, c)| *c = tlas.hits(&batch.ray(i), mask).len() as i64)
-            })
-        })?;
-        Ok(out)
+        self.per_row(py, batch.len(), threads, |tlas, i| {
+            tlas.hits(&batch.ray(i), mask).len() as i64
+        })
     }
 
     /// Every hit of each ray within [tnear, tfar], nearest first: (ray_splits, ray, t,

@@ -40,13 +40,11 @@ impl<G: TriangleSurface> Blas<G> {
 
 impl<G: TriangleSurface> SurfaceQuery for Blas<G> {
     fn nearest_placed(&self, query: Vec3, placement: Option<&Placement>, limit_sq: f32) -> Best {
-        let g = self.geometry();
         // Triangles are measured where the query is (the world, for a placed one); boxes
         // are pruned in the structure's space.
-        let test = |prim: u32, best: &Best| {
-            let v = g.vertices_of_triangle(prim);
+        let placed = |prim: u32, v: &[Vec3; 3], best: &Best| {
             let v = match placement {
-                None => v,
+                None => *v,
                 Some(p) => v.map(|x| p.to_world.transform_point3(x)),
             };
             measure(query, prim, &v, best, limit_sq)
@@ -57,16 +55,14 @@ impl<G: TriangleSurface> SurfaceQuery for Blas<G> {
                     None => (query, 1.0),
                     Some(p) => (p.to_local.transform_point3(query), p.stretch),
                 };
-                let measure = |prim: u32, v: &[Vec3; 3], best: &Best| {
-                    let v = match placement {
-                        None => *v,
-                        Some(p) => v.map(|x| p.to_world.transform_point3(x)),
-                    };
-                    self::measure(query, prim, &v, best, limit_sq)
-                };
-                flat.nearest(local, stretch, limit_sq, measure)
+                flat.nearest(local, stretch, limit_sq, placed)
             }
-            None => (0..g.len() as u32).fold(None, |best, prim| test(prim, &best).or(best)),
+            None => {
+                let g = self.geometry();
+                (0..g.len() as u32).fold(None, |best, prim| {
+                    placed(prim, &g.vertices_of_triangle(prim), &best).or(best)
+                })
+            }
         }
     }
 

@@ -1,6 +1,7 @@
 //! Walks of any tree layout (through [`TreeView`]) for the queries that are not the
 //! closest hit: the nearest primitive to a point, nearest child first and pruned by box
-//! distance, and every primitive a ray passes through.
+//! distance (a top-level tree's instances; a `Blas` walks its own point layout the same
+//! way, [`super::PointTree::nearest`]), and every primitive a ray passes through.
 
 use super::Nearest;
 use crate::aabb::SlabRay;
