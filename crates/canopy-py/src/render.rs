@@ -365,3 +365,40 @@ pub fn read_image<'py>(
         .expect("height x width x 3 values");
     Ok(array.into_pyarray(py))
 }
+
+/// Writes a linear (height, width, 3) float32 image to `path` as `canopy render` writes
+/// its output: `.png` (8-bit sRGB) or `.exr` (linear float), atomically (a failed write
+/// leaves no file).
+#[pyfunction]
+pub fn write_image(
+    py: Python<'_>,
+    path: std::path::PathBuf,
+    image: numpy::PyReadonlyArray3<'_, f32>,
+) -> PyResult<()> {
+    use numpy::PyUntypedArrayMethods;
+    let shape = image.shape();
+    if shape[2] != 3 || shape[0] == 0 || shape[1] == 0 {
+        return Err(pyo3::exceptions::PyValueError::new_err(format!(
+            "image must have shape (height, width, 3), not {shape:?}"
+        )));
+    }
+    let values = image.as_slice().map_err(|_| {
+        pyo3::exceptions::PyValueError::new_err("image must be C-contiguous and aligned")
+    })?;
+    if let Some(i) = values.iter().position(|v| !v.is_finite()) {
+        return Err(pyo3::exceptions::PyValueError::new_err(format!(
+            "image value {i} is not finite ({})",
+            values[i]
+        )));
+    }
+    let film = canopy_render::film::Film {
+        width: shape[1] as u32,
+        height: shape[0] as u32,
+        pixels: values
+            .chunks_exact(3)
+            .map(|p| glam::Vec3::new(p[0], p[1], p[2]))
+            .collect(),
+    };
+    py.detach(|| canopy_render::output::write_image(&film, &path))
+        .map_err(|e| PyOSError::new_err(e.to_string()))
+}

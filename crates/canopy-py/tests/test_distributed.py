@@ -83,3 +83,32 @@ material = { type = "lambertian", albedo = [0.8, 0.3, 0.2] }
     task = ray.remote(distributed.render_tile)
     tile = ray.get(task.remote(bundle, (0, 0, 24, 16), {}, canopy.__version__))
     np.testing.assert_array_equal(tile, expected)
+
+
+def test_the_command_line_writes_the_image(tmp_path):
+    import subprocess
+    import sys
+
+    out = tmp_path / "paper-3.exr"
+    run = subprocess.run(
+        [sys.executable, "-m", "canopy_rt.distributed", "render", "paper-3", "-o", str(out),
+         "--size", "40x28", "--spp", "2", "--seed", "9", "--tile", "16"],
+        capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr
+    assert "tiles 6/6" in run.stderr
+    np.testing.assert_array_equal(canopy.read_image(out), canopy.render("paper-3", size=(40, 28), spp=2, seed=9))
+    bad = subprocess.run([sys.executable, "-m", "canopy_rt.distributed", "render", "gone.toml",
+                          "-o", str(tmp_path / "x.png")], capture_output=True, text=True, timeout=300)
+    assert bad.returncode == 1 and "gone.toml" in bad.stderr
+    assert not (tmp_path / "x.png").exists()
+
+
+def test_write_image_round_trips_exr_and_refuses_bad_images(tmp_path):
+    image = np.random.default_rng(1).random((5, 7, 3), dtype=np.float32) * 4
+    canopy.write_image(tmp_path / "a.exr", image)
+    np.testing.assert_array_equal(canopy.read_image(tmp_path / "a.exr"), image)
+    with pytest.raises(ValueError, match="not finite"):
+        canopy.write_image(tmp_path / "b.exr", np.full((2, 2, 3), np.nan, np.float32))
+    with pytest.raises(ValueError, match="shape"):
+        canopy.write_image(tmp_path / "c.exr", np.zeros((2, 2, 4), np.float32))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.exr"]

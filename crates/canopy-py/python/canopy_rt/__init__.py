@@ -48,6 +48,7 @@ __all__ = [
     "read_image",
     "render",
     "__version__",
+    "write_image",
 ]
 
 SceneInfo = _canopy.SceneInfo
@@ -320,6 +321,14 @@ def render(
         checkpoint_every=float(checkpoint_every),
         resume=None if resume is None else str(resume),
     )
+
+
+def write_image(path, image) -> None:
+    """Writes a linear float32 (height, width, 3) image as ``canopy render`` writes its
+    output: ``.png`` (8-bit sRGB) or ``.exr`` (linear float, exactly these values),
+    atomically: a failed write leaves no file."""
+    image = _array(image, "image", np.float32, 3, "(height, width, 3)")
+    _canopy.write_image(str(path), image)
 
 
 def read_image(path) -> np.ndarray:

@@ -7,6 +7,9 @@ the machines.
 >>> import canopy_rt.distributed                                      # doctest: +SKIP
 >>> image = canopy_rt.distributed.render("scene.toml", spp=256, tile=64)   # doctest: +SKIP
 
+From a shell: ``python -m canopy_rt.distributed render scene.toml -o image.exr --address
+auto`` (``--help`` lists the options).
+
 The scene (a built-in scene's name, or a scene file, mesh or glTF model and every file it
 reads) is loaded and checked on the driver, and its files are shipped once through Ray's
 object store; a worker writes them into a private directory, keeping their places relative
@@ -15,7 +18,7 @@ started yet (``address=None`` starts a local Ray on this machine; ``"auto"`` joi
 cluster this machine belongs to). A task whose worker dies is run again by Ray.
 
 Not yet: scenes built in Python (:class:`canopy_rt.Scene`), ranges of samples, resuming a
-driver that died, animations, a command line.
+driver that died, animations.
 """
 
 from __future__ import annotations
@@ -27,7 +30,7 @@ from typing import Callable, Dict, List, Optional, Tuple
 
 import numpy as np
 
-from . import Scene, __version__, load_scene
+from . import Scene, __version__, load_scene, write_image
 from . import render as render_locally
 
 _Region = Tuple[int, int, int, int]
@@ -157,3 +160,52 @@ def render(
         for ref in pending:
             ray.cancel(ref)
     return image
+
+
+def main(argv=None) -> int:
+    """``python -m canopy_rt.distributed render SCENE -o IMAGE [options]``."""
+    import argparse
+    import sys
+
+    parser = argparse.ArgumentParser(prog="python -m canopy_rt.distributed",
+                                     description="Render a canopy scene on a Ray cluster.")
+    commands = parser.add_subparsers(dest="command", required=True)
+    command = commands.add_parser("render", help="render a scene, tiles as Ray tasks")
+    command.add_argument("scene", help="built-in scene name, scene file, mesh or glTF model")
+    command.add_argument("-o", "--output", required=True, help=".png or .exr, written atomically")
+    command.add_argument("--spp", type=int)
+    command.add_argument("--size", help="WxH")
+    command.add_argument("--seed", type=int)
+    command.add_argument("--depth", type=int, dest="max_depth")
+    command.add_argument("--integrator", choices=["path", "bsdf"])
+    command.add_argument("--tile", type=int, default=64, help="tile size in pixels (64)")
+    command.add_argument("--threads-per-task", type=int, default=1)
+    command.add_argument("--address", help="Ray cluster address ('auto': this machine's "
+                         "cluster); none starts a local Ray")
+    args = parser.parse_args(argv)
+    size = None
+    if args.size:
+        try:
+            w, h = (int(v) for v in args.size.lower().split("x"))
+            size = (w, h)
+        except ValueError:
+            parser.error(f"--size must be WxH, not {args.size}")
+
+    def show(done: int, total: int) -> None:
+        print(f"\rtiles {done}/{total}", end="" if done < total else "\n", file=sys.stderr)
+
+    try:
+        image = render(args.scene, spp=args.spp, size=size, seed=args.seed,
+                       max_depth=args.max_depth, integrator=args.integrator, tile=args.tile,
+                       threads_per_task=args.threads_per_task, address=args.address,
+                       progress=show)
+        write_image(args.output, image)
+    except (ValueError, TypeError, OSError, RuntimeError, ImportError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 1
+    print(f"image       {args.output}", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
