@@ -21,6 +21,13 @@ def local_ray():
         ray.shutdown()
 
 
+@pytest.fixture
+def address():
+    """The test cluster's address, for drivers in other processes (a driver killed by a
+    test then leaves no Ray processes of its own behind)."""
+    return ray.get_runtime_context().gcs_address
+
+
 def test_tiles_cover_the_image_once():
     regions = distributed.tiles(50, 33, 16)
     covered = np.zeros((33, 50), int)
@@ -85,14 +92,14 @@ material = { type = "lambertian", albedo = [0.8, 0.3, 0.2] }
     np.testing.assert_array_equal(tile, expected)
 
 
-def test_the_command_line_writes_the_image(tmp_path):
+def test_the_command_line_writes_the_image(tmp_path, address):
     import subprocess
     import sys
 
     out = tmp_path / "paper-3.exr"
     run = subprocess.run(
         [sys.executable, "-m", "canopy_rt.distributed", "render", "paper-3", "-o", str(out),
-         "--size", "40x28", "--spp", "2", "--seed", "9", "--tile", "16"],
+         "--size", "40x28", "--spp", "2", "--seed", "9", "--tile", "16", "--address", address],
         capture_output=True, text=True, timeout=300)
     assert run.returncode == 0, run.stderr
     assert "tiles 6/6" in run.stderr
@@ -112,3 +119,49 @@ def test_write_image_round_trips_exr_and_refuses_bad_images(tmp_path):
     with pytest.raises(ValueError, match="shape"):
         canopy.write_image(tmp_path / "c.exr", np.zeros((2, 2, 4), np.float32))
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.exr"]
+
+
+def test_a_driver_started_again_renders_only_the_missing_tiles(tmp_path):
+    store = tmp_path / "tiles"
+    settings = dict(size=(40, 28), spp=2, seed=9, tile=16, resume_dir=store)
+    expected = canopy.render("paper-3", size=(40, 28), spp=2, seed=9)
+    first = distributed.render("paper-3", **settings)
+    np.testing.assert_array_equal(first, expected)
+    kept = sorted(p.name for p in store.iterdir())
+    assert len(kept) == 7 and "render.json" in kept
+    # A driver that died after some tiles: two are missing.
+    (store / "tile-0-0.exr").unlink()
+    (store / "tile-32-16.exr").unlink()
+    calls = []
+    again = distributed.render("paper-3", progress=lambda d, t: calls.append(d), **settings)
+    np.testing.assert_array_equal(again, expected)
+    assert calls == [4, 5, 6], "four tiles came from the directory, two were rendered"
+    with pytest.raises(ValueError, match="another render"):
+        distributed.render("paper-3", **{**settings, "seed": 10})
+
+
+def test_a_killed_command_line_driver_resumes(tmp_path, address):
+    import subprocess
+    import sys
+    import time
+
+    store = tmp_path / "tiles"
+    out = tmp_path / "image.exr"
+    command = [sys.executable, "-m", "canopy_rt.distributed", "render", "paper-3", "-o", str(out),
+               "--size", "64x48", "--spp", "4", "--seed", "2", "--tile", "8",
+               "--resume-dir", str(store), "--address", address]
+    driver = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    # Killed once it has kept some tiles (an event, not a time: the directory is watched).
+    deadline = time.monotonic() + 240
+    while time.monotonic() < deadline and driver.poll() is None:
+        if len(list(store.glob("tile-*.exr"))) >= 3:
+            break
+        time.sleep(0.05)
+    driver.kill()
+    driver.wait()
+    kept_before = len(list(store.glob("tile-*.exr")))
+    assert kept_before >= 3 and not out.exists() or kept_before == 48
+    run = subprocess.run(command, capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr
+    np.testing.assert_array_equal(canopy.read_image(out),
+                                  canopy.render("paper-3", size=(64, 48), spp=4, seed=2))

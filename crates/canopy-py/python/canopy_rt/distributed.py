@@ -17,20 +17,25 @@ to each other, and renders from there. ``ray.init(address=...)`` is called when 
 started yet (``address=None`` starts a local Ray on this machine; ``"auto"`` joins the
 cluster this machine belongs to). A task whose worker dies is run again by Ray.
 
-Not yet: scenes built in Python (:class:`canopy_rt.Scene`), ranges of samples, resuming a
-driver that died, animations.
+With ``resume_dir=``, every finished tile is kept there as an EXR file (written
+atomically, its float32 pixels exact) beside a record of the scene and settings; a driver
+started again with the same arguments renders only the tiles that are missing, and
+refuses a directory that holds another render's tiles.
+
+Not yet: scenes built in Python (:class:`canopy_rt.Scene`), ranges of samples, animations.
 """
 
 from __future__ import annotations
 
 import hashlib
+import json
 import os
 import tempfile
 from typing import Callable, Dict, List, Optional, Tuple
 
 import numpy as np
 
-from . import Scene, __version__, load_scene, write_image
+from . import Scene, __version__, load_scene, read_image, write_image
 from . import render as render_locally
 
 _Region = Tuple[int, int, int, int]
@@ -102,6 +107,40 @@ def render_tile(bundle, region: _Region, options: dict, version: str) -> np.ndar
     return render_locally(_materialize(source, files), region=region, **options)
 
 
+class _TileStore:
+    """Finished tiles of one render kept in a directory: `render.json` says which
+    render (scene file contents, settings, tiling), each tile is `tile-X-Y.exr`."""
+
+    def __init__(self, directory, record: dict):
+        self.directory = str(directory)
+        os.makedirs(self.directory, exist_ok=True)
+        path = os.path.join(self.directory, "render.json")
+        if os.path.exists(path):
+            with open(path) as f:
+                found = json.load(f)
+            if found != record:
+                raise ValueError(f"{self.directory} holds the tiles of another render "
+                                 "(other scene, settings or tiling): give an empty directory")
+        else:
+            temporary = path + ".tmp"
+            with open(temporary, "w") as f:
+                json.dump(record, f)
+            os.replace(temporary, path)
+
+    def path(self, region: _Region) -> str:
+        return os.path.join(self.directory, f"tile-{region[0]}-{region[1]}.exr")
+
+    def load(self, region: _Region) -> Optional[np.ndarray]:
+        path = self.path(region)
+        if not os.path.exists(path):
+            return None
+        tile = read_image(path)
+        return tile if tile.shape == (region[3], region[2], 3) else None
+
+    def keep(self, region: _Region, tile: np.ndarray) -> None:
+        write_image(self.path(region), tile)  # atomic: a killed driver leaves no half tile
+
+
 def render(
     scene,
     *,
@@ -117,12 +156,14 @@ def render(
     threads_per_task: int = 1,
     address: Optional[str] = None,
     progress: Optional[Callable[[int, int], None]] = None,
+    resume_dir=None,
 ) -> np.ndarray:
     """Renders ``scene`` on a Ray cluster: the same linear float32 (height, width, 3)
     image as :func:`canopy_rt.render` with the same settings, bit for bit. The image is
     split into tiles of ``tile`` x ``tile`` pixels, one Ray task each, each task using
     ``threads_per_task`` threads (and asking Ray for as many CPUs). ``progress(done,
-    total)`` is called on the driver as tiles finish."""
+    total)`` is called on the driver as tiles finish (tiles found in ``resume_dir`` count
+    as finished at the start)."""
     if isinstance(scene, Scene):
         raise TypeError("a Scene built in Python cannot be shipped to a cluster yet: "
                         "render a scene file, mesh or glTF model")
@@ -138,21 +179,45 @@ def render(
                    integrator=integrator, russian_roulette=russian_roulette, bvh=bvh,
                    width=width, threads=int(threads_per_task))
 
+    regions = tiles(image_width, image_height, int(tile))
+    image = np.zeros((image_height, image_width, 3), np.float32)
+    store = None
+    if resume_dir is not None:
+        digest = hashlib.sha256()
+        for path in sorted(bundle[1]):
+            digest.update(path.encode() + hashlib.sha256(bundle[1][path]).digest())
+        record = dict(scene=bundle[0], files=digest.hexdigest(), tile=int(tile),
+                      version=__version__, **{k: v for k, v in options.items() if k != "threads"})
+        store = _TileStore(resume_dir, json.loads(json.dumps(record)))
+    todo = []
+    for region in regions:
+        kept = store.load(region) if store else None
+        if kept is None:
+            todo.append(region)
+        else:
+            x, y, w, h = region
+            image[y:y + h, x:x + w] = kept
+    done = len(regions) - len(todo)
+    if progress is not None and done:
+        progress(done, len(regions))
+    if not todo:
+        return image
+
     ray = _ray()
     if not ray.is_initialized():
         ray.init(address=address, include_dashboard=False, log_to_driver=False)
     task = ray.remote(num_cpus=int(threads_per_task), max_retries=3)(render_tile)
     bundle_ref = ray.put(bundle)
-    regions = tiles(image_width, image_height, int(tile))
-    pending = {task.remote(bundle_ref, region, options, __version__): region for region in regions}
-    image = np.zeros((image_height, image_width, 3), np.float32)
-    done = 0
+    pending = {task.remote(bundle_ref, region, options, __version__): region for region in todo}
     try:
         while pending:
             finished, _ = ray.wait(list(pending), num_returns=1)
             for ref in finished:
-                x, y, w, h = pending.pop(ref)
+                region = pending.pop(ref)
+                x, y, w, h = region
                 image[y:y + h, x:x + w] = ray.get(ref)
+                if store:
+                    store.keep(region, image[y:y + h, x:x + w])
                 done += 1
                 if progress is not None:
                     progress(done, len(regions))
@@ -182,6 +247,8 @@ def main(argv=None) -> int:
     command.add_argument("--threads-per-task", type=int, default=1)
     command.add_argument("--address", help="Ray cluster address ('auto': this machine's "
                          "cluster); none starts a local Ray")
+    command.add_argument("--resume-dir", help="keep finished tiles here; run again with the "
+                         "same arguments to render only the missing ones")
     args = parser.parse_args(argv)
     size = None
     if args.size:
@@ -198,7 +265,7 @@ def main(argv=None) -> int:
         image = render(args.scene, spp=args.spp, size=size, seed=args.seed,
                        max_depth=args.max_depth, integrator=args.integrator, tile=args.tile,
                        threads_per_task=args.threads_per_task, address=args.address,
-                       progress=show)
+                       progress=show, resume_dir=args.resume_dir)
         write_image(args.output, image)
     except (ValueError, TypeError, OSError, RuntimeError, ImportError) as e:
         print(f"error: {e}", file=sys.stderr)
