@@ -17,6 +17,15 @@ fn builders() -> Vec<&'static str> {
     canopy_bvh::Builder::ALL.iter().map(|b| b.name()).collect()
 }
 
+/// The names of the built-in scenes, in the order `canopy scenes` lists them.
+#[pyfunction]
+fn scenes() -> Vec<&'static str> {
+    canopy_render::builtin::BUILTIN_SCENES
+        .iter()
+        .map(|s| s.name)
+        .collect()
+}
+
 /// The GPU adapters wgpu finds, described (empty when there is none).
 #[pyfunction]
 fn devices(py: Python<'_>) -> Vec<String> {
@@ -30,6 +39,7 @@ fn _canopy(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<scene::PyScene>()?;
     m.add_class::<ray_scene::RayScene>()?;
     m.add_function(wrap_pyfunction!(builders, m)?)?;
+    m.add_function(wrap_pyfunction!(scenes, m)?)?;
     m.add_function(wrap_pyfunction!(devices, m)?)?;
     m.add_function(wrap_pyfunction!(render::render, m)?)?;
     m.add_function(wrap_pyfunction!(render::load_scene, m)?)?;

@@ -165,3 +165,10 @@ def test_a_killed_command_line_driver_resumes(tmp_path, address):
     assert run.returncode == 0, run.stderr
     np.testing.assert_array_equal(canopy.read_image(out),
                                   canopy.render("paper-3", size=(64, 48), spp=4, seed=2))
+
+
+def test_a_built_in_scene_is_not_taken_for_a_file_of_its_name(tmp_path, monkeypatch):
+    assert "paper-3" in canopy.scenes() and "cornell" in canopy.scenes()
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "paper-3").write_text("not a scene file")
+    assert distributed._bundle("paper-3") == ("paper-3", {})

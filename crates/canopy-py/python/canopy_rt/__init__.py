@@ -42,6 +42,7 @@ __all__ = [
     "lambertian",
     "metal",
     "builders",
+    "scenes",
     "devices",
     "load_mesh",
     "load_scene",
@@ -243,6 +244,12 @@ class Bvh:
 
     def __repr__(self) -> str:
         return repr(self._native)
+
+
+def scenes() -> list:
+    """The names of the built-in scenes (``paper-1`` … ``paper-6``, ``cornell``, …), in the
+    order ``canopy scenes`` lists them; any of them is a ``scene`` for :func:`render`."""
+    return _canopy.scenes()
 
 
 def devices() -> List[str]:

@@ -35,7 +35,7 @@ from typing import Callable, Dict, List, Optional, Tuple
 
 import numpy as np
 
-from . import Scene, __version__, load_scene, read_image, write_image
+from . import Scene, __version__, load_scene, read_image, scenes, write_image
 from . import render as render_locally
 
 _Region = Tuple[int, int, int, int]
@@ -60,7 +60,7 @@ def _bundle(scene: str) -> Tuple[str, Dict[str, bytes]]:
     """The scene as tasks receive it: its name or absolute path, and the bytes of every
     file it reads by absolute path (none for a built-in scene)."""
     info = load_scene(scene)  # raises here, before any work, when the scene is bad
-    if not os.path.exists(scene):
+    if scene in scenes():  # a built-in scene wins over a file of the same name, as in load_scene
         return scene, {}
     files = {}
     for path in [scene, *info.inputs]:
