@@ -2,21 +2,14 @@
 //! for every ray, the hit of a loop over every instance and every primitive. Transforms
 //! include rotations, mirrors (negative determinant) and non-uniform scale.
 
+mod common;
+use common::uniform;
+
 use canopy_bvh::{
     intersect_triangle, Aabb, Blas, BlasParams, Boxes, Builder, BvhWidth, Geometry, Hit, Instance,
     InstanceError, Isa, Ray, RayQuery, RefitError, ShearedRay, Tlas, TriangleMesh, ALL_MASKS,
 };
 use glam::{Affine3A, Quat, Vec3};
-
-/// A xorshift stream of numbers in [0, 1] from `seed`.
-fn uniform(mut state: u32) -> impl FnMut() -> f32 {
-    move || {
-        state ^= state << 13;
-        state ^= state >> 17;
-        state ^= state << 5;
-        state as f32 / u32::MAX as f32
-    }
-}
 
 /// A soup of `n` small triangles in the unit cube, sharing vertices in fans.
 fn mesh(n: usize, seed: u32) -> TriangleMesh {

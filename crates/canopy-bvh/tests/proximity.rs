@@ -3,22 +3,15 @@
 //! for a structure on its own and for instances placed by rotations, mirrors and
 //! non-uniform scale.
 
+mod common;
+use common::uniform;
+
 use canopy_bvh::{
     closest_point_on_triangle, intersect_triangle, solid_angle, Blas, BlasParams, Builder,
     BvhWidth, Hit, Instance, Ray, ShearedRay, SurfaceQuery, Tlas, TriangleMesh, ALL_MASKS,
     INSIDE_FAR_FIELD,
 };
 use glam::{Affine3A, Quat, Vec3};
-
-/// A xorshift stream of numbers in [0, 1] from `seed`.
-fn uniform(mut state: u32) -> impl FnMut() -> f32 {
-    move || {
-        state ^= state << 13;
-        state ^= state >> 17;
-        state ^= state << 5;
-        state as f32 / u32::MAX as f32
-    }
-}
 
 /// A closed torus (major radius 1, minor 0.35) with normals facing out, its tube's
 /// radius rippled so that it is not convex anywhere: `rings` × `sides` quads.

@@ -3,6 +3,9 @@
 //! barycentrics, bit for bit) and same any-hit answer. Scenes mix triangles with other
 //! primitives (boxes, tested by the caller's closure), as a renderer's scenes do.
 
+mod common;
+use common::uniform;
+
 use canopy_bvh::{
     build, build_with_clipper, intersect_triangle, split_box, split_triangle, Aabb, Blas,
     BlasParams, BuildParams, Builder, Bvh2, Bvh4, Bvh8, BvhN, BvhWidth, Geometry, GpuBvh, Hit, Isa,
@@ -58,16 +61,6 @@ impl Geometry for Prims {
     }
     fn intersect(&self, prim: u32, ray: &Ray, _: &ShearedRay) -> Option<PrimHit> {
         self.0[prim as usize].hit(ray)
-    }
-}
-
-/// A xorshift stream of numbers in [0, 1] from `seed`.
-fn uniform(mut state: u32) -> impl FnMut() -> f32 {
-    move || {
-        state ^= state << 13;
-        state ^= state >> 17;
-        state ^= state << 5;
-        state as f32 / u32::MAX as f32
     }
 }
 

@@ -113,13 +113,9 @@ pub fn scene_from_mesh(path: &Path) -> Result<Scene, SceneError> {
         cause,
     };
     let invalid = |message: String| fail(mesh::MeshError::Invalid(message));
-    let file = path
-        .file_name()
-        .map(|f| f.to_string_lossy().into_owned())
-        .unwrap_or_default();
+    let (assets, file) = DirAssets::beside(path);
     let format = mesh::MeshFormat::from_path(&file).map_err(fail)?;
-    let dir = path.parent().unwrap_or(Path::new(".")).to_owned();
-    let bytes = scene_file::Assets::read(&DirAssets(dir), &file).map_err(invalid)?;
+    let bytes = scene_file::Assets::read(&assets, &file).map_err(invalid)?;
     let data = mesh::parse_mesh(&bytes, format).map_err(fail)?;
     drop(bytes);
     let stem = path
@@ -173,12 +169,7 @@ pub fn scene_from_gltf(path: &Path) -> Result<Scene, SceneError> {
         file: display.clone(),
         message,
     };
-    let file = path
-        .file_name()
-        .map(|f| f.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let dir = path.parent().unwrap_or(Path::new(".")).to_owned();
-    let assets = DirAssets(dir.clone());
+    let (assets, file) = DirAssets::beside(path);
     let bytes = scene_file::Assets::read(&assets, &file).map_err(fail)?;
     let stem = path
         .file_stem()

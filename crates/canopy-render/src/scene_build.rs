@@ -131,12 +131,7 @@ impl Scene {
     ) -> Result<Option<crate::gltf_scene::ModelCamera>, String> {
         let name = path.display().to_string();
         let fail = |e: String| format!("`{name}`: {e}");
-        let dir = path.parent().unwrap_or(Path::new(".")).to_owned();
-        let file = path
-            .file_name()
-            .map(|f| f.to_string_lossy().into_owned())
-            .unwrap_or_default();
-        let assets = crate::scene_file::DirAssets(dir);
+        let (assets, file) = crate::scene_file::DirAssets::beside(path);
         let bytes = crate::scene_file::Assets::read(&assets, &file).map_err(fail)?;
         let before = (
             self.meshes.len(),

@@ -35,6 +35,22 @@ pub trait Assets {
 /// Files relative to a directory (the scene file's own).
 pub struct DirAssets(pub PathBuf);
 
+impl DirAssets {
+    /// The directory holding `path`, and the file's name in it: how a file given on
+    /// its own (a mesh, a model) is read, with what lies beside it.
+    pub fn beside(path: &std::path::Path) -> (Self, String) {
+        let dir = path
+            .parent()
+            .unwrap_or(std::path::Path::new("."))
+            .to_owned();
+        let file = path
+            .file_name()
+            .map(|f| f.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        (Self(dir), file)
+    }
+}
+
 impl Assets for DirAssets {
     fn read(&self, path: &str) -> Result<Vec<u8>, String> {
         let full = self.0.join(path);
