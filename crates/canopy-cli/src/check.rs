@@ -39,12 +39,15 @@ struct Description {
     description: String,
     materials: usize,
     emissive_materials: usize,
+    textured_materials: usize,
     bounds_min: [f32; 3],
     bounds_max: [f32; 3],
     film_bytes: u64,
     geometry_bytes: u64,
     /// The environment map's pixels and sampling tables (0 without one).
     environment_bytes: u64,
+    /// Decoded texture images.
+    texture_bytes: u64,
     warnings: Vec<String>,
 }
 
@@ -78,6 +81,7 @@ fn describe(arg: &str, scene: &Scene) -> Description {
             .iter()
             .filter(|m| matches!(m, Material::Emissive { .. }))
             .count(),
+        textured_materials: scene.textured_materials(),
         bounds_min: bounds.min.to_array(),
         bounds_max: bounds.max.to_array(),
         film_bytes: scene.settings.film_bytes(),
@@ -95,6 +99,7 @@ fn describe(arg: &str, scene: &Scene) -> Description {
                 .map(|m| m.mesh.indices().len() as u64 * BYTES_PER_MESH_TRIANGLE)
                 .sum::<u64>()
             + scene.instances.len() as u64 * BYTES_PER_INSTANCE,
+        texture_bytes: scene.image_bytes(),
         warnings: scene.warnings(),
     }
 }
@@ -111,15 +116,16 @@ fn lines(scene: &Scene, d: &Description) -> Vec<String> {
         format!("render      {}", d.facts.settings_text()),
         format!("primitives  {}", d.facts.primitives_text()),
         format!(
-            "materials   {} ({} emissive)",
-            d.materials, d.emissive_materials
+            "materials   {} ({} emissive, {} textured)",
+            d.materials, d.emissive_materials, d.textured_materials
         ),
         format!("bounds      {:?} to {:?}", d.bounds_min, d.bounds_max),
         format!(
-            "memory      ~{} of film, ~{} of primitives and BVH, ~{} of environment map",
+            "memory      ~{} of film, ~{} of primitives and BVH, ~{} of environment map, ~{} of textures",
             human_bytes(d.film_bytes),
             human_bytes(d.geometry_bytes),
-            human_bytes(d.environment_bytes)
+            human_bytes(d.environment_bytes),
+            human_bytes(d.texture_bytes)
         ),
     ]
 }

@@ -520,7 +520,7 @@ fn meaningless_scenes_fail_check_and_render() {
         ),
         (
             format!("{CAMERA}[[spheres]]\ncenter = [0, 0, 0]\nradius = 1\nmaterial = {{ type = \"emissive\", radiance = [1e38, 1, 1] }}\n"),
-            "`radiance` in [0, 1e12]",
+            "`radiance` components must be in [0, 1e12]",
         ),
         (
             sphere_scene("background = [1, 1e30, 1]\n"),

@@ -16,7 +16,9 @@ use std::time::{Duration, Instant};
 
 /// A material for the GPU: 32 bytes; WGSL `struct { kind: vec4<u32>, value: vec4<f32> }`.
 /// `kind.x`: 0 Lambertian (`value.xyz` albedo), 1 metal (albedo, `value.w` fuzz),
-/// 2 dielectric (`value.w` index of refraction), 3 emissive (`value.xyz` radiance).
+/// 2 dielectric (`value.w` index of refraction), 3 emissive (`value.xyz` radiance), 4 glTF
+/// metallic-roughness (`value.xyz` base colour, `value.w` roughness, `kind.y` the bits of
+/// the metallic factor).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
 pub struct GpuMaterial {
@@ -26,14 +28,15 @@ pub struct GpuMaterial {
 
 impl GpuMaterial {
     pub fn new(m: &Material) -> Self {
-        let (kind, v, w) = match *m {
-            Material::Lambertian { albedo } => (0, albedo, 0.0),
-            Material::Metal { albedo, fuzz } => (1, albedo, fuzz),
-            Material::Dielectric { ior } => (2, Vec3::ZERO, ior),
-            Material::Emissive { radiance } => (3, radiance, 0.0),
+        let (kind, v, w, extra) = match *m {
+            Material::Lambertian { albedo } => (0, albedo, 0.0, 0),
+            Material::Metal { albedo, fuzz } => (1, albedo, fuzz, 0),
+            Material::Dielectric { ior } => (2, Vec3::ZERO, ior, 0),
+            Material::Emissive { radiance } => (3, radiance, 0.0, 0),
+            Material::Pbr(p) => (4, p.base_color, p.roughness, p.metallic.to_bits()),
         };
         Self {
-            kind: [kind, 0, 0, 0],
+            kind: [kind, extra, 0, 0],
             value: [v.x, v.y, v.z, w],
         }
     }
@@ -180,6 +183,12 @@ impl<'g> Renderer<'g> {
     }
 
     fn upload(gpu: &'g Gpu, scene: &Scene, flat: Flat) -> Result<Self, GpuError> {
+        if scene.is_textured() {
+            // Drawn without them, the image would silently differ from the CPU's.
+            return Err(GpuError::Unsupported(
+                "textured materials yet (render them on the CPU)",
+            ));
+        }
         let (background_kind, background, env) = match &scene.background {
             Background::Sky => (0, Vec3::ZERO, EnvironmentTables::default()),
             Background::Constant(c) => (1, *c, EnvironmentTables::default()),
@@ -286,6 +295,7 @@ impl<'g> Renderer<'g> {
                 include_str!("shaders/common.wgsl"),
                 include_str!("shaders/render.wgsl"),
                 include_str!("shaders/path.wgsl"),
+                include_str!("shaders/pbr.wgsl"),
                 include_str!("shaders/environment.wgsl"),
                 include_str!("shaders/instances.wgsl"),
             ],

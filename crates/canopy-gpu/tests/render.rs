@@ -202,6 +202,47 @@ fn spheres_of_every_material_render_alike_on_cpu_and_gpu() {
     assert_devices_agree("spheres", &gpu, &scene_from("spheres", SPHERES), 10);
 }
 
+/// glTF metallic-roughness spheres: rough and polished dielectrics and metals, one half
+/// metal, over a rough ground, under the sky and a small light.
+const PBR_SPHERES: &str = r#"
+name = "pbr"
+[camera]
+look_from = [0, 1.5, 6]
+look_at = [0, 0.5, 0]
+vfov = 40
+[render]
+width = 32
+height = 32
+spp = 16
+max_depth = 6
+[[spheres]]
+center = [0, -1000, 0]
+radius = 1000
+material = { type = "pbr", base_color = [0.5, 0.5, 0.5], roughness = 0.8 }
+[[spheres]]
+center = [-1.6, 0.7, 0]
+radius = 0.7
+material = { type = "pbr", base_color = [1.0, 0.77, 0.34], metallic = 1, roughness = 0.3 }
+[[spheres]]
+center = [0, 0.7, 0]
+radius = 0.7
+material = { type = "pbr", base_color = [0.1, 0.3, 0.8], roughness = 0.2 }
+[[spheres]]
+center = [1.6, 0.7, 0]
+radius = 0.7
+material = { type = "pbr", base_color = [0.8, 0.2, 0.2], metallic = 0.5, roughness = 0.6 }
+[[spheres]]
+center = [0, 2.2, -1.5]
+radius = 0.4
+material = { type = "emissive", radiance = [4, 3, 2] }
+"#;
+
+#[test]
+fn metallic_roughness_materials_render_alike_on_cpu_and_gpu() {
+    let Some(gpu) = gpu() else { return };
+    assert_devices_agree("pbr", &gpu, &scene_from("pbr", PBR_SPHERES), 10);
+}
+
 /// A smooth teapot (vertex normals), rotated boxes and an emitter.
 fn teapot_scene() -> Scene {
     let teapot = concat!(

@@ -46,6 +46,7 @@ fn _canopy(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(render::read_image, m)?)?;
     m.add_function(wrap_pyfunction!(render::write_image, m)?)?;
     m.add_function(wrap_pyfunction!(render::load_mesh, m)?)?;
+    m.add_function(wrap_pyfunction!(scene::eval_material, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

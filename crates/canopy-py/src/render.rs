@@ -61,7 +61,8 @@ impl SceneInfo {
         Ok(d)
     }
 
-    /// Counts of primitives by shape, materials and emissive materials.
+    /// Counts of primitives by shape, instances, materials (emissive and textured ones
+    /// too) and texture images.
     #[getter]
     fn counts<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let c = self.scene.shape_counts();
@@ -80,6 +81,8 @@ impl SceneInfo {
             .filter(|m| matches!(m, Material::Emissive { .. }))
             .count();
         d.set_item("emissive_materials", emissive)?;
+        d.set_item("textured_materials", self.scene.textured_materials())?;
+        d.set_item("images", self.scene.images.len())?;
         Ok(d)
     }
 

@@ -4,7 +4,7 @@
 use crate::arrays;
 use crate::render::SceneInfo;
 use canopy_render::camera::CameraSpec;
-use canopy_render::material::Material;
+use canopy_render::material::{Material, Pbr};
 use canopy_render::{Background, Scene};
 use glam::Vec3;
 use numpy::{PyReadonlyArray1, PyReadonlyArray2};
@@ -30,7 +30,9 @@ fn material_from_dict(table: &Bound<'_, PyDict>) -> PyResult<Material> {
     let bad = |message: String| PyValueError::new_err(format!("material: {message}"));
     let kind: String = table
         .get_item("type")?
-        .ok_or_else(|| bad("needs a `type` (lambertian, metal, dielectric or emissive)".into()))?
+        .ok_or_else(|| {
+            bad("needs a `type` (lambertian, metal, dielectric, emissive or pbr)".into())
+        })?
         .extract()
         .map_err(|_| bad("`type` must be a string".into()))?;
     let allowed: &[&str] = match kind.as_str() {
@@ -38,9 +40,10 @@ fn material_from_dict(table: &Bound<'_, PyDict>) -> PyResult<Material> {
         "metal" => &["type", "albedo", "fuzz"],
         "dielectric" => &["type", "ior"],
         "emissive" => &["type", "radiance"],
+        "pbr" => &["type", "base_color", "metallic", "roughness"],
         other => {
             return Err(bad(format!(
-                "unknown type `{other}` (lambertian, metal, dielectric or emissive)"
+                "unknown type `{other}` (lambertian, metal, dielectric, emissive or pbr)"
             )))
         }
     };
@@ -82,6 +85,11 @@ fn material_from_dict(table: &Bound<'_, PyDict>) -> PyResult<Material> {
         "dielectric" => Material::Dielectric {
             ior: number("ior", None)?,
         },
+        "pbr" => Material::Pbr(Pbr {
+            base_color: colour("base_color")?,
+            metallic: number("metallic", Some(0.0))?,
+            roughness: number("roughness", Some(1.0))?,
+        }),
         _ => Material::Emissive {
             radiance: colour("radiance")?,
         },
@@ -364,4 +372,49 @@ impl PyScene {
             s.settings.spp
         )
     }
+}
+
+type Values<'py> = Bound<'py, numpy::PyArray2<f32>>;
+type Densities<'py> = Bound<'py, numpy::PyArray1<f32>>;
+
+/// A material's BSDF times the cosine, and its sampling density, for the direction pairs
+/// `wo[i]` (to the viewer) and `wi[i]` (to the light), unit vectors in the surface's frame
+/// (normal +z).
+#[pyfunction]
+pub fn eval_material<'py>(
+    py: Python<'py>,
+    material: &Bound<'py, PyDict>,
+    wo: PyReadonlyArray2<'py, f32>,
+    wi: PyReadonlyArray2<'py, f32>,
+) -> PyResult<(Values<'py>, Densities<'py>)> {
+    let material = material_from_dict(material)?;
+    material
+        .check()
+        .map_err(|e| PyValueError::new_err(format!("material: {e}")))?;
+    let (wo, wi) = (arrays::points("wo", &wo)?, arrays::points("wi", &wi)?);
+    if wo.len() != wi.len() {
+        return Err(PyValueError::new_err(format!(
+            "wo has {} rows and wi {}; they pair up row by row",
+            wo.len(),
+            wi.len()
+        )));
+    }
+    let surface = canopy_render::geometry::Surface {
+        p: Vec3::ZERO,
+        geometric_normal: Vec3::Z,
+        shading_normal: Vec3::Z,
+        error: 0.0,
+    };
+    let (values, pdfs): (Vec<[f32; 3]>, Vec<f32>) = wo
+        .iter()
+        .zip(wi)
+        .map(|(&o, &i)| {
+            let (dir, wi) = (-Vec3::from(o).normalize(), Vec3::from(i).normalize());
+            let value = material.eval(dir, &surface, wi);
+            (value.to_array(), material.pdf(dir, &surface, wi))
+        })
+        .unzip();
+    let values =
+        numpy::PyArray2::from_vec2(py, &values.iter().map(|v| v.to_vec()).collect::<Vec<_>>())?;
+    Ok((values, numpy::PyArray1::from_vec(py, pdfs)))
 }

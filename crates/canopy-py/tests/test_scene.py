@@ -30,6 +30,10 @@ material = {{ type = "lambertian", albedo = [0.5, 0.5, 0.5] }}
 center = [2.2, 0.5, 0]
 radius = 0.5
 material = {{ type = "dielectric", ior = 1.5 }}
+[[spheres]]
+center = [0, 0.3, 2]
+radius = 0.3
+material = {{ type = "pbr", base_color = [0.9, 0.6, 0.2], metallic = 1, roughness = 0.4 }}
 [[cuboids]]
 min = [-0.5, -0.5, -0.5]
 max = [0.5, 0.5, 0.5]
@@ -51,6 +55,7 @@ def table_scene() -> canopy.Scene:
     scene.camera(look_from=(0, 3, 9), look_at=(0, 0.5, 0), vfov=35)
     scene.add_sphere((0, -100, 0), 99.5, material=canopy.lambertian((0.5, 0.5, 0.5)))
     scene.add_sphere((2.2, 0.5, 0), 0.5, material=canopy.dielectric(1.5))
+    scene.add_sphere((0, 0.3, 2), 0.3, material=canopy.pbr((0.9, 0.6, 0.2), metallic=1, roughness=0.4))
     scene.add_box((-0.5, -0.5, -0.5), (0.5, 0.5, 0.5), rotate=(0, 30, 0), translate=(-2.2, 0, 0),
                   material=canopy.metal((0.9, 0.8, 0.6), fuzz=0.1))
     vertices, faces = canopy.load_mesh(TEAPOT)
@@ -67,7 +72,7 @@ def test_a_python_scene_renders_the_scene_files_pixels(tmp_path):
     from_file = canopy.render(str(path))
     scene = table_scene()
     info = scene.info()
-    assert info.counts["primitives"] == 3 and info.counts["instances"] == 2
+    assert info.counts["primitives"] == 4 and info.counts["instances"] == 2
     assert info.counts["instanced_triangles"] == 2 * len(canopy.load_mesh(TEAPOT)[1])
     from_python = canopy.render(scene)
     assert from_python.shape == (30, 40, 3)
@@ -104,6 +109,7 @@ def test_instances_take_any_invertible_transform_and_the_mesh_is_stored_once():
         (lambda s: s.add_sphere((0, 0, 0), 1, material={"type": "lambertian", "albdo": [1, 1, 1]}), "has no `albdo`"),
         (lambda s: s.add_sphere((0, 0, 0), 1, material={"type": "plastic"}), "unknown type `plastic`"),
         (lambda s: s.add_sphere((0, 0, 0), 1, material=7), "material 7 does not exist"),
+        (lambda s: s.add_sphere((0, 0, 0), 1, material=canopy.pbr((1, 1, 1), roughness=2)), "`roughness` must be in [0, 1]"),
         (lambda s: s.add_spheres([[0, 0, 0], [1, 0, 0]], [1, 0], material=canopy.dielectric(1.5)), "sphere 1"),
         (lambda s: s.add_box((1, 1, 1), (0, 0, 0), material=canopy.dielectric(1.5)), "`min`"),
         (lambda s: s.add_mesh([[0, 0, 0], [1, 0, 0], [0, np.nan, 0]], [[0, 1, 2]]), "vertices[2]"),
@@ -190,7 +196,8 @@ rotate = [0, 30, 0]
     turned[[0, 0, 2, 2], [0, 2, 0, 2]] = [c, s, -s, c]
     placed = scene.add_gltf(truck, turned)
     assert placed == 5  # the truck's body parts and two wheels, sharing one mesh
-    assert any("textures are not rendered yet" in w for w in scene.info().warnings)
+    counts = scene.info().counts
+    assert counts["images"] == 1 and counts["textured_materials"] >= 1, counts
     np.testing.assert_allclose(canopy.render(scene), from_file, atol=1e-6)
     # A refused model changes nothing.
     broken = tmp_path / "broken.glb"
@@ -198,3 +205,25 @@ rotate = [0, 30, 0]
     with pytest.raises(ValueError, match="add_gltf: `.*broken.glb`: not a valid glTF 2.0 file"):
         scene.add_gltf(broken)
     assert scene.info().counts["instances"] == 5
+
+
+def test_materials_are_evaluated_in_the_surface_frame():
+    rng = np.random.default_rng(4)
+    wo, wi = rng.normal(size=(2, 500, 3))
+    wo[:, 2], wi[:, 2] = np.abs(wo[:, 2]), np.abs(wi[:, 2])
+    wo /= np.linalg.norm(wo, axis=1, keepdims=True)
+    wi /= np.linalg.norm(wi, axis=1, keepdims=True)
+    value, pdf = canopy.eval_material(canopy.lambertian((0.5, 0.25, 1.0)), wo, wi)
+    np.testing.assert_allclose(value, np.outer(wi[:, 2] / np.pi, [0.5, 0.25, 1.0]), rtol=1e-5)
+    np.testing.assert_allclose(pdf, wi[:, 2] / np.pi, rtol=1e-5)
+    # The glTF BRDF is reciprocal: f(wo, wi) = f(wi, wo), the cosine aside.
+    gold = canopy.pbr((1.0, 0.77, 0.34), metallic=0.7, roughness=0.5)
+    there, _ = canopy.eval_material(gold, wo, wi)
+    back, _ = canopy.eval_material(gold, wi, wo)
+    np.testing.assert_allclose(there / wi[:, 2:], back / wo[:, 2:], rtol=1e-4)
+    # Nothing is reflected below the surface.
+    below = wi * [1, 1, -1]
+    value, pdf = canopy.eval_material(gold, wo, below)
+    assert not value.any() and not pdf.any()
+    with pytest.raises(ValueError, match="wo has 500 rows and wi 2"):
+        canopy.eval_material(gold, wo, wi[:2])

@@ -25,6 +25,7 @@ pub mod sampling;
 pub mod scene;
 pub mod scene_build;
 pub mod scene_file;
+pub mod texture;
 pub mod visualize;
 
 pub use accel::{clipper, Accel, AccelKind};

@@ -30,6 +30,11 @@ impl Frame {
     pub fn to_world(&self, local: Vec3) -> Vec3 {
         local.x * self.x + local.y * self.y + local.z * self.z
     }
+
+    #[inline]
+    pub fn to_local(&self, world: Vec3) -> Vec3 {
+        Vec3::new(world.dot(self.x), world.dot(self.y), world.dot(self.z))
+    }
 }
 
 /// The direction at polar angle `acos(cos_theta)` and azimuth `phi` around +z.

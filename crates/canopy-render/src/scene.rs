@@ -4,8 +4,9 @@ pub use crate::background::Background;
 use crate::camera::CameraSpec;
 use crate::geometry::{Shape, Surface, Triangle};
 use crate::material::Material;
+use crate::texture::{Image, MaterialMaps};
 use canopy_bvh::{Aabb, Hit, Ray, TriangleMesh};
-use glam::{Affine3A, Vec3};
+use glam::{Affine3A, Vec2, Vec3};
 use std::path::PathBuf;
 use std::sync::Arc;
 
@@ -133,6 +134,8 @@ pub struct SceneMesh {
     pub mesh: Arc<TriangleMesh>,
     /// Per-vertex normals for smooth shading: empty (flat), or one per vertex.
     pub normals: Vec<Vec3>,
+    /// Per-vertex texture coordinates: empty, or one per vertex.
+    pub uvs: Vec<Vec2>,
 }
 
 /// A mesh placed in the world: by an affine transform (mirrors and non-uniform scale
@@ -180,6 +183,10 @@ pub struct Scene {
     /// What a loader left out or read only in part (a model's textures, say), one
     /// sentence each; reported with the warnings.
     pub notes: Vec<String>,
+    /// Images textures read, shared by every material that uses them.
+    pub images: Vec<Arc<Image>>,
+    /// The textures of material `i`, where `i` is in range and it has any.
+    pub material_maps: Vec<MaterialMaps>,
 }
 
 impl Scene {
@@ -254,6 +261,47 @@ impl Scene {
                 (surface, instance.material)
             }
         }
+    }
+
+    /// The surface where `ray` hits and its material there, textures applied (where
+    /// the surface has texture coordinates; without them a material is its factors).
+    #[inline]
+    pub fn shade(&self, ray: &Ray, hit: &Hit) -> (Surface, Material) {
+        let (surface, index) = self.hit_surface(ray, hit);
+        let material = self.materials[index as usize];
+        let textured = match self.material_maps.get(index as usize) {
+            Some(maps) if !maps.is_empty() => self
+                .hit_uv(hit)
+                .map(|uv| maps.apply(material, &self.images, uv)),
+            _ => None,
+        };
+        (surface, textured.unwrap_or(material))
+    }
+
+    /// The texture coordinates where `hit` lies, for a mesh instance with them.
+    pub fn hit_uv(&self, hit: &Hit) -> Option<Vec2> {
+        let instance = self.instance_of(hit.inst)?;
+        let mesh = &self.meshes[instance.mesh as usize];
+        if mesh.uvs.is_empty() {
+            return None;
+        }
+        let [a, b, c] = mesh.mesh.indices()[hit.prim as usize].map(|i| mesh.uvs[i as usize]);
+        Some(a * (1.0 - hit.u - hit.v) + b * hit.u + c * hit.v)
+    }
+
+    /// Whether any material has a texture.
+    pub fn is_textured(&self) -> bool {
+        self.textured_materials() > 0
+    }
+
+    /// Materials with at least one texture.
+    pub fn textured_materials(&self) -> usize {
+        self.material_maps.iter().filter(|m| !m.is_empty()).count()
+    }
+
+    /// Memory the decoded images hold.
+    pub fn image_bytes(&self) -> u64 {
+        self.images.iter().map(|i| i.texels.len() as u64 * 4).sum()
     }
 
     /// The same scene with every mesh instance's triangles baked into world space as

@@ -9,6 +9,7 @@ use crate::material::Material;
 use crate::mesh::MeshData;
 use crate::scene::{MeshInstance, Primitive, Scene, SceneMesh};
 use crate::scene_file::{instances::MAX_INSTANCES, MAX_COORDINATE, MAX_RADIANCE};
+use crate::texture::MaterialMaps;
 use canopy_bvh::{Aabb, Instance, TriangleMesh};
 use glam::{Affine3A, EulerRot, Mat3, Quat, Vec3};
 use std::path::Path;
@@ -71,17 +72,31 @@ impl Material {
     /// Why this material is not physical, if it is not: a surface cannot reflect more
     /// light than it receives.
     pub fn check(&self) -> Result<(), String> {
-        let albedo_ok = |c: Vec3| c.to_array().iter().all(|v| (0.0..=1.0).contains(v));
-        let ok = match *self {
-            Material::Lambertian { albedo } => albedo_ok(albedo),
-            Material::Metal { albedo, fuzz } => albedo_ok(albedo) && (0.0..=1.0).contains(&fuzz),
-            Material::Dielectric { ior } => ior.is_finite() && ior > 0.0,
-            Material::Emissive { radiance } => radiance_ok(radiance),
+        let colour =
+            |name: &str, c: Vec3| match c.to_array().iter().all(|v| (0.0..=1.0).contains(v)) {
+                true => Ok(()),
+                false => Err(format!("`{name}` components must be in [0, 1], not {c}")),
+            };
+        let fraction = |name: &str, v: f32| match (0.0..=1.0).contains(&v) {
+            true => Ok(()),
+            false => Err(format!("`{name}` must be in [0, 1], not {v}")),
         };
-        if ok {
-            Ok(())
-        } else {
-            Err(format!("`albedo` components must be in [0, 1], `radiance` in [0, {MAX_RADIANCE:e}], `fuzz` in [0, 1], `ior` finite and > 0 (got {self:?})"))
+        match *self {
+            Material::Lambertian { albedo } => colour("albedo", albedo),
+            Material::Metal { albedo, fuzz } => {
+                colour("albedo", albedo).and_then(|()| fraction("fuzz", fuzz))
+            }
+            Material::Dielectric { ior } if !(ior.is_finite() && ior > 0.0) => {
+                Err(format!("`ior` must be finite and > 0, not {ior}"))
+            }
+            Material::Dielectric { .. } => Ok(()),
+            Material::Emissive { radiance } if !radiance_ok(radiance) => Err(format!(
+                "`radiance` components must be in [0, {MAX_RADIANCE:e}], not {radiance}"
+            )),
+            Material::Emissive { .. } => Ok(()),
+            Material::Pbr(p) => colour("base_color", p.base_color)
+                .and_then(|()| fraction("metallic", p.metallic))
+                .and_then(|()| fraction("roughness", p.roughness)),
         }
     }
 }
@@ -140,6 +155,7 @@ impl Scene {
             self.inputs.len(),
             self.notes.len(),
             self.skipped_degenerate,
+            (self.images.len(), self.material_maps.len()),
         );
         let added = crate::gltf_scene::add_gltf(self, &bytes, &assets, to_world);
         match added {
@@ -148,7 +164,9 @@ impl Scene {
                 Ok(camera)
             }
             Err(e) => {
-                let (meshes, materials, instances, inputs, notes, skipped) = before;
+                let (meshes, materials, instances, inputs, notes, skipped, (images, maps)) = before;
+                self.images.truncate(images);
+                self.material_maps.truncate(maps);
                 self.meshes.truncate(meshes);
                 self.materials.truncate(materials);
                 self.instances.truncate(instances);
@@ -295,8 +313,50 @@ impl Scene {
             name: name.to_owned(),
             mesh: Arc::new(mesh),
             normals: data.normals,
+            uvs: Vec::new(),
         });
         Ok(self.meshes.len() as u32 - 1)
+    }
+
+    /// Gives mesh `mesh` texture coordinates, one per vertex.
+    pub fn set_mesh_uvs(&mut self, mesh: u32, uvs: Vec<glam::Vec2>) -> Result<(), String> {
+        let Some(target) = self.meshes.get_mut(mesh as usize) else {
+            return Err(format!("mesh {mesh} does not exist"));
+        };
+        if uvs.len() != target.mesh.vertices().len() {
+            return Err(format!(
+                "{} texture coordinates for {} vertices",
+                uvs.len(),
+                target.mesh.vertices().len()
+            ));
+        }
+        if let Some(i) = uvs.iter().position(|uv| !uv.is_finite()) {
+            return Err(format!("texture coordinate {i} is not finite ({})", uvs[i]));
+        }
+        target.uvs = uvs;
+        Ok(())
+    }
+
+    /// Adds a decoded image for textures to use; returns its index.
+    pub fn add_image(&mut self, image: crate::texture::Image) -> u32 {
+        self.images.push(Arc::new(image));
+        self.images.len() as u32 - 1
+    }
+
+    /// Scales material `material`'s parameters by textures (see [`MaterialMaps`]).
+    pub fn set_material_maps(&mut self, material: u32, maps: MaterialMaps) -> Result<(), String> {
+        self.check_material_index(material)?;
+        for t in [maps.base_color, maps.metallic_roughness].iter().flatten() {
+            if t.image as usize >= self.images.len() {
+                return Err(format!("image {} does not exist", t.image));
+            }
+        }
+        let i = material as usize;
+        if self.material_maps.len() <= i {
+            self.material_maps.resize(i + 1, MaterialMaps::default());
+        }
+        self.material_maps[i] = maps;
+        Ok(())
     }
 
     /// Places mesh `mesh` by the affine transform `to_world` (any invertible one:

@@ -6,7 +6,7 @@ use crate::camera::CameraSpec;
 use crate::error::SceneError;
 use crate::files::{available_memory, read_regular_file, regular_file_size};
 use crate::geometry::{Shape, Triangle};
-use crate::material::Material;
+use crate::material::{Material, Pbr};
 use crate::mesh::{parse_mesh, MeshData, MeshFormat};
 use crate::scene::{Background, Primitive, RenderSettings, Scene};
 use glam::{Mat3, Mat4, Quat, Vec3};
@@ -178,6 +178,18 @@ enum MaterialDoc {
     Emissive {
         radiance: [f32; 3],
     },
+    Pbr {
+        base_color: [f32; 3],
+        #[serde(default)]
+        metallic: f32,
+        #[serde(default = "default_roughness")]
+        roughness: f32,
+    },
+}
+
+/// glTF's default roughness.
+fn default_roughness() -> f32 {
+    1.0
 }
 
 #[derive(Deserialize)]
@@ -460,6 +472,15 @@ impl SceneBuilder<'_> {
             MaterialDoc::Emissive { radiance } => Material::Emissive {
                 radiance: radiance.into(),
             },
+            MaterialDoc::Pbr {
+                base_color,
+                metallic,
+                roughness,
+            } => Material::Pbr(Pbr {
+                base_color: base_color.into(),
+                metallic,
+                roughness,
+            }),
         };
         match material.check() {
             Ok(()) => Ok(material),

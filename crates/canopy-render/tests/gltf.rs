@@ -87,10 +87,6 @@ fn a_camera_in_the_file_is_used_and_what_is_not_read_is_named() {
         toward.dot(to_duck) > 0.9,
         "the file's camera looks at the duck"
     );
-    assert!(duck
-        .warnings()
-        .iter()
-        .any(|w| w.contains("textures are not rendered yet")));
     let alpha = load_scene(models().join("AlphaBlendModeTest.glb").to_str().unwrap()).unwrap();
     let warnings = alpha.warnings().join("\n");
     assert!(
@@ -297,4 +293,192 @@ fn the_fuzzers_finds_are_errors() {
         let err = parse_gltf(&bytes, &NoFiles, name).map(|_| ()).unwrap_err();
         assert!(err.contains(expected), "{name}: {err}");
     }
+}
+
+/// A 2x2 PNG: red, green on the top row; blue, white below.
+fn quadrants_png() -> Vec<u8> {
+    let colours = [
+        [255, 0, 0, 255],
+        [0, 255, 0, 255],
+        [0, 0, 255, 255],
+        [255, 255, 255, 255],
+    ];
+    let mut png = Vec::new();
+    image::RgbaImage::from_fn(2, 2, |x, y| image::Rgba(colours[(y * 2 + x) as usize]))
+        .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+        .unwrap();
+    png
+}
+
+/// The triangle with texture coordinates equal to its x and y, textured by `image`
+/// (an `images` entry) through a sampler and an optional `KHR_texture_transform`.
+fn textured_triangle(image: &str, texture_info_extra: &str) -> (String, Vec<u8>) {
+    let mut bin = triangle_bin([0, 1, 2]);
+    for v in [0.0f32, 0.0, 1.0, 0.0, 0.0, 1.0] {
+        bin.extend(v.to_le_bytes());
+    }
+    let json = format!(
+        r#"{{"asset":{{"version":"2.0"}},"scene":0,"scenes":[{{"nodes":[0]}}],
+"extensionsUsed":["KHR_texture_transform"],
+"nodes":[{{"mesh":0}}],
+"meshes":[{{"name":"tri","primitives":[{{"attributes":{{"POSITION":0,"TEXCOORD_0":2}},"indices":1,"material":0}}]}}],
+"materials":[{{"name":"paint","pbrMetallicRoughness":{{"baseColorFactor":[1,1,0.5,1],"baseColorTexture":{{"index":0{texture_info_extra}}}}}}}],
+"textures":[{{"source":0,"sampler":0}}],
+"samplers":[{{"wrapS":33071,"wrapT":33648}}],
+"images":[{image}],
+"buffers":[{{"byteLength":68}}],
+"bufferViews":[{{"buffer":0,"byteOffset":0,"byteLength":36}},{{"buffer":0,"byteOffset":36,"byteLength":6}},{{"buffer":0,"byteOffset":44,"byteLength":24}}],
+"accessors":[{{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[1,1,0]}},
+{{"bufferView":1,"componentType":5123,"count":3,"type":"SCALAR"}},
+{{"bufferView":2,"componentType":5126,"count":3,"type":"VEC2"}}]}}"#
+    );
+    (json, bin)
+}
+
+fn data_uri(png: &[u8]) -> String {
+    use base64::Engine;
+    let body = base64::engine::general_purpose::STANDARD.encode(png);
+    format!(r#"{{"uri":"data:image/png;base64,{body}"}}"#)
+}
+
+/// The base colour where a ray straight down the z axis meets (x, y) of the triangle.
+fn base_colour_at(scene: &canopy_render::Scene, x: f32, y: f32) -> glam::Vec3 {
+    use canopy_bvh::RayQuery;
+    let accel = Accel::for_scene(
+        scene,
+        AccelKind::default(),
+        BvhWidth::default(),
+        &BuildParams::default(),
+        None,
+    );
+    let ray = canopy_bvh::Ray::new(
+        glam::Vec3::new(x, y, 1.0),
+        -glam::Vec3::Z,
+        0.0,
+        f32::INFINITY,
+    );
+    let hit = accel.intersect(&ray).expect("the ray meets the triangle");
+    match scene.shade(&ray, &hit).1 {
+        canopy_render::material::Material::Pbr(p) => p.base_color,
+        other => panic!("{other:?}"),
+    }
+}
+
+#[test]
+fn base_colour_textures_are_read_with_their_sampler_and_transform() {
+    let (json, bin) = textured_triangle(&data_uri(&quadrants_png()), "");
+    let scene = parse_gltf(&glb(&json, &bin), &NoFiles, "tri").unwrap();
+    assert_eq!(scene.images.len(), 1);
+    assert_eq!(scene.meshes[0].uvs.len(), 3);
+    // Texel centres, times the factor (1, 1, 0.5); UV (0, 0) is the image's top left.
+    let close = |a: glam::Vec3, b: glam::Vec3| (a - b).abs().max_element() < 1e-4;
+    assert!(close(
+        base_colour_at(&scene, 0.25, 0.25),
+        glam::Vec3::new(1.0, 0.0, 0.0)
+    ));
+    assert!(close(
+        base_colour_at(&scene, 0.75, 0.2),
+        glam::Vec3::new(0.0, 1.0, 0.0)
+    ));
+    assert!(close(
+        base_colour_at(&scene, 0.2, 0.75),
+        glam::Vec3::new(0.0, 0.0, 0.5)
+    ));
+    // Between red and green: halfway in linear light.
+    assert!(close(
+        base_colour_at(&scene, 0.5, 0.25),
+        glam::Vec3::new(0.5, 0.5, 0.0)
+    ));
+    // An offset of half the image in u: red's place now shows green (clamped at the edge).
+    let (json, bin) = textured_triangle(
+        &data_uri(&quadrants_png()),
+        r#","extensions":{"KHR_texture_transform":{"offset":[0.5,0]}}"#,
+    );
+    let shifted = parse_gltf(&glb(&json, &bin), &NoFiles, "tri").unwrap();
+    assert!(close(
+        base_colour_at(&shifted, 0.25, 0.25),
+        glam::Vec3::new(0.0, 1.0, 0.0)
+    ));
+    assert!(close(
+        base_colour_at(&shifted, 0.7, 0.25),
+        glam::Vec3::new(0.0, 1.0, 0.0)
+    ));
+    // A second set of texture coordinates is not read: the texture is left out, named.
+    let (json, bin) = textured_triangle(&data_uri(&quadrants_png()), r#","texCoord":1"#);
+    let second = parse_gltf(&glb(&json, &bin), &NoFiles, "tri").unwrap();
+    assert!(close(
+        base_colour_at(&second, 0.25, 0.25),
+        glam::Vec3::new(1.0, 1.0, 0.5)
+    ));
+    assert!(
+        second.warnings().iter().any(|w| w.contains("TEXCOORD_1")),
+        "{:?}",
+        second.warnings()
+    );
+}
+
+#[test]
+fn missing_and_broken_images_are_errors_that_name_them() {
+    let cases = [
+        (
+            r#"{"uri":"textures/gone.png"}"#.to_owned(),
+            "image 0: cannot read textures/gone.png",
+        ),
+        (data_uri(b"\x89PNG\r\n\x1a\n broken"), "image 0: cannot"),
+        (data_uri(&quadrants_png()[..40]), "image 0: cannot"),
+        (
+            r#"{"name":"logo","bufferView":9,"mimeType":"image/png"}"#.to_owned(),
+            "not a valid glTF",
+        ),
+    ];
+    for (image, expected) in cases {
+        let (json, bin) = textured_triangle(&image, "");
+        let err = parse_gltf(&glb(&json, &bin), &NoFiles, "tri")
+            .map(|_| ())
+            .unwrap_err();
+        assert!(err.contains(expected), "expected {expected:?} in: {err}");
+    }
+}
+
+#[test]
+fn textured_models_show_their_textures() {
+    // The textured box's faces show the Cesium logo: blue, green and white texels,
+    // where its factor alone would be one colour.
+    let scene = load_scene(models().join("BoxTextured.glb").to_str().unwrap()).unwrap();
+    assert!(scene.is_textured());
+    let accel = Accel::for_scene(
+        &scene,
+        AccelKind::default(),
+        BvhWidth::default(),
+        &BuildParams::default(),
+        None,
+    );
+    let camera = canopy_render::camera::Camera::new(&scene.camera, 64, 64);
+    let mut colours = Vec::new();
+    for y in 0..64 {
+        for x in 0..64 {
+            use canopy_bvh::RayQuery;
+            let (s, t) = ((x as f32 + 0.5) / 64.0, (y as f32 + 0.5) / 64.0);
+            let ray = camera.ray(s, t, &mut canopy_render::rng::Rng::for_sample(0, 0, 0));
+            if let Some(hit) = accel.intersect(&ray) {
+                if let canopy_render::material::Material::Pbr(p) = scene.shade(&ray, &hit).1 {
+                    colours.push(p.base_color);
+                }
+            }
+        }
+    }
+    let blue = colours
+        .iter()
+        .filter(|c| c.z > 2.0 * c.x && c.z > c.y)
+        .count();
+    let green = colours
+        .iter()
+        .filter(|c| c.y > 2.0 * c.x && c.y > c.z)
+        .count();
+    let white = colours.iter().filter(|c| c.min_element() > 0.7).count();
+    assert!(
+        blue > 50 && green > 50 && white > 50,
+        "{blue} {green} {white} of {}",
+        colours.len()
+    );
 }

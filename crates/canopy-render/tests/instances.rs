@@ -113,6 +113,7 @@ fn scene(integrator: Integrator) -> Scene {
             name: "cube".into(),
             mesh: Arc::new(cube()),
             normals: Vec::new(),
+            uvs: Vec::new(),
         }],
         instances,
         ..Scene::default()

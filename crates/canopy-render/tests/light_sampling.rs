@@ -292,6 +292,40 @@ material = {{ type = "metal", albedo = [0.9, 0.9, 0.9], fuzz = 0.2 }}
     assert_integrators_agree("environment map", &scene(&source, &assets()), 16);
 }
 
+#[test]
+fn metallic_roughness_surfaces_under_an_area_light_and_an_environment_map() {
+    let source = format!(
+        r#"background = {{ environment = "sky.hdr", rotate = 30 }}
+{CAMERA}{SMALL}
+[[cuboids]]
+min = [-3, -0.1, -3]
+max = [3, 0, 3]
+material = {{ type = "pbr", base_color = [0.6, 0.6, 0.6], roughness = 0.7 }}
+
+[[cuboids]] # the light, facing down
+min = [-0.4, 2, -0.4]
+max = [0.4, 2, 0.4]
+material = {{ type = "emissive", radiance = [10, 10, 10] }}
+
+[[spheres]]
+center = [-0.6, 0.5, 0]
+radius = 0.5
+material = {{ type = "pbr", base_color = [1.0, 0.77, 0.34], metallic = 1, roughness = 0.35 }}
+
+[[spheres]]
+center = [0.6, 0.5, 0]
+radius = 0.5
+material = {{ type = "pbr", base_color = [0.2, 0.4, 0.8], roughness = 0.15 }}
+
+[[spheres]]
+center = [0, 0.3, 1]
+radius = 0.3
+material = {{ type = "pbr", base_color = [0.8, 0.3, 0.3], metallic = 0.5, roughness = 0.05 }}
+"#
+    );
+    assert_integrators_agree("metallic-roughness", &scene(&source, &assets()), 16);
+}
+
 /// Mean of every 8x8 tile of `runs` path-traced renders is 1 within noise.
 fn assert_furnace_is_one(name: &str, scene: &Scene, runs: u64) {
     let stats = tile_stats(scene, Integrator::Path, runs);

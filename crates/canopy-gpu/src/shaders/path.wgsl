@@ -278,6 +278,10 @@ fn material_eval(m: Material, dir: vec3<f32>, s: Surface, wi: vec3<f32>) -> vec3
     if (m.kind.x == 1u && m.value.w > 0.0) {
         return m.value.xyz * fuzz_pdf(reflect_about(dir, shading), m.value.w, wi);
     }
+    if (m.kind.x == 4u) {
+        let f = frame_from_z(shading);
+        return pbr_eval(pbr_of(m), to_local(f, -dir), to_local(f, wi));
+    }
     return vec3<f32>(0.0);
 }
 
@@ -291,6 +295,10 @@ fn material_pdf(m: Material, dir: vec3<f32>, s: Surface, wi: vec3<f32>) -> f32 {
     }
     if (m.kind.x == 1u && m.value.w > 0.0) {
         return fuzz_pdf(reflect_about(dir, shading), m.value.w, wi);
+    }
+    if (m.kind.x == 4u) {
+        let f = frame_from_z(shading);
+        return pbr_pdf(pbr_of(m), to_local(f, -dir), to_local(f, wi));
     }
     return 0.0;
 }

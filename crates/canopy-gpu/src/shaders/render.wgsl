@@ -5,7 +5,7 @@
 // rounding.
 
 // kind 0 Lambertian (value = albedo), 1 metal (albedo, fuzz in w), 2 dielectric (ior in
-// w), 3 emissive (radiance).
+// w), 3 emissive (radiance), 4 glTF metallic-roughness (pbr.wgsl).
 struct Material {
     kind: vec4<u32>,
     value: vec4<f32>,
@@ -269,6 +269,20 @@ fn scatter(m: Material, dir: vec3<f32>, s: Surface, rng: ptr<function, Rng>) -> 
                 direction = refract_through(dir, shading, eta, cos_theta);
             }
             out = Scatter(normalize(direction), vec3<f32>(1.0), true, 0.0, true);
+        }
+        case 4u: {
+            let pbr = pbr_of(m);
+            let f = frame_from_z(shading);
+            let wo = to_local(f, -dir);
+            let choice = next_f32(rng);
+            let u = vec2<f32>(next_f32(rng), next_f32(rng));
+            let wi = pbr_sample(pbr, wo, choice, u);
+            if (wi.z > 0.0) {
+                let pdf = pbr_pdf(pbr, wo, wi);
+                let direction = f * wi;
+                let weight = pbr_eval(pbr, wo, wi) / pdf;
+                out = Scatter(direction, weight, dot(direction, geometric) > 0.0 && pdf > 0.0, pdf, false);
+            }
         }
         default: {}
     }

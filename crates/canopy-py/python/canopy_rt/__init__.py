@@ -23,7 +23,7 @@ from typing import Callable, List, NamedTuple, Optional, Sequence, Tuple, Union
 import numpy as np
 
 from . import _canopy
-from .scene import Scene, dielectric, emissive, lambertian, metal
+from .scene import Scene, dielectric, emissive, eval_material, lambertian, metal, pbr
 from .ray_scene import ClosestPoints, RayHitLists, RayHits, RayScene
 
 __version__: str = _canopy.__version__
@@ -39,8 +39,10 @@ __all__ = [
     "SceneInfo",
     "dielectric",
     "emissive",
+    "eval_material",
     "lambertian",
     "metal",
+    "pbr",
     "builders",
     "scenes",
     "devices",

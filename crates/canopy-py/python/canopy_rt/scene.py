@@ -47,6 +47,28 @@ def emissive(radiance) -> dict:
     return {"type": "emissive", "radiance": [float(c) for c in radiance]}
 
 
+def pbr(base_color, metallic: float = 0.0, roughness: float = 1.0) -> dict:
+    """glTF's metallic-roughness material: GGX over a diffuse base. ``base_color`` is
+    (r, g, b) in [0, 1] (linear), ``metallic`` 0 for a dielectric and 1 for a metal,
+    ``roughness`` from 0 (polished) to 1."""
+    return {
+        "type": "pbr",
+        "base_color": [float(c) for c in base_color],
+        "metallic": float(metallic),
+        "roughness": float(roughness),
+    }
+
+
+def eval_material(material: dict, wo, wi):
+    """The BSDF of ``material`` times the cosine, and the density with which the renderer
+    samples it, for direction pairs: ``wo`` towards the viewer and ``wi`` towards the light,
+    (n, 3) arrays of unit vectors in the surface's frame (its normal is +z). Returns a
+    float32 array (n, 3) of values and one (n,) of densities per steradian."""
+    wo = np.ascontiguousarray(wo, dtype=np.float32).reshape(-1, 3)
+    wi = np.ascontiguousarray(wi, dtype=np.float32).reshape(-1, 3)
+    return _canopy.eval_material(material, wo, wi)
+
+
 def _transform(transform) -> np.ndarray:
     """A (3, 4) float32 affine matrix from a 4x4 or 3x4 matrix (column vectors), or the
     identity for None."""

@@ -64,7 +64,7 @@ pub(super) fn describe(index: usize, name: Option<&str>) -> String {
 }
 
 /// The bytes of a `data:` URI's body (`[<mime>];base64,<data>`).
-fn decode_data_uri(data: &str) -> Result<Vec<u8>, String> {
+pub(super) fn decode_data_uri(data: &str) -> Result<Vec<u8>, String> {
     let (header, body) = data.split_once(',').ok_or("a data URI without a comma")?;
     if !header.ends_with(";base64") {
         return Err("only base64 data URIs are supported".into());
@@ -75,7 +75,7 @@ fn decode_data_uri(data: &str) -> Result<Vec<u8>, String> {
 }
 
 /// A relative URI with its `%XX` escapes decoded (spaces in file names are common).
-fn percent_decoded(uri: &str) -> String {
+pub(super) fn percent_decoded(uri: &str) -> String {
     let bytes = uri.as_bytes();
     let mut out = Vec::with_capacity(bytes.len());
     let mut i = 0;
@@ -116,6 +116,12 @@ pub(super) const NORMALS: Expect = Expect {
     what: "normals",
     types: &[DataType::F32],
     dimensions: Dimensions::Vec3,
+};
+
+pub(super) const TEXCOORDS: Expect = Expect {
+    what: "texture coordinates",
+    types: &[DataType::F32, DataType::U8, DataType::U16],
+    dimensions: Dimensions::Vec2,
 };
 
 pub(super) const INDICES: Expect = Expect {

@@ -1,11 +1,10 @@
-//! glTF's metallic-roughness materials as canopy's materials, until the GGX model of
-//! the glTF specification lands: the base colour factor as a Lambertian albedo, metals
-//! (metallic at least one half) as canopy's fuzzy metal with the roughness as fuzz,
-//! transmission as glass of the material's index of refraction, and emission (times
-//! `KHR_materials_emissive_strength`) as an emitter. Textures are not read yet: each
-//! material that has one is named in a note.
+//! glTF's materials as canopy's: metallic-roughness as [`Pbr`] (the specification's
+//! BRDF), transmission as glass of the material's index of refraction, and emission
+//! (times `KHR_materials_emissive_strength`) as an emitter. Base-colour and
+//! metallic-roughness textures are read by the loader ([`super::textures`]); normal and
+//! emissive ones are named in a note.
 
-use crate::material::Material;
+use crate::material::{Material, Pbr};
 use glam::Vec3;
 
 /// A material of the file as canopy renders it, and what it leaves out.
@@ -15,15 +14,12 @@ pub(super) fn convert(material: &gltf::Material<'_>, notes: &mut Vec<String>) ->
         (None, _) => "the default material".to_owned(),
     };
     let pbr = material.pbr_metallic_roughness();
-    let textures = [
-        pbr.base_color_texture().is_some(),
-        pbr.metallic_roughness_texture().is_some(),
-        material.normal_texture().is_some(),
-        material.emissive_texture().is_some(),
-    ];
-    if textures.iter().any(|&t| t) {
+    if material.normal_texture().is_some() {
+        notes.push(format!("{named}: normal maps are not rendered yet"));
+    }
+    if material.emissive_texture().is_some() {
         notes.push(format!(
-            "{named}: textures are not rendered yet (its colour and factors are)"
+            "{named}: emissive textures are not rendered yet (its emissive factor is)"
         ));
     }
     if material.alpha_mode() != gltf::material::AlphaMode::Opaque {
@@ -46,12 +42,19 @@ pub(super) fn convert(material: &gltf::Material<'_>, notes: &mut Vec<String>) ->
         };
     }
     let [r, g, b, _alpha] = pbr.base_color_factor();
-    let albedo = Vec3::new(r, g, b).clamp(Vec3::ZERO, Vec3::ONE);
-    match pbr.metallic_factor() >= 0.5 {
-        true => Material::Metal {
-            albedo,
-            fuzz: pbr.roughness_factor().clamp(0.0, 1.0),
-        },
-        false => Material::Lambertian { albedo },
+    let albedo = Vec3::new(r, g, b).map(finite_unit);
+    Material::Pbr(Pbr {
+        base_color: albedo,
+        metallic: finite_unit(pbr.metallic_factor()),
+        roughness: finite_unit(pbr.roughness_factor()),
+    })
+}
+
+/// A factor the specification bounds to [0, 1], clamped there (NaN as 0).
+fn finite_unit(v: f32) -> f32 {
+    if v.is_nan() {
+        0.0
+    } else {
+        v.clamp(0.0, 1.0)
     }
 }

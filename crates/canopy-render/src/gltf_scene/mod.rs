@@ -5,17 +5,19 @@
 //! material canopy's nearest ([`materials`]). Every accessor is checked against its
 //! buffer before it is read ([`data`]); errors name the file and the object at fault.
 //!
-//! Not read yet (each named in the scene's warnings where a file uses it): textures,
-//! alpha modes, `KHR_lights_punctual` lights, orthographic cameras, sparse accessors.
+//! Not read yet (each named in the scene's warnings where a file uses it): normal and
+//! emissive textures, alpha modes, `KHR_lights_punctual` lights, orthographic cameras,
+//! sparse accessors.
 
 mod data;
 mod materials;
+mod textures;
 
 use crate::camera::CameraSpec;
 use crate::scene::Scene;
 use crate::scene_file::Assets;
-use data::{check_accessor, describe, Buffers, INDICES, NORMALS, POSITIONS};
-use glam::{Affine3A, Mat4, Vec3};
+use data::{check_accessor, describe, Buffers, INDICES, NORMALS, POSITIONS, TEXCOORDS};
+use glam::{Affine3A, Mat4, Vec2, Vec3};
 use gltf::mesh::Mode;
 use std::collections::HashMap;
 
@@ -26,6 +28,7 @@ const KNOWN_EXTENSIONS: &[&str] = &[
     "KHR_materials_ior",
     "KHR_materials_emissive_strength",
     "KHR_lights_punctual",
+    "KHR_texture_transform",
 ];
 
 /// Deepest node hierarchy followed (a cycle, which the specification forbids, is caught
@@ -79,6 +82,8 @@ pub fn add_gltf(
     let placed_before = scene.instances.len();
     let mut loader = Loader {
         buffers: &buffers,
+        assets,
+        images: textures::Images::default(),
         scene,
         meshes: HashMap::new(),
         materials: HashMap::new(),
@@ -163,6 +168,8 @@ fn placed_camera((camera, world): (gltf::Camera<'_>, Affine3A)) -> Result<ModelC
 
 struct Loader<'a, 's> {
     buffers: &'a Buffers,
+    assets: &'a dyn Assets,
+    images: textures::Images,
     scene: &'s mut Scene,
     /// canopy's mesh of each (glTF mesh, primitive) already read.
     meshes: HashMap<(usize, usize), Option<u32>>,
@@ -299,6 +306,30 @@ impl<'a> Loader<'a, '_> {
             // The specification asks for flat shading where normals are not given.
             None => Vec::new(),
         };
+        let uvs: Vec<Vec2> = match primitive.get(&gltf::Semantic::TexCoords(0)) {
+            Some(accessor) => {
+                check_accessor(&accessor, &TEXCOORDS, buffers)?;
+                let integer = accessor.data_type() != gltf::accessor::DataType::F32;
+                if integer && !accessor.normalized() {
+                    return Err(format!(
+                        "texture coordinates accessor {} holds integers that are not normalized",
+                        accessor.index()
+                    ));
+                }
+                if accessor.count() != positions.len() {
+                    return Err(format!(
+                        "{} texture coordinates for {} positions",
+                        accessor.count(),
+                        positions.len()
+                    ));
+                }
+                let uvs = reader
+                    .read_tex_coords(0)
+                    .ok_or("its texture coordinates cannot be read")?;
+                uvs.into_f32().map(Vec2::from).collect()
+            }
+            None => Vec::new(),
+        };
         let vertices: Vec<u32> = match primitive.indices() {
             Some(accessor) => {
                 check_accessor(&accessor, &INDICES, buffers)?;
@@ -319,6 +350,9 @@ impl<'a> Loader<'a, '_> {
         let mesh = self
             .scene
             .add_mesh(&name, positions, triangles, normals, false)?;
+        if !uvs.is_empty() {
+            self.scene.set_mesh_uvs(mesh, uvs)?;
+        }
         Ok(Some(mesh))
     }
 
@@ -327,15 +361,35 @@ impl<'a> Loader<'a, '_> {
         if let Some(&index) = self.materials.get(&material.index()) {
             return Ok(index);
         }
+        let named = material.index().map_or("the default material".into(), |i| {
+            format!("material {}", describe(i, material.name()))
+        });
         let mut notes = Vec::new();
         let converted = materials::convert(material, &mut notes);
+        let index = self
+            .scene
+            .add_material(converted)
+            .map_err(|e| format!("{named}: {e}"))?;
+        if matches!(converted, crate::material::Material::Pbr(_)) {
+            let pbr = material.pbr_metallic_roughness();
+            let mut texture = |info: Option<gltf::texture::Info<'a>>| match info {
+                Some(info) => {
+                    self.images
+                        .texture(self.scene, self.buffers, self.assets, &info, &mut notes)
+                }
+                None => Ok(None),
+            };
+            let maps = crate::texture::MaterialMaps {
+                base_color: texture(pbr.base_color_texture())?,
+                metallic_roughness: texture(pbr.metallic_roughness_texture())?,
+            };
+            if !maps.is_empty() {
+                self.scene
+                    .set_material_maps(index, maps)
+                    .map_err(|e| format!("{named}: {e}"))?;
+            }
+        }
         notes.into_iter().for_each(|n| self.note(n));
-        let index = self.scene.add_material(converted).map_err(|e| {
-            let name = material.index().map_or("the default material".into(), |i| {
-                format!("material {}", describe(i, material.name()))
-            });
-            format!("{name}: {e}")
-        })?;
         self.materials.insert(material.index(), index);
         Ok(index)
     }

@@ -72,8 +72,8 @@ impl Tracer<'_> {
                 radiance += throughput * scene.background.radiance(ray.dir);
                 break;
             };
-            let (surface, material) = scene.hit_surface(&ray, &hit);
-            let material = &scene.materials[material as usize];
+            let (surface, material) = scene.shade(&ray, &hit);
+            let material = &material;
             radiance += throughput * material.emitted();
             let Some(sample) = material.sample(ray.dir, &surface, rng) else {
                 break;
@@ -115,8 +115,8 @@ impl Tracer<'_> {
                 radiance += throughput * weight * scene.background.radiance(ray.dir);
                 break;
             };
-            let (surface, material) = scene.hit_surface(&ray, &hit);
-            let material = &scene.materials[material as usize];
+            let (surface, material) = scene.shade(&ray, &hit);
+            let material = &material;
             let emitted = material.emitted();
             if emitted != Vec3::ZERO {
                 let weight = match previous {

@@ -1,10 +1,15 @@
 //! Materials: how a surface scatters and emits light.
 
 mod fuzz;
+pub mod ggx;
+mod pbr;
+
+pub use pbr::Pbr;
 
 use crate::geometry::Surface;
 use crate::rng::Rng;
-use glam::Vec3;
+use crate::sampling::Frame;
+use glam::{Vec2, Vec3};
 use std::f32::consts::FRAC_1_PI;
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -20,6 +25,8 @@ pub enum Material {
     Dielectric { ior: f32 },
     /// A diffuse emitter, emitting `radiance` on both sides; it scatters nothing.
     Emissive { radiance: Vec3 },
+    /// glTF's metallic-roughness model: GGX over a Lambertian base (see [`Pbr`]).
+    Pbr(Pbr),
 }
 
 /// A direction drawn from a material's scattering distribution.
@@ -84,7 +91,7 @@ impl Material {
         match *self {
             Material::Metal { fuzz, .. } => fuzz == 0.0,
             Material::Dielectric { .. } => true,
-            Material::Lambertian { .. } | Material::Emissive { .. } => false,
+            Material::Lambertian { .. } | Material::Emissive { .. } | Material::Pbr(_) => false,
         }
     }
 
@@ -151,6 +158,21 @@ impl Material {
                 })
             }
             Material::Emissive { .. } => None,
+            Material::Pbr(pbr) => {
+                let frame = Frame::from_z(facing.shading);
+                let wo = frame.to_local(-dir);
+                let choice = rng.next_f32();
+                let u = Vec2::new(rng.next_f32(), rng.next_f32());
+                let wi = pbr.sample(wo, choice, u)?;
+                let pdf = pbr.pdf(wo, wi);
+                let direction = frame.to_world(wi);
+                (direction.dot(facing.geometric) > 0.0 && pdf > 0.0).then(|| BsdfSample {
+                    direction,
+                    weight: pbr.eval(wo, wi) / pdf,
+                    pdf,
+                    delta: false,
+                })
+            }
         }
     }
 
@@ -169,6 +191,10 @@ impl Material {
             Material::Metal { albedo, fuzz } if fuzz > 0.0 => {
                 albedo * fuzz::pdf(reflect(dir, facing.shading), fuzz, wi)
             }
+            Material::Pbr(pbr) => {
+                let frame = Frame::from_z(facing.shading);
+                pbr.eval(frame.to_local(-dir), frame.to_local(wi))
+            }
             _ => Vec3::ZERO,
         }
     }
@@ -181,6 +207,10 @@ impl Material {
             Material::Lambertian { .. } => wi.dot(facing.shading).max(0.0) * FRAC_1_PI,
             Material::Metal { fuzz, .. } if fuzz > 0.0 => {
                 fuzz::pdf(reflect(dir, facing.shading), fuzz, wi)
+            }
+            Material::Pbr(pbr) => {
+                let frame = Frame::from_z(facing.shading);
+                pbr.pdf(frame.to_local(-dir), frame.to_local(wi))
             }
             _ => 0.0,
         }

@@ -135,6 +135,7 @@ impl SceneBuilder<'_> {
             name: name.to_owned(),
             mesh: Arc::new(mesh),
             normals: data.normals,
+            uvs: Vec::new(),
         });
         Ok(())
     }
