@@ -186,7 +186,7 @@ impl<'g> Renderer<'g> {
         if scene.is_textured() {
             // Drawn without them, the image would silently differ from the CPU's.
             return Err(GpuError::Unsupported(
-                "textured materials yet (render them on the CPU)",
+                "textured or see-through materials yet (render them on the CPU)",
             ));
         }
         let (background_kind, background, env) = match &scene.background {

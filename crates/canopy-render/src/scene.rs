@@ -289,12 +289,37 @@ impl Scene {
         Some(a * (1.0 - hit.u - hit.v) + b * hit.u + c * hit.v)
     }
 
-    /// Whether any material has a texture.
+    /// Whether any material has a texture or is not opaque.
     pub fn is_textured(&self) -> bool {
         self.textured_materials() > 0
     }
 
-    /// Materials with at least one texture.
+    /// Whether some material lets rays through where they meet it (glTF's MASK and
+    /// BLEND alpha modes).
+    pub fn has_see_through(&self) -> bool {
+        self.material_maps.iter().any(|m| m.coverage.is_some())
+    }
+
+    /// The material index of what `hit` hit.
+    #[inline]
+    pub fn material_index(&self, hit: &Hit) -> u32 {
+        match self.instance_of(hit.inst) {
+            None => self.primitives[hit.prim as usize].material,
+            Some(instance) => instance.material,
+        }
+    }
+
+    /// Whether a ray stops at `hit`, or passes through a see-through part of the surface
+    /// (`u` draws a uniform number for stochastic transparency).
+    #[inline]
+    pub fn stops_ray(&self, hit: &Hit, u: impl FnOnce() -> f32) -> bool {
+        match self.material_maps.get(self.material_index(hit) as usize) {
+            Some(maps) if maps.coverage.is_some() => maps.stops(&self.images, self.hit_uv(hit), u),
+            _ => true,
+        }
+    }
+
+    /// Materials with at least one texture or a coverage other than opaque.
     pub fn textured_materials(&self) -> usize {
         self.material_maps.iter().filter(|m| !m.is_empty()).count()
     }

@@ -183,18 +183,51 @@ impl TextureRef {
     }
 }
 
-/// The textures a material's parameters are scaled by (glTF's metallic-roughness slots).
+/// How much of a surface is there: glTF's alpha modes. Its alpha is the base colour
+/// factor's times the base colour texture's.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Coverage {
+    /// Present where alpha ≥ `cutoff`, absent elsewhere (leaves, fences).
+    Mask { alpha: f32, cutoff: f32 },
+    /// Present with probability alpha (stochastic transparency): on average a ray is
+    /// stopped by a fraction alpha of the surface, as blending would show.
+    Blend { alpha: f32 },
+}
+
+/// The textures a material's parameters are scaled by (glTF's metallic-roughness slots),
+/// and its coverage where it is not opaque.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct MaterialMaps {
     /// sRGB colour times the base colour factor.
     pub base_color: Option<TextureRef>,
     /// Roughness in green and metallic in blue, times their factors (linear).
     pub metallic_roughness: Option<TextureRef>,
+    /// `None`: opaque.
+    pub coverage: Option<Coverage>,
 }
 
 impl MaterialMaps {
     pub fn is_empty(&self) -> bool {
-        self.base_color.is_none() && self.metallic_roughness.is_none()
+        self.base_color.is_none() && self.metallic_roughness.is_none() && self.coverage.is_none()
+    }
+
+    /// Whether a ray meeting the surface at `uv` (if it has texture coordinates) stops
+    /// there; `u` draws the uniform number stochastic transparency needs.
+    pub fn stops(&self, images: &[Arc<Image>], uv: Option<Vec2>, u: impl FnOnce() -> f32) -> bool {
+        let Some(coverage) = self.coverage else {
+            return true;
+        };
+        let texture_alpha = |alpha: f32| match (&self.base_color, uv) {
+            (Some(t), Some(uv)) => alpha * t.lookup(images, uv, true).w,
+            _ => alpha,
+        };
+        match coverage {
+            Coverage::Mask { alpha, cutoff } => texture_alpha(alpha) >= cutoff,
+            Coverage::Blend { alpha } => {
+                let alpha = texture_alpha(alpha);
+                alpha >= 1.0 || (alpha > 0.0 && u() < alpha)
+            }
+        }
     }
 
     /// `material` with its parameters scaled by these textures at `uv`. Only the
@@ -320,6 +353,7 @@ mod tests {
         let maps = MaterialMaps {
             base_color: Some(plain(Wrap::Repeat)),
             metallic_roughness: Some(plain(Wrap::Repeat)),
+            coverage: None,
         };
         let m = Material::Pbr(crate::material::Pbr {
             base_color: Vec3::new(0.5, 1.0, 1.0),
@@ -342,6 +376,32 @@ mod tests {
         );
         let glass = Material::Dielectric { ior: 1.5 };
         assert_eq!(maps.apply(glass, &images, Vec2::ZERO), glass);
+    }
+
+    #[test]
+    fn coverage_masks_by_the_cutoff_and_blends_by_chance() {
+        let images = [checker()];
+        let (opaque_texel, clear_texel) = (Vec2::new(0.25, 0.25), Vec2::new(0.25, 0.75));
+        let masked = MaterialMaps {
+            base_color: Some(plain(Wrap::ClampToEdge)),
+            coverage: Some(Coverage::Mask {
+                alpha: 0.8,
+                cutoff: 0.5,
+            }),
+            ..MaterialMaps::default()
+        };
+        let never = || -> f32 { unreachable!("a mask draws no number") };
+        assert!(masked.stops(&images, Some(opaque_texel), never));
+        assert!(!masked.stops(&images, Some(clear_texel), never));
+        // Without texture coordinates only the factor counts.
+        assert!(masked.stops(&images, None, never));
+        let blended = MaterialMaps {
+            coverage: Some(Coverage::Blend { alpha: 0.3 }),
+            ..MaterialMaps::default()
+        };
+        assert!(blended.stops(&images, None, || 0.29));
+        assert!(!blended.stops(&images, None, || 0.31));
+        assert!(MaterialMaps::default().stops(&images, None, never));
     }
 
     #[test]

@@ -78,7 +78,7 @@ fn nodes_become_instances_of_meshes_stored_once() {
 }
 
 #[test]
-fn a_camera_in_the_file_is_used_and_what_is_not_read_is_named() {
+fn a_camera_in_the_file_is_used_alpha_modes_are_read_and_what_is_not_is_named() {
     let duck = load_scene(models().join("Duck.glb").to_str().unwrap()).unwrap();
     let camera = duck.camera;
     let toward = (camera.look_at - camera.look_from).normalize();
@@ -90,8 +90,33 @@ fn a_camera_in_the_file_is_used_and_what_is_not_read_is_named() {
     let alpha = load_scene(models().join("AlphaBlendModeTest.glb").to_str().unwrap()).unwrap();
     let warnings = alpha.warnings().join("\n");
     assert!(
-        warnings.contains("alpha mode Blend") && warnings.contains("alpha mode Mask"),
+        warnings.contains("normal maps are not rendered yet"),
         "{warnings}"
+    );
+    // Its alpha modes are read: one blended material, masks with three cutoffs.
+    use canopy_render::texture::Coverage;
+    let coverages: Vec<Coverage> = alpha
+        .material_maps
+        .iter()
+        .filter_map(|m| m.coverage)
+        .collect();
+    let blends = coverages
+        .iter()
+        .filter(|c| matches!(c, Coverage::Blend { .. }))
+        .count();
+    let mut cutoffs: Vec<f32> = coverages
+        .iter()
+        .filter_map(|c| match c {
+            Coverage::Mask { cutoff, .. } => Some(*cutoff),
+            _ => None,
+        })
+        .collect();
+    cutoffs.sort_by(f32::total_cmp);
+    cutoffs.dedup();
+    assert_eq!(
+        (blends, cutoffs),
+        (1, vec![0.25, 0.5, 0.75]),
+        "{coverages:?}"
     );
 }
 
@@ -422,7 +447,7 @@ fn missing_and_broken_images_are_errors_that_name_them() {
     let cases = [
         (
             r#"{"uri":"textures/gone.png"}"#.to_owned(),
-            "image 0: cannot read textures/gone.png",
+            "material 0 (\"paint\"): image 0: cannot read textures/gone.png",
         ),
         (data_uri(b"\x89PNG\r\n\x1a\n broken"), "image 0: cannot"),
         (data_uri(&quadrants_png()[..40]), "image 0: cannot"),
@@ -481,4 +506,113 @@ fn textured_models_show_their_textures() {
         "{blue} {green} {white} of {}",
         colours.len()
     );
+}
+
+/// The textured triangle with alpha mode `mode` (and `cutoff`), base colour alpha
+/// `alpha`, and its texture's alpha 1 in the top half and 0 in the bottom half.
+fn see_through_triangle(mode: &str, alpha: f32) -> canopy_render::Scene {
+    let colours = [
+        [255, 0, 0, 255],
+        [0, 255, 0, 255],
+        [0, 0, 255, 0],
+        [255, 255, 255, 0],
+    ];
+    let mut png = Vec::new();
+    image::RgbaImage::from_fn(2, 2, |x, y| image::Rgba(colours[(y * 2 + x) as usize]))
+        .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+        .unwrap();
+    let (json, bin) = textured_triangle(&data_uri(&png), "");
+    let json = json
+        .replace("[1,1,0.5,1]", &format!("[1,1,0.5,{alpha}]"))
+        .replace(r#""name":"paint","#, &format!(r#""name":"paint",{mode}"#));
+    let mut scene = parse_gltf(&glb(&json, &bin), &NoFiles, "tri").unwrap();
+    (
+        scene.settings.width,
+        scene.settings.height,
+        scene.settings.spp,
+    ) = (32, 32, 16);
+    scene
+}
+
+fn render_film(scene: &canopy_render::Scene) -> canopy_render::Film {
+    let accel = Accel::for_scene(
+        scene,
+        AccelKind::default(),
+        BvhWidth::default(),
+        &BuildParams::default(),
+        None,
+    );
+    integrator::render(scene, &accel, &|| {}).0
+}
+
+#[test]
+fn masked_surfaces_are_cut_out_by_their_alpha() {
+    let masked = see_through_triangle(r#""alphaMode":"MASK","alphaCutoff":0.5,"#, 1.0);
+    assert!(masked.has_see_through() && masked.warnings().iter().all(|w| !w.contains("alpha")));
+    // The texture's top half stops rays, its bottom half does not (no number drawn).
+    let stops = |x: f32, y: f32| {
+        use canopy_bvh::RayQuery;
+        let accel = Accel::for_scene(
+            &masked,
+            AccelKind::default(),
+            BvhWidth::default(),
+            &BuildParams::default(),
+            None,
+        );
+        let ray = canopy_bvh::Ray::new(
+            glam::Vec3::new(x, y, 1.0),
+            -glam::Vec3::Z,
+            0.0,
+            f32::INFINITY,
+        );
+        let hit = accel.intersect(&ray).unwrap();
+        masked.stops_ray(&hit, || unreachable!())
+    };
+    assert!(stops(0.25, 0.25) && !stops(0.2, 0.75));
+    // Cut out everywhere (alpha factor 0), the triangle leaves the image it would have
+    // without it, bit for bit, with light sampling's shadow rays and without.
+    for integrator in canopy_render::Integrator::ALL {
+        let mut cut = see_through_triangle(r#""alphaMode":"MASK","#, 0.0);
+        cut.settings.integrator = integrator;
+        let mut empty = cut.clone();
+        empty.instances.clear();
+        assert_eq!(
+            render_film(&cut).pixels,
+            render_film(&empty).pixels,
+            "{integrator}"
+        );
+    }
+}
+
+#[test]
+fn blended_surfaces_stop_a_fraction_alpha_of_rays() {
+    // Half-transparent: each pixel is on average halfway between the image without the
+    // triangle and the image with it opaque (top half of the texture, alpha 1 there).
+    let mean_of = |scene: &canopy_render::Scene| {
+        let film = render_film(scene);
+        film.pixels
+            .iter()
+            .map(|p| p.element_sum() as f64)
+            .sum::<f64>()
+            / film.pixels.len() as f64
+    };
+    let opaque = see_through_triangle("", 1.0);
+    let mut empty = opaque.clone();
+    empty.instances.clear();
+    let mut blended = see_through_triangle(r#""alphaMode":"BLEND","#, 0.5);
+    blended.settings.spp = 256;
+    // Only the opaque top half of the texture is blended at 0.5; the bottom is alpha 0.
+    let mut top_opaque = see_through_triangle(r#""alphaMode":"MASK","#, 1.0);
+    top_opaque.settings.spp = 256;
+    let (without, with, half) = (mean_of(&empty), mean_of(&top_opaque), mean_of(&blended));
+    let expected = 0.5 * (without + with);
+    assert!(
+        (with - without).abs() > 0.05,
+        "the triangle shows: {with} vs {without}"
+    );
+    assert!(
+        (half - expected).abs() < 0.02 * expected,
+        "{half} vs {expected} ({without}, {with})"
+    );
+    assert!(mean_of(&opaque).is_finite());
 }

@@ -5,6 +5,7 @@
 //! emissive ones are named in a note.
 
 use crate::material::{Material, Pbr};
+use crate::texture::Coverage;
 use glam::Vec3;
 
 /// A material of the file as canopy renders it, and what it leaves out.
@@ -20,12 +21,6 @@ pub(super) fn convert(material: &gltf::Material<'_>, notes: &mut Vec<String>) ->
     if material.emissive_texture().is_some() {
         notes.push(format!(
             "{named}: emissive textures are not rendered yet (its emissive factor is)"
-        ));
-    }
-    if material.alpha_mode() != gltf::material::AlphaMode::Opaque {
-        notes.push(format!(
-            "{named}: alpha mode {:?} is not rendered yet (drawn opaque)",
-            material.alpha_mode()
         ));
     }
     let emissive =
@@ -48,6 +43,19 @@ pub(super) fn convert(material: &gltf::Material<'_>, notes: &mut Vec<String>) ->
         metallic: finite_unit(pbr.metallic_factor()),
         roughness: finite_unit(pbr.roughness_factor()),
     })
+}
+
+/// How much of the surface is there, where it is not all opaque.
+pub(super) fn coverage(material: &gltf::Material<'_>) -> Option<Coverage> {
+    let alpha = finite_unit(material.pbr_metallic_roughness().base_color_factor()[3]);
+    match material.alpha_mode() {
+        gltf::material::AlphaMode::Opaque => None,
+        gltf::material::AlphaMode::Mask => Some(Coverage::Mask {
+            alpha,
+            cutoff: material.alpha_cutoff().unwrap_or(0.5),
+        }),
+        gltf::material::AlphaMode::Blend => Some(Coverage::Blend { alpha }),
+    }
 }
 
 /// A factor the specification bounds to [0, 1], clamped there (NaN as 0).

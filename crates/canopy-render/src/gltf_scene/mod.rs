@@ -6,8 +6,8 @@
 //! buffer before it is read ([`data`]); errors name the file and the object at fault.
 //!
 //! Not read yet (each named in the scene's warnings where a file uses it): normal and
-//! emissive textures, alpha modes, `KHR_lights_punctual` lights, orthographic cameras,
-//! sparse accessors.
+//! emissive textures, `KHR_lights_punctual` lights, orthographic cameras, sparse
+//! accessors.
 
 mod data;
 mod materials;
@@ -373,15 +373,16 @@ impl<'a> Loader<'a, '_> {
         if matches!(converted, crate::material::Material::Pbr(_)) {
             let pbr = material.pbr_metallic_roughness();
             let mut texture = |info: Option<gltf::texture::Info<'a>>| match info {
-                Some(info) => {
-                    self.images
-                        .texture(self.scene, self.buffers, self.assets, &info, &mut notes)
-                }
+                Some(info) => self
+                    .images
+                    .texture(self.scene, self.buffers, self.assets, &info, &mut notes)
+                    .map_err(|e| format!("{named}: {e}")),
                 None => Ok(None),
             };
             let maps = crate::texture::MaterialMaps {
                 base_color: texture(pbr.base_color_texture())?,
                 metallic_roughness: texture(pbr.metallic_roughness_texture())?,
+                coverage: materials::coverage(material),
             };
             if !maps.is_empty() {
                 self.scene

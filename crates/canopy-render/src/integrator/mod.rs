@@ -213,6 +213,7 @@ fn accumulate<P: Probe>(
         scene,
         accel,
         lights: &lights,
+        see_through: scene.has_see_through(),
     };
     let first_sample = accumulator.samples;
     let totals = Totals::default();

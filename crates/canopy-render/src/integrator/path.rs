@@ -11,7 +11,7 @@ use crate::material::Material;
 use crate::rng::Rng;
 use crate::sampling::power_heuristic;
 use crate::scene::{Integrator, Scene};
-use canopy_bvh::{Ray, RayQuery, ALL_MASKS};
+use canopy_bvh::{Hit, Ray, RayQuery, ALL_MASKS};
 use glam::Vec3;
 
 /// Segments a path has before Russian roulette may end it.
@@ -24,11 +24,16 @@ const ROULETTE_MAX_SURVIVAL: f32 = 0.95;
 /// rounding error on it) never counts as an occluder.
 const SHADOW_SHORTENING: f32 = 1e-4;
 
+/// Most see-through layers a ray passes before the next surface counts as opaque.
+const MAX_SEE_THROUGH_LAYERS: u32 = 256;
+
 /// What a path can see of the render: scene, structures and the lights.
 pub(super) struct Tracer<'a> {
     pub scene: &'a Scene,
     pub accel: &'a Accel,
     pub lights: &'a Lights,
+    /// Whether some surfaces let rays through (alpha modes), so that hits must be tested.
+    pub see_through: bool,
 }
 
 /// Rays traced by one worker, and its probe.
@@ -65,10 +70,7 @@ impl Tracer<'_> {
         let mut radiance = Vec3::ZERO;
         for _ in 0..scene.settings.max_depth {
             work.rays += 1;
-            let Some(hit) = self
-                .accel
-                .intersect_counted(&ray, ALL_MASKS, &mut work.probe)
-            else {
+            let Some(hit) = self.intersect(&ray, rng, work) else {
                 radiance += throughput * scene.background.radiance(ray.dir);
                 break;
             };
@@ -102,10 +104,7 @@ impl Tracer<'_> {
         let mut previous: Option<BsdfVertex> = None;
         for segments in 1..=settings.max_depth {
             work.rays += 1;
-            let Some(hit) = self
-                .accel
-                .intersect_counted(&ray, ALL_MASKS, &mut work.probe)
-            else {
+            let Some(hit) = self.intersect(&ray, rng, work) else {
                 let weight = match previous {
                     Some(v) if sample_background => {
                         power_heuristic(v.pdf, scene.background.pdf(ray.dir))
@@ -185,7 +184,7 @@ impl Tracer<'_> {
                 };
                 let origin = offset_origin(surface, wi);
                 let shadow = Ray::new(origin, target - origin, 0.0, 1.0 - SHADOW_SHORTENING);
-                if !self.occluded(&shadow, work) {
+                if !self.occluded(&shadow, rng, work) {
                     let weight = power_heuristic(light.pdf, material.pdf(ray.dir, surface, wi));
                     direct += f * light.radiance * (weight / light.pdf);
                 }
@@ -196,7 +195,7 @@ impl Tracer<'_> {
             if f != Vec3::ZERO {
                 let origin = offset_origin(surface, sky.direction);
                 let shadow = Ray::new(origin, sky.direction, 0.0, f32::INFINITY);
-                if !self.occluded(&shadow, work) {
+                if !self.occluded(&shadow, rng, work) {
                     let bsdf_pdf = material.pdf(ray.dir, surface, sky.direction);
                     let weight = power_heuristic(sky.pdf, bsdf_pdf);
                     direct += f * sky.radiance * (weight / sky.pdf);
@@ -206,9 +205,35 @@ impl Tracer<'_> {
         direct
     }
 
-    fn occluded<P: Probe>(&self, shadow: &Ray, work: &mut Work<P>) -> bool {
+    /// The first surface along `ray` that stops it: the closest hit, or, where
+    /// surfaces are see-through, the closest one whose coverage stops the ray (the
+    /// search goes on past each one that does not).
+    fn intersect<P: Probe>(&self, ray: &Ray, rng: &mut Rng, work: &mut Work<P>) -> Option<Hit> {
+        let mut hit = self
+            .accel
+            .intersect_counted(ray, ALL_MASKS, &mut work.probe)?;
+        if !self.see_through {
+            return Some(hit);
+        }
+        for _ in 0..MAX_SEE_THROUGH_LAYERS {
+            if self.scene.stops_ray(&hit, || rng.next_f32()) {
+                return Some(hit);
+            }
+            let beyond = Ray::new(ray.origin, ray.dir, hit.t.next_up(), ray.t_max);
+            hit = self
+                .accel
+                .intersect_counted(&beyond, ALL_MASKS, &mut work.probe)?;
+        }
+        Some(hit)
+    }
+
+    fn occluded<P: Probe>(&self, shadow: &Ray, rng: &mut Rng, work: &mut Work<P>) -> bool {
         work.rays += 1;
         work.shadow_rays += 1;
+        if self.see_through {
+            // Any hit will not do: a see-through surface does not block.
+            return self.intersect(shadow, rng, work).is_some();
+        }
         work.probe.time_shadow(|| self.accel.occluded(shadow))
     }
 }
