@@ -40,6 +40,8 @@ struct Description {
     materials: usize,
     emissive_materials: usize,
     textured_materials: usize,
+    /// Point, spot and directional lights.
+    punctual_lights: usize,
     bounds_min: [f32; 3],
     bounds_max: [f32; 3],
     film_bytes: u64,
@@ -82,6 +84,7 @@ fn describe(arg: &str, scene: &Scene) -> Description {
             .filter(|m| matches!(m, Material::Emissive { .. }))
             .count(),
         textured_materials: scene.textured_materials(),
+        punctual_lights: scene.lights.len(),
         bounds_min: bounds.min.to_array(),
         bounds_max: bounds.max.to_array(),
         film_bytes: scene.settings.film_bytes(),
@@ -116,8 +119,8 @@ fn lines(scene: &Scene, d: &Description) -> Vec<String> {
         format!("render      {}", d.facts.settings_text()),
         format!("primitives  {}", d.facts.primitives_text()),
         format!(
-            "materials   {} ({} emissive, {} textured)",
-            d.materials, d.emissive_materials, d.textured_materials
+            "materials   {} ({} emissive, {} textured); {} point, spot or directional lights",
+            d.materials, d.emissive_materials, d.textured_materials, d.punctual_lights
         ),
         format!("bounds      {:?} to {:?}", d.bounds_min, d.bounds_max),
         format!(

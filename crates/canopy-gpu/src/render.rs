@@ -183,6 +183,11 @@ impl<'g> Renderer<'g> {
     }
 
     fn upload(gpu: &'g Gpu, scene: &Scene, flat: Flat) -> Result<Self, GpuError> {
+        if !scene.lights.is_empty() {
+            return Err(GpuError::Unsupported(
+                "point, spot or directional lights yet (render them on the CPU)",
+            ));
+        }
         if scene.is_textured() {
             // Drawn without them, the image would silently differ from the CPU's.
             return Err(GpuError::Unsupported(

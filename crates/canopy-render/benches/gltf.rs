@@ -34,7 +34,7 @@ fn chunks(glb: &[u8]) -> (Value, Vec<u8>) {
 
 fn glb(json: &Value, bin: &[u8]) -> Vec<u8> {
     let pad = |mut v: Vec<u8>, with: u8| {
-        while v.len() % 4 != 0 {
+        while !v.len().is_multiple_of(4) {
             v.push(with);
         }
         v

@@ -1,5 +1,6 @@
-//! The scene's emitters as lights: every primitive with an emissive material, chosen in
-//! proportion to its power, then a point on it drawn by its shape.
+//! The scene's lights: every primitive with an emissive material, and the punctual
+//! lights (point, spot, directional) glTF files bring. One is chosen in proportion to
+//! its power, then a point on it drawn by its shape (a punctual light is its own point).
 
 use crate::geometry::{Shape, SurfaceSample};
 use crate::rng::Rng;
@@ -9,15 +10,145 @@ use canopy_bvh::Hit;
 use glam::{Vec2, Vec3};
 use std::borrow::Cow;
 
+/// A light without area (glTF's `KHR_lights_punctual`), placed in the world. Its
+/// strengths are taken in canopy's units (a white sky has radiance 1), as glTF viewers
+/// take them: a point or spot light of intensity `I` lights a surface facing it at
+/// distance `d` with irradiance `I / d²`, a directional one with `irradiance`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum PunctualLight {
+    Point {
+        position: Vec3,
+        intensity: Vec3,
+    },
+    /// A point light shining along unit `direction`, full within the inner cone and
+    /// fading to nothing at the outer one (the specification's smooth falloff).
+    Spot {
+        position: Vec3,
+        direction: Vec3,
+        intensity: Vec3,
+        cos_inner: f32,
+        cos_outer: f32,
+    },
+    /// Light from infinitely far away travelling along unit `direction`.
+    Directional {
+        direction: Vec3,
+        irradiance: Vec3,
+    },
+}
+
+impl PunctualLight {
+    /// Why it cannot be rendered, if it cannot.
+    pub fn check(&self) -> Result<(), String> {
+        let (strength, positions, directions) = match *self {
+            PunctualLight::Point {
+                position,
+                intensity,
+            } => (intensity, vec![position], vec![]),
+            PunctualLight::Spot {
+                position,
+                direction,
+                intensity,
+                cos_inner,
+                cos_outer,
+            } => {
+                if !(cos_outer < cos_inner && (-1.0..=1.0).contains(&cos_outer) && cos_inner <= 1.0)
+                {
+                    return Err(format!(
+                        "a spot light's outer cone must be wider than its inner one (cosines {cos_outer} and {cos_inner})"
+                    ));
+                }
+                (intensity, vec![position], vec![direction])
+            }
+            PunctualLight::Directional {
+                direction,
+                irradiance,
+            } => (irradiance, vec![], vec![direction]),
+        };
+        if !(strength.is_finite() && strength.min_element() >= 0.0) {
+            return Err(format!(
+                "a light's strength must be finite and >= 0, not {strength}"
+            ));
+        }
+        if positions.iter().any(|p| !p.is_finite()) {
+            return Err("a light's position must be finite".into());
+        }
+        if directions
+            .iter()
+            .any(|d| !d.is_finite() || (d.length() - 1.0).abs() > 1e-3)
+        {
+            return Err("a light's direction must be a unit vector".into());
+        }
+        Ok(())
+    }
+
+    /// Luminance of the power it sends into a scene of radius `radius` (for choosing).
+    fn power(&self, radius: f32) -> f32 {
+        use std::f32::consts::PI;
+        match *self {
+            PunctualLight::Point { intensity, .. } => 4.0 * PI * luminance(intensity),
+            PunctualLight::Spot {
+                intensity,
+                cos_inner,
+                cos_outer,
+                ..
+            } => 2.0 * PI * (1.0 - 0.5 * (cos_inner + cos_outer)) * luminance(intensity),
+            PunctualLight::Directional { irradiance, .. } => {
+                PI * radius * radius * luminance(irradiance)
+            }
+        }
+    }
+
+    /// The light at `reference`: where it comes from (a point `radius` away for a
+    /// directional light), and the radiance-like quantity the integrator multiplies by
+    /// the BSDF (irradiance at normal incidence).
+    fn toward(&self, reference: Vec3, radius: f32) -> Option<(Vec3, Vec3)> {
+        match *self {
+            PunctualLight::Point {
+                position,
+                intensity,
+            } => {
+                let d2 = position.distance_squared(reference);
+                (d2 > 0.0).then(|| (position, intensity / d2))
+            }
+            PunctualLight::Spot {
+                position,
+                direction,
+                intensity,
+                cos_inner,
+                cos_outer,
+            } => {
+                let to_reference = reference - position;
+                let d2 = to_reference.length_squared();
+                if d2 <= 0.0 {
+                    return None;
+                }
+                let cd = direction.dot(to_reference / d2.sqrt());
+                let scale = 1.0 / (cos_inner - cos_outer).max(1e-3);
+                let falloff = ((cd - cos_outer) * scale).clamp(0.0, 1.0);
+                let falloff = falloff * falloff;
+                (falloff > 0.0).then(|| (position, intensity * (falloff / d2)))
+            }
+            PunctualLight::Directional {
+                direction,
+                irradiance,
+            } => Some((reference - 2.0 * radius * direction, irradiance)),
+        }
+    }
+}
+
 /// A point on a light, drawn for a point that wants its light.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LightSample {
     /// The point on the light's surface, its normal and rounding error.
     pub point: SurfaceSample,
-    /// Radiance it sends towards the reference point (emitters are two-sided).
+    /// Radiance it sends towards the reference point (emitters are two-sided); for a
+    /// punctual light, the irradiance it brings there.
     pub radiance: Vec3,
-    /// Density per solid angle at the reference point, the choice of light included.
+    /// Density per solid angle at the reference point, the choice of light included; for
+    /// a punctual light, the probability of choosing it.
     pub pdf: f32,
+    /// A punctual light: no other strategy can find it, so it is not weighted by MIS.
+    pub delta: bool,
 }
 
 /// The emitters of a scene, ready to be sampled: every emissive primitive, and every
@@ -34,6 +165,10 @@ pub struct Lights {
     /// For each mesh instance, the light index of its first triangle (its triangles are
     /// lights in order), or [`Lights::NONE`] when its material does not emit.
     first_light_of_instance: Vec<u32>,
+    /// The scene's punctual lights, after the emitters in light order.
+    punctual: Vec<PunctualLight>,
+    /// Radius of a sphere around the scene (where directional light starts from).
+    radius: f32,
 }
 
 impl Lights {
@@ -67,20 +202,37 @@ impl Lights {
                 power.push(radiance * scene.instance_triangle(instance, prim).area());
             }
         }
+        let bounds = scene.bounds();
+        let radius = match bounds.is_empty() {
+            true => 1.0,
+            false => (0.5 * (bounds.max - bounds.min).length()).max(1.0),
+        };
+        let center = if bounds.is_empty() {
+            Vec3::ZERO
+        } else {
+            bounds.center()
+        };
+        let radius = radius + center.length();
+        for light in &scene.lights {
+            power.push(light.power(radius));
+        }
         Self {
             emitters,
             choice: Distribution1D::new(power),
             light_of_prim,
             first_light_of_instance,
+            punctual: scene.lights.clone(),
+            radius,
         }
     }
 
+    /// Lights of both kinds.
     pub fn len(&self) -> usize {
-        self.emitters.len()
+        self.emitters.len() + self.punctual.len()
     }
 
     pub fn is_empty(&self) -> bool {
-        self.emitters.is_empty()
+        self.len() == 0
     }
 
     /// The (instance, primitive) of each light, in light order.
@@ -114,12 +266,27 @@ impl Lights {
         let choice = self.choice.as_ref()?;
         let (light, _) = choice.sample(rng.next_f32());
         let u = Vec2::new(rng.next_f32(), rng.next_f32());
+        if let Some(punctual) = self.punctual.get(light.wrapping_sub(self.emitters.len())) {
+            let (p, irradiance) = punctual.toward(reference, self.radius)?;
+            return Some(LightSample {
+                point: SurfaceSample {
+                    p,
+                    normal: (reference - p).normalize_or_zero(),
+                    error: 0.0,
+                    pdf: 1.0,
+                },
+                radiance: irradiance,
+                pdf: choice.pmf(light),
+                delta: true,
+            });
+        }
         let (shape, material) = self.shape_of(scene, light);
         let point = shape.sample_toward(reference, u)?;
         Some(LightSample {
             point,
             radiance: scene.materials[material as usize].emitted(),
             pdf: point.pdf * choice.pmf(light),
+            delta: false,
         })
     }
 

@@ -3,6 +3,7 @@
 pub use crate::background::Background;
 use crate::camera::CameraSpec;
 use crate::geometry::{Shape, Surface, Triangle};
+use crate::lights::PunctualLight;
 use crate::material::Material;
 use crate::texture::{Image, MaterialMaps};
 use canopy_bvh::{Aabb, Hit, Ray, TriangleMesh};
@@ -187,6 +188,8 @@ pub struct Scene {
     pub images: Vec<Arc<Image>>,
     /// The textures of material `i`, where `i` is in range and it has any.
     pub material_maps: Vec<MaterialMaps>,
+    /// Lights without area (point, spot, directional), beside the emissive surfaces.
+    pub lights: Vec<PunctualLight>,
 }
 
 impl Scene {
@@ -382,10 +385,20 @@ impl Scene {
             .materials
             .iter()
             .any(|m| matches!(m, crate::material::Material::Emissive { .. }));
-        if !emitters && self.background == Background::Constant(Vec3::ZERO) {
+        if !emitters
+            && self.lights.is_empty()
+            && self.background == Background::Constant(Vec3::ZERO)
+        {
             warnings.push(
                 "no light: no emissive material and a black background give a black image".into(),
             );
+        }
+        if !self.lights.is_empty() && self.settings.integrator == Integrator::Bsdf {
+            warnings.push(format!(
+                "the bsdf integrator never finds the scene's {} point, spot or directional lights \
+                 (only light sampling does): use the path integrator",
+                self.lights.len()
+            ));
         }
         warnings
     }

@@ -148,15 +148,7 @@ impl Scene {
         let fail = |e: String| format!("`{name}`: {e}");
         let (assets, file) = crate::scene_file::DirAssets::beside(path);
         let bytes = crate::scene_file::Assets::read(&assets, &file).map_err(fail)?;
-        let before = (
-            self.meshes.len(),
-            self.materials.len(),
-            self.instances.len(),
-            self.inputs.len(),
-            self.notes.len(),
-            self.skipped_degenerate,
-            (self.images.len(), self.material_maps.len()),
-        );
+        let before = Appended::lengths(self);
         let added = crate::gltf_scene::add_gltf(self, &bytes, &assets, to_world);
         match added {
             Ok(camera) => {
@@ -164,15 +156,7 @@ impl Scene {
                 Ok(camera)
             }
             Err(e) => {
-                let (meshes, materials, instances, inputs, notes, skipped, (images, maps)) = before;
-                self.images.truncate(images);
-                self.material_maps.truncate(maps);
-                self.meshes.truncate(meshes);
-                self.materials.truncate(materials);
-                self.instances.truncate(instances);
-                self.inputs.truncate(inputs);
-                self.notes.truncate(notes);
-                self.skipped_degenerate = skipped;
+                before.remove_from(self);
                 Err(fail(e))
             }
         }
@@ -337,6 +321,13 @@ impl Scene {
         Ok(())
     }
 
+    /// Adds a point, spot or directional light.
+    pub fn add_light(&mut self, light: crate::lights::PunctualLight) -> Result<(), String> {
+        light.check()?;
+        self.lights.push(light);
+        Ok(())
+    }
+
     /// Adds a decoded image for textures to use; returns its index.
     pub fn add_image(&mut self, image: crate::texture::Image) -> u32 {
         self.images.push(Arc::new(image));
@@ -398,6 +389,48 @@ impl Scene {
             material,
         });
         Ok(self.instances.len() as u32 - 1)
+    }
+}
+
+/// How long each list a loader appends to was, so that a failed load can be undone.
+struct Appended {
+    meshes: usize,
+    materials: usize,
+    instances: usize,
+    inputs: usize,
+    notes: usize,
+    images: usize,
+    material_maps: usize,
+    lights: usize,
+    skipped_degenerate: usize,
+}
+
+impl Appended {
+    fn lengths(scene: &Scene) -> Self {
+        Self {
+            meshes: scene.meshes.len(),
+            materials: scene.materials.len(),
+            instances: scene.instances.len(),
+            inputs: scene.inputs.len(),
+            notes: scene.notes.len(),
+            images: scene.images.len(),
+            material_maps: scene.material_maps.len(),
+            lights: scene.lights.len(),
+            skipped_degenerate: scene.skipped_degenerate,
+        }
+    }
+
+    /// Removes what was appended to `scene` since.
+    fn remove_from(self, scene: &mut Scene) {
+        scene.meshes.truncate(self.meshes);
+        scene.materials.truncate(self.materials);
+        scene.instances.truncate(self.instances);
+        scene.inputs.truncate(self.inputs);
+        scene.notes.truncate(self.notes);
+        scene.images.truncate(self.images);
+        scene.material_maps.truncate(self.material_maps);
+        scene.lights.truncate(self.lights);
+        scene.skipped_degenerate = self.skipped_degenerate;
     }
 }
 

@@ -616,3 +616,54 @@ fn blended_surfaces_stop_a_fraction_alpha_of_rays() {
     );
     assert!(mean_of(&opaque).is_finite());
 }
+
+#[test]
+fn punctual_lights_are_placed_by_their_nodes() {
+    let json = TRIANGLE
+        .replace(
+            r#""asset":{"version":"2.0"},"#,
+            r#""asset":{"version":"2.0"},"extensionsUsed":["KHR_lights_punctual"],
+"extensions":{"KHR_lights_punctual":{"lights":[{"name":"lamp","type":"spot","color":[1,0.5,0.25],"intensity":8,
+"spot":{"innerConeAngle":0.2,"outerConeAngle":0.6}},{"type":"point","intensity":2,"range":5}]}},"#,
+        )
+        .replace(r#""scenes":[{"nodes":[0]}]"#, r#""scenes":[{"nodes":[0,1,2]}]"#)
+        .replace(
+            r#""nodes":[{"mesh":0}]"#,
+            r#""nodes":[{"mesh":0},{"translation":[0,3,0],"rotation":[-0.70710677,0,0,0.70710677],"extensions":{"KHR_lights_punctual":{"light":0}}},
+{"translation":[1,2,3],"extensions":{"KHR_lights_punctual":{"light":1}}}]"#,
+        );
+    let scene = parse_gltf(&glb(&json, &triangle_bin([0, 1, 2])), &NoFiles, "lit").unwrap();
+    use canopy_render::lights::PunctualLight;
+    let [PunctualLight::Spot {
+        position,
+        direction,
+        intensity,
+        cos_inner,
+        cos_outer,
+    }, PunctualLight::Point { position: p, .. }] = scene.lights[..]
+    else {
+        panic!("{:?}", scene.lights);
+    };
+    assert!((position - glam::Vec3::new(0.0, 3.0, 0.0)).length() < 1e-6);
+    assert!(
+        (direction - glam::Vec3::NEG_Y).length() < 1e-6,
+        "shines down its node's −z: {direction}"
+    );
+    assert_eq!(intensity, glam::Vec3::new(8.0, 4.0, 2.0));
+    assert!((cos_inner - 0.2f32.cos()).abs() < 1e-6 && (cos_outer - 0.6f32.cos()).abs() < 1e-6);
+    assert_eq!(p, glam::Vec3::new(1.0, 2.0, 3.0));
+    let warnings = scene.warnings().join("\n");
+    assert!(
+        warnings.contains("light 1: its range is not used"),
+        "{warnings}"
+    );
+    // A spot light whose cones are the wrong way round is refused, named.
+    let bad = json.replace(r#""innerConeAngle":0.2"#, r#""innerConeAngle":0.7"#);
+    let err = parse_gltf(&glb(&bad, &triangle_bin([0, 1, 2])), &NoFiles, "lit")
+        .map(|_| ())
+        .unwrap_err();
+    assert!(
+        err.contains("node 1: light 0 (\"lamp\"): a spot light's outer cone"),
+        "{err}"
+    );
+}

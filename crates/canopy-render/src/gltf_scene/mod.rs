@@ -6,8 +6,7 @@
 //! buffer before it is read ([`data`]); errors name the file and the object at fault.
 //!
 //! Not read yet (each named in the scene's warnings where a file uses it): normal and
-//! emissive textures, `KHR_lights_punctual` lights, orthographic cameras, sparse
-//! accessors.
+//! emissive textures, lights' ranges, orthographic cameras, sparse accessors.
 
 mod data;
 mod materials;
@@ -93,9 +92,6 @@ pub fn add_gltf(
         if !KNOWN_EXTENSIONS.contains(&extension) {
             loader.note(format!("extension {extension} is not read"));
         }
-    }
-    if document.lights().is_some_and(|mut l| l.next().is_some()) {
-        loader.note("KHR_lights_punctual lights are not rendered yet".into());
     }
     let roots: Vec<gltf::Node<'_>> = match document.default_scene().or(document.scenes().next()) {
         Some(scene) => scene.nodes().collect(),
@@ -222,6 +218,10 @@ impl<'a> Loader<'a, '_> {
                 )),
             }
         }
+        if let Some(light) = node.light() {
+            self.place_light(&light, world)
+                .map_err(|e| format!("{named}: {e}"))?;
+        }
         if let Some(mesh) = node.mesh() {
             if world.matrix3.determinant() == 0.0 {
                 // A zero scale hides a node (a common way to switch parts off).
@@ -235,6 +235,48 @@ impl<'a> Loader<'a, '_> {
             self.place(&child, world, depth + 1, visited)?;
         }
         Ok(())
+    }
+
+    /// Places a `KHR_lights_punctual` light by `world` (it shines down its local −z).
+    fn place_light(
+        &mut self,
+        light: &gltf::khr_lights_punctual::Light<'a>,
+        world: Affine3A,
+    ) -> Result<(), String> {
+        use crate::lights::PunctualLight;
+        use gltf::khr_lights_punctual::Kind;
+        let named = format!("light {}", describe(light.index(), light.name()));
+        let strength = Vec3::from(light.color()) * light.intensity();
+        let position = world.transform_point3(Vec3::ZERO);
+        let direction = world.transform_vector3(-Vec3::Z).normalize_or_zero();
+        if light.range().is_some() {
+            self.note(format!(
+                "{named}: its range is not used (light falls off with the square of distance)"
+            ));
+        }
+        let placed = match light.kind() {
+            Kind::Point => PunctualLight::Point {
+                position,
+                intensity: strength,
+            },
+            Kind::Spot {
+                inner_cone_angle,
+                outer_cone_angle,
+            } => PunctualLight::Spot {
+                position,
+                direction,
+                intensity: strength,
+                cos_inner: inner_cone_angle.cos(),
+                cos_outer: outer_cone_angle.cos(),
+            },
+            Kind::Directional => PunctualLight::Directional {
+                direction,
+                irradiance: strength,
+            },
+        };
+        self.scene
+            .add_light(placed)
+            .map_err(|e| format!("{named}: {e}"))
     }
 
     /// Places every primitive of `mesh` by `world`.

@@ -185,7 +185,10 @@ impl Tracer<'_> {
                 let origin = offset_origin(surface, wi);
                 let shadow = Ray::new(origin, target - origin, 0.0, 1.0 - SHADOW_SHORTENING);
                 if !self.occluded(&shadow, rng, work) {
-                    let weight = power_heuristic(light.pdf, material.pdf(ray.dir, surface, wi));
+                    let weight = match light.delta {
+                        true => 1.0,
+                        false => power_heuristic(light.pdf, material.pdf(ray.dir, surface, wi)),
+                    };
                     direct += f * light.radiance * (weight / light.pdf);
                 }
             }
