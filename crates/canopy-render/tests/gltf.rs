@@ -22,14 +22,7 @@ fn render_small(path: &Path) -> f32 {
         scene.settings.height,
         scene.settings.spp,
     ) = (24, 24, 2);
-    let accel = Accel::for_scene(
-        &scene,
-        AccelKind::default(),
-        BvhWidth::default(),
-        &BuildParams::default(),
-        None,
-    );
-    let (film, _) = integrator::render(&scene, &accel, &|| {});
+    let film = render_film(&scene);
     let mut sum = 0.0;
     for y in 0..24 {
         for x in 0..24 {
@@ -320,19 +313,23 @@ fn the_fuzzers_finds_are_errors() {
     }
 }
 
+/// A 2x2 PNG of `texels`, row by row from the top.
+fn png_of(texels: [[u8; 4]; 4]) -> Vec<u8> {
+    let mut png = Vec::new();
+    image::RgbaImage::from_fn(2, 2, |x, y| image::Rgba(texels[(y * 2 + x) as usize]))
+        .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+        .unwrap();
+    png
+}
+
 /// A 2x2 PNG: red, green on the top row; blue, white below.
 fn quadrants_png() -> Vec<u8> {
-    let colours = [
+    png_of([
         [255, 0, 0, 255],
         [0, 255, 0, 255],
         [0, 0, 255, 255],
         [255, 255, 255, 255],
-    ];
-    let mut png = Vec::new();
-    image::RgbaImage::from_fn(2, 2, |x, y| image::Rgba(colours[(y * 2 + x) as usize]))
-        .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
-        .unwrap();
-    png
+    ])
 }
 
 /// The triangle with texture coordinates equal to its x and y, textured by `image`
@@ -366,23 +363,34 @@ fn data_uri(png: &[u8]) -> String {
     format!(r#"{{"uri":"data:image/png;base64,{body}"}}"#)
 }
 
-/// The base colour where a ray straight down the z axis meets (x, y) of the triangle.
-fn base_colour_at(scene: &canopy_render::Scene, x: f32, y: f32) -> glam::Vec3 {
-    use canopy_bvh::RayQuery;
-    let accel = Accel::for_scene(
+fn accel_of(scene: &canopy_render::Scene) -> Accel {
+    Accel::for_scene(
         scene,
         AccelKind::default(),
         BvhWidth::default(),
         &BuildParams::default(),
         None,
-    );
+    )
+}
+
+/// The ray straight down the z axis onto (x, y) of the triangle, and its hit.
+fn from_above(scene: &canopy_render::Scene, x: f32, y: f32) -> (canopy_bvh::Ray, canopy_bvh::Hit) {
+    use canopy_bvh::RayQuery;
     let ray = canopy_bvh::Ray::new(
         glam::Vec3::new(x, y, 1.0),
         -glam::Vec3::Z,
         0.0,
         f32::INFINITY,
     );
-    let hit = accel.intersect(&ray).expect("the ray meets the triangle");
+    let hit = accel_of(scene)
+        .intersect(&ray)
+        .expect("the ray meets the triangle");
+    (ray, hit)
+}
+
+/// The base colour where a ray straight down the z axis meets (x, y) of the triangle.
+fn base_colour_at(scene: &canopy_render::Scene, x: f32, y: f32) -> glam::Vec3 {
+    let (ray, hit) = from_above(scene, x, y);
     match scene.shade(&ray, &hit).1 {
         canopy_render::material::Material::Pbr(p) => p.base_color,
         other => panic!("{other:?}"),
@@ -471,13 +479,7 @@ fn textured_models_show_their_textures() {
     // where its factor alone would be one colour.
     let scene = load_scene(models().join("BoxTextured.glb").to_str().unwrap()).unwrap();
     assert!(scene.is_textured());
-    let accel = Accel::for_scene(
-        &scene,
-        AccelKind::default(),
-        BvhWidth::default(),
-        &BuildParams::default(),
-        None,
-    );
+    let accel = accel_of(&scene);
     let camera = canopy_render::camera::Camera::new(&scene.camera, 64, 64);
     let mut colours = Vec::new();
     for y in 0..64 {
@@ -511,16 +513,12 @@ fn textured_models_show_their_textures() {
 /// The textured triangle with alpha mode `mode` (and `cutoff`), base colour alpha
 /// `alpha`, and its texture's alpha 1 in the top half and 0 in the bottom half.
 fn see_through_triangle(mode: &str, alpha: f32) -> canopy_render::Scene {
-    let colours = [
+    let png = png_of([
         [255, 0, 0, 255],
         [0, 255, 0, 255],
         [0, 0, 255, 0],
         [255, 255, 255, 0],
-    ];
-    let mut png = Vec::new();
-    image::RgbaImage::from_fn(2, 2, |x, y| image::Rgba(colours[(y * 2 + x) as usize]))
-        .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
-        .unwrap();
+    ]);
     let (json, bin) = textured_triangle(&data_uri(&png), "");
     let json = json
         .replace("[1,1,0.5,1]", &format!("[1,1,0.5,{alpha}]"))
@@ -535,14 +533,7 @@ fn see_through_triangle(mode: &str, alpha: f32) -> canopy_render::Scene {
 }
 
 fn render_film(scene: &canopy_render::Scene) -> canopy_render::Film {
-    let accel = Accel::for_scene(
-        scene,
-        AccelKind::default(),
-        BvhWidth::default(),
-        &BuildParams::default(),
-        None,
-    );
-    integrator::render(scene, &accel, &|| {}).0
+    integrator::render(scene, &accel_of(scene), &|| {}).0
 }
 
 #[test]
@@ -550,24 +541,7 @@ fn masked_surfaces_are_cut_out_by_their_alpha() {
     let masked = see_through_triangle(r#""alphaMode":"MASK","alphaCutoff":0.5,"#, 1.0);
     assert!(masked.has_see_through() && masked.warnings().iter().all(|w| !w.contains("alpha")));
     // The texture's top half stops rays, its bottom half does not (no number drawn).
-    let stops = |x: f32, y: f32| {
-        use canopy_bvh::RayQuery;
-        let accel = Accel::for_scene(
-            &masked,
-            AccelKind::default(),
-            BvhWidth::default(),
-            &BuildParams::default(),
-            None,
-        );
-        let ray = canopy_bvh::Ray::new(
-            glam::Vec3::new(x, y, 1.0),
-            -glam::Vec3::Z,
-            0.0,
-            f32::INFINITY,
-        );
-        let hit = accel.intersect(&ray).unwrap();
-        masked.stops_ray(&hit, || unreachable!())
-    };
+    let stops = |x, y| masked.stops_ray(&from_above(&masked, x, y).1, || unreachable!());
     assert!(stops(0.25, 0.25) && !stops(0.2, 0.75));
     // Cut out everywhere (alpha factor 0), the triangle leaves the image it would have
     // without it, bit for bit, with light sampling's shadow rays and without.

@@ -99,20 +99,8 @@ impl Ggx {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::material::tests::stratified_sphere as sphere;
     use crate::sampling::uniform_sphere;
-
-    /// Stratified directions over the whole sphere, each standing for `4π / n²` sr.
-    fn sphere(n: usize) -> impl Iterator<Item = Vec3> {
-        (0..n * n).map(move |k| {
-            let u = Vec2::new(
-                ((k / n) as f32 + 0.5) / n as f32,
-                ((k % n) as f32 + 0.5) / n as f32,
-            );
-            // Poles on ±x, so that the peak about +z falls where the cells are fine.
-            let w = uniform_sphere(u);
-            Vec3::new(w.z, w.x, w.y)
-        })
-    }
 
     #[test]
     fn projected_normal_density_integrates_to_one() {

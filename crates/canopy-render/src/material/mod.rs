@@ -238,8 +238,21 @@ fn schlick(cos_theta: f32, eta: f32) -> f32 {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
+
+    /// Stratified directions over the whole sphere, equal-area cells of `4π / n²` sr,
+    /// with the grid's poles on ±x so that lobes about +z fall where its cells are fine.
+    pub(crate) fn stratified_sphere(n: usize) -> impl Iterator<Item = Vec3> {
+        (0..n * n).map(move |k| {
+            let u = Vec2::new(
+                ((k / n) as f32 + 0.5) / n as f32,
+                ((k % n) as f32 + 0.5) / n as f32,
+            );
+            let w = crate::sampling::uniform_sphere(u);
+            Vec3::new(w.z, w.x, w.y)
+        })
+    }
 
     fn surface_facing_up() -> Surface {
         Surface {

@@ -118,6 +118,7 @@ fn cosine_hemisphere(u: Vec2) -> Vec3 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::material::tests::stratified_sphere as sphere;
     use crate::rng::Rng;
     use crate::sampling::uniform_sphere;
 
@@ -133,19 +134,6 @@ mod tests {
             }
         }
         all
-    }
-
-    /// Stratified directions over the whole sphere, equal-area cells of `4π / n²` sr,
-    /// with the grid's poles on ±x so that lobes about +z fall where its cells are fine.
-    fn sphere(n: usize) -> impl Iterator<Item = Vec3> {
-        (0..n * n).map(move |k| {
-            let u = Vec2::new(
-                ((k / n) as f32 + 0.5) / n as f32,
-                ((k % n) as f32 + 0.5) / n as f32,
-            );
-            let w = uniform_sphere(u);
-            Vec3::new(w.z, w.x, w.y)
-        })
     }
 
     fn random_view(rng: &mut Rng) -> Vec3 {
