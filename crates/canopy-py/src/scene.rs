@@ -224,6 +224,52 @@ impl PyScene {
             .map_err(refused("material"))
     }
 
+    /// Adds a point light, or a spot light where `spot` gives (direction, inner and
+    /// outer cone angles in degrees).
+    #[pyo3(signature = (position, intensity, spot=None))]
+    fn add_point_light(
+        &mut self,
+        position: [f32; 3],
+        intensity: [f32; 3],
+        spot: Option<([f32; 3], f32, f32)>,
+    ) -> PyResult<()> {
+        use canopy_render::lights::PunctualLight;
+        let light = match spot {
+            None => PunctualLight::Point {
+                position: position.into(),
+                intensity: intensity.into(),
+            },
+            Some((direction, inner, outer)) => PunctualLight::Spot {
+                position: position.into(),
+                direction: Vec3::from(direction).try_normalize().ok_or_else(|| {
+                    PyValueError::new_err("add_spot_light: `direction` must be finite and not zero")
+                })?,
+                intensity: intensity.into(),
+                cos_inner: inner.to_radians().cos(),
+                cos_outer: outer.to_radians().cos(),
+            },
+        };
+        let what = if spot.is_some() {
+            "add_spot_light"
+        } else {
+            "add_point_light"
+        };
+        self.scene.add_light(light).map_err(refused(what))
+    }
+
+    /// Adds light from infinitely far away travelling along `direction`.
+    fn add_directional_light(&mut self, direction: [f32; 3], irradiance: [f32; 3]) -> PyResult<()> {
+        let direction = Vec3::from(direction).try_normalize().ok_or_else(|| {
+            PyValueError::new_err("add_directional_light: `direction` must be finite and not zero")
+        })?;
+        self.scene
+            .add_light(canopy_render::lights::PunctualLight::Directional {
+                direction,
+                irradiance: irradiance.into(),
+            })
+            .map_err(refused("add_directional_light"))
+    }
+
     fn add_sphere(
         &mut self,
         center: [f32; 3],

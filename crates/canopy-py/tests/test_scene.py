@@ -227,3 +227,46 @@ def test_materials_are_evaluated_in_the_surface_frame():
     assert not value.any() and not pdf.any()
     with pytest.raises(ValueError, match="wo has 500 rows and wi 2"):
         canopy.eval_material(gold, wo, wi[:2])
+
+
+def test_point_spot_and_directional_lights_light_the_scene_as_the_scene_file_does(tmp_path):
+    path = tmp_path / "lit.toml"
+    path.write_text("""
+background = [0, 0, 0]
+camera = { look_from = [0, 4, 6], look_at = [0, 0, 0] }
+render = { width = 24, height = 16, spp = 4 }
+[[cuboids]]
+min = [-5, -1, -5]
+max = [5, 0, 5]
+material = { type = "pbr", base_color = [0.7, 0.7, 0.7], roughness = 0.6 }
+[[lights]]
+type = "point"
+position = [0, 2, 0]
+intensity = [5, 5, 5]
+[[lights]]
+type = "spot"
+position = [2, 3, 0]
+direction = [-1, -2, 0]
+intensity = [10, 8, 6]
+inner_angle = 10
+outer_angle = 30
+[[lights]]
+type = "directional"
+direction = [1, -2, 0]
+irradiance = [0.5, 0.5, 0.5]
+""")
+    from_file = canopy.render(str(path))
+    scene = canopy.Scene(size=(24, 16), spp=4)
+    scene.camera(look_from=(0, 4, 6), look_at=(0, 0, 0))
+    scene.background((0, 0, 0))
+    scene.add_box((-5, -1, -5), (5, 0, 5), material=canopy.pbr((0.7, 0.7, 0.7), roughness=0.6))
+    scene.add_point_light((0, 2, 0), (5, 5, 5))
+    scene.add_spot_light((2, 3, 0), (-1, -2, 0), (10, 8, 6), inner_angle=10, outer_angle=30)
+    scene.add_directional_light((1, -2, 0), (0.5, 0.5, 0.5))
+    image = canopy.render(scene)
+    assert image.mean() > 0.01
+    np.testing.assert_array_equal(image, from_file)
+    with pytest.raises(ValueError, match="outer cone must be wider"):
+        scene.add_spot_light((0, 1, 0), (0, -1, 0), (1, 1, 1), inner_angle=40, outer_angle=30)
+    with pytest.raises(ValueError, match="add_directional_light: `direction`"):
+        scene.add_directional_light((0, 0, 0), (1, 1, 1))

@@ -17,6 +17,7 @@ use std::sync::Arc;
 use toml::Spanned;
 
 pub(crate) mod instances;
+mod lights;
 mod models;
 pub use instances::MAX_INSTANCES;
 
@@ -103,6 +104,9 @@ struct SceneDoc {
     /// Whole glTF models, each placed by a transform.
     #[serde(default)]
     gltf: Vec<Spanned<models::GltfDoc>>,
+    /// Point, spot and directional lights.
+    #[serde(default)]
+    lights: Vec<Spanned<lights::LightDoc>>,
 }
 
 /// `background = { environment = "file.hdr", rotate = 90, strength = 1 }`
@@ -325,6 +329,9 @@ pub fn parse_scene(source: &str, file: &str, assets: &dyn Assets) -> Result<Scen
     }
     for model in &doc.gltf {
         builder.gltf(model, assets)?;
+    }
+    for light in &doc.lights {
+        builder.light(light)?;
     }
     Ok(builder.scene)
 }
@@ -688,6 +695,47 @@ mod tests {
 
     fn error(body: &str) -> String {
         parse(body).unwrap_err().to_string()
+    }
+
+    #[test]
+    fn lights_of_every_kind_are_read_and_bad_ones_named_by_line() {
+        let scene = parse(
+            "[[lights]]\ntype = \"point\"\nposition = [0, 4, 0]\nintensity = [20, 20, 20]\n\
+             [[lights]]\ntype = \"spot\"\nposition = [2, 3, 0]\ndirection = [0, -2, 0]\n\
+             intensity = [1, 1, 1]\ninner_angle = 15\nouter_angle = 30\n\
+             [[lights]]\ntype = \"directional\"\ndirection = [0, 0, -3]\nirradiance = [2, 2, 2]\n",
+        )
+        .unwrap();
+        use crate::lights::PunctualLight;
+        assert!(
+            matches!(scene.lights[0], PunctualLight::Point { position, .. } if position == Vec3::new(0.0, 4.0, 0.0))
+        );
+        let PunctualLight::Spot {
+            direction,
+            cos_inner,
+            cos_outer,
+            ..
+        } = scene.lights[1]
+        else {
+            panic!("{:?}", scene.lights[1]);
+        };
+        assert_eq!(direction, Vec3::NEG_Y);
+        assert!((cos_inner - 15f32.to_radians().cos()).abs() < 1e-6);
+        assert!((cos_outer - 30f32.to_radians().cos()).abs() < 1e-6);
+        assert!(
+            matches!(scene.lights[2], PunctualLight::Directional { direction, .. } if direction == Vec3::NEG_Z)
+        );
+        let e = error("\n[[lights]]\ntype = \"spot\"\nposition = [0, 0, 0]\ndirection = [0, -1, 0]\nintensity = [1, 1, 1]\ninner_angle = 50\n");
+        assert!(
+            e.contains("test.toml:5") && e.contains("outer cone must be wider"),
+            "{e}"
+        );
+        let e = error(
+            "[[lights]]\ntype = \"directional\"\ndirection = [0, 0, 0]\nirradiance = [1, 1, 1]\n",
+        );
+        assert!(e.contains("`direction` must be finite and not zero"), "{e}");
+        let e = error("[[lights]]\ntype = \"area\"\n");
+        assert!(e.contains("area"), "{e}");
     }
 
     #[test]

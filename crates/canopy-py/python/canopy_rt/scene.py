@@ -185,6 +185,25 @@ class Scene:
             raise TypeError(f"a material is a dict such as canopy_rt.lambertian((0.5, 0.5, 0.5)) or an index, not {type(material).__name__}")
         return material
 
+    def add_point_light(self, position, intensity) -> None:
+        """Adds a point light of ``intensity`` (r, g, b): a surface facing it at distance d
+        receives irradiance intensity / d² (a white sky gives an open floor π)."""
+        self._native.add_point_light(_vec3(position, "position"), _vec3(intensity, "intensity"))
+
+    def add_spot_light(self, position, direction, intensity, *, inner_angle: float = 0.0,
+                       outer_angle: float = 45.0) -> None:
+        """Adds a spot light shining along ``direction``: full ``intensity`` within
+        ``inner_angle`` degrees of it, fading to nothing at ``outer_angle``."""
+        self._native.add_point_light(
+            _vec3(position, "position"), _vec3(intensity, "intensity"),
+            (_vec3(direction, "direction"), float(inner_angle), float(outer_angle)),
+        )
+
+    def add_directional_light(self, direction, irradiance) -> None:
+        """Adds light from infinitely far away travelling along ``direction``, bringing
+        ``irradiance`` (r, g, b) to a surface facing it."""
+        self._native.add_directional_light(_vec3(direction, "direction"), _vec3(irradiance, "irradiance"))
+
     def add_sphere(self, center, radius: float, *, material: Material) -> None:
         self._native.add_sphere(_vec3(center, "center"), float(radius), self._material(material))
 
