@@ -5,9 +5,9 @@ use crate::camera::CameraSpec;
 use crate::geometry::{Shape, Surface, Triangle};
 use crate::lights::PunctualLight;
 use crate::material::Material;
-use crate::texture::{Image, MaterialMaps};
+use crate::texture::{Image, MaterialMaps, NormalMap};
 use canopy_bvh::{Aabb, Hit, Ray, TriangleMesh};
-use glam::{Affine3A, Vec2, Vec3};
+use glam::{Affine3A, Vec2, Vec3, Vec4};
 use std::path::PathBuf;
 use std::sync::Arc;
 
@@ -137,6 +137,9 @@ pub struct SceneMesh {
     pub normals: Vec<Vec3>,
     /// Per-vertex texture coordinates: empty, or one per vertex.
     pub uvs: Vec<Vec2>,
+    /// Tangent (xyz) and bitangent sign (w) at each corner of each triangle, for normal
+    /// maps: empty, or one triple per triangle.
+    pub tangents: Vec<[Vec4; 3]>,
 }
 
 /// A mesh placed in the world: by an affine transform (mirrors and non-uniform scale
@@ -270,15 +273,64 @@ impl Scene {
     /// the surface has texture coordinates; without them a material is its factors).
     #[inline]
     pub fn shade(&self, ray: &Ray, hit: &Hit) -> (Surface, Material) {
-        let (surface, index) = self.hit_surface(ray, hit);
+        let (mut surface, index) = self.hit_surface(ray, hit);
         let material = self.materials[index as usize];
-        let textured = match self.material_maps.get(index as usize) {
-            Some(maps) if !maps.is_empty() => self
-                .hit_uv(hit)
-                .map(|uv| maps.apply(material, &self.images, uv)),
-            _ => None,
+        let Some(maps) = self
+            .material_maps
+            .get(index as usize)
+            .filter(|m| !m.is_empty())
+        else {
+            return (surface, material);
         };
-        (surface, textured.unwrap_or(material))
+        let Some(uv) = self.hit_uv(hit) else {
+            return (surface, material);
+        };
+        if let Some(map) = &maps.normal {
+            if let Some(bent) = self.normal_mapped(map, hit, uv, &surface) {
+                surface.shading_normal = bent;
+            }
+        }
+        (surface, maps.apply(material, &self.images, uv))
+    }
+
+    /// The shading normal at `hit` bent by `map`, where the mesh has tangents and the
+    /// bent normal stays on the side of the surface the shading normal is on.
+    fn normal_mapped(
+        &self,
+        map: &NormalMap,
+        hit: &Hit,
+        uv: Vec2,
+        surface: &Surface,
+    ) -> Option<Vec3> {
+        let instance = self.instance_of(hit.inst)?;
+        let mesh = &self.meshes[instance.mesh as usize];
+        let corners = mesh.tangents.get(hit.prim as usize)?;
+        let weights = [1.0 - hit.u - hit.v, hit.u, hit.v];
+        let tangent: Vec3 = (0..3).map(|i| weights[i] * corners[i].truncate()).sum();
+        // The bitangent in the mesh's own space, from its own normal there, so that the
+        // instance's transform (mirrors included) carries both as it carries the mesh.
+        let indices = mesh.mesh.indices()[hit.prim as usize];
+        let local_normal = match mesh.normals.is_empty() {
+            true => {
+                let [a, b, c] = indices.map(|i| mesh.mesh.vertices()[i as usize]);
+                (b - a).cross(c - a)
+            }
+            false => (0..3)
+                .map(|i| weights[i] * mesh.normals[indices[i] as usize])
+                .sum(),
+        };
+        let bitangent = corners[0].w * local_normal.normalize_or_zero().cross(tangent);
+        let to_world = instance.to_world.matrix3;
+        let bent = map.perturb(
+            &self.images,
+            uv,
+            surface.shading_normal,
+            to_world * tangent,
+            to_world * bitangent,
+        )?;
+        (bent.dot(surface.geometric_normal) * surface.shading_normal.dot(surface.geometric_normal)
+            > 0.0)
+            .then_some(bent)
     }
 
     /// The texture coordinates where `hit` lies, for a mesh instance with them.

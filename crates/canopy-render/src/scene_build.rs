@@ -298,6 +298,7 @@ impl Scene {
             mesh: Arc::new(mesh),
             normals: data.normals,
             uvs: Vec::new(),
+            tangents: Vec::new(),
         });
         Ok(self.meshes.len() as u32 - 1)
     }

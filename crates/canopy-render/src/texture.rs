@@ -194,21 +194,59 @@ pub enum Coverage {
     Blend { alpha: f32 },
 }
 
+/// A tangent-space normal map: +X along the tangent, +Y along the bitangent, +Z along
+/// the surface normal, each stored as (c + 1) / 2; `scale` scales X and Y.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NormalMap {
+    pub texture: TextureRef,
+    pub scale: f32,
+}
+
+impl NormalMap {
+    /// The shading normal `normal` (unit) bent by the map at `uv`, in the frame of the
+    /// surface's `tangent` and `bitangent` (any length, not yet orthogonal to it); `None`
+    /// where the frame is degenerate.
+    pub fn perturb(
+        &self,
+        images: &[Arc<Image>],
+        uv: Vec2,
+        normal: Vec3,
+        tangent: Vec3,
+        bitangent: Vec3,
+    ) -> Option<Vec3> {
+        let t = (tangent - normal * normal.dot(tangent)).try_normalize()?;
+        let b =
+            (bitangent - normal * normal.dot(bitangent) - t * t.dot(bitangent)).try_normalize()?;
+        let c = self.texture.lookup(images, uv, false);
+        let local = Vec3::new(
+            (2.0 * c.x - 1.0) * self.scale,
+            (2.0 * c.y - 1.0) * self.scale,
+            2.0 * c.z - 1.0,
+        );
+        (t * local.x + b * local.y + normal * local.z).try_normalize()
+    }
+}
+
 /// The textures a material's parameters are scaled by (glTF's metallic-roughness slots),
-/// and its coverage where it is not opaque.
+/// its normal map, and its coverage where it is not opaque.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct MaterialMaps {
     /// sRGB colour times the base colour factor.
     pub base_color: Option<TextureRef>,
     /// Roughness in green and metallic in blue, times their factors (linear).
     pub metallic_roughness: Option<TextureRef>,
+    /// Bends the shading normal (meshes with tangents only).
+    pub normal: Option<NormalMap>,
     /// `None`: opaque.
     pub coverage: Option<Coverage>,
 }
 
 impl MaterialMaps {
     pub fn is_empty(&self) -> bool {
-        self.base_color.is_none() && self.metallic_roughness.is_none() && self.coverage.is_none()
+        self.base_color.is_none()
+            && self.metallic_roughness.is_none()
+            && self.normal.is_none()
+            && self.coverage.is_none()
     }
 
     /// Whether a ray meeting the surface at `uv` (if it has texture coordinates) stops
@@ -353,6 +391,7 @@ mod tests {
         let maps = MaterialMaps {
             base_color: Some(plain(Wrap::Repeat)),
             metallic_roughness: Some(plain(Wrap::Repeat)),
+            normal: None,
             coverage: None,
         };
         let m = Material::Pbr(crate::material::Pbr {

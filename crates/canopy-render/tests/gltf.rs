@@ -81,11 +81,9 @@ fn a_camera_in_the_file_is_used_alpha_modes_are_read_and_what_is_not_is_named() 
         "the file's camera looks at the duck"
     );
     let alpha = load_scene(models().join("AlphaBlendModeTest.glb").to_str().unwrap()).unwrap();
-    let warnings = alpha.warnings().join("\n");
-    assert!(
-        warnings.contains("normal maps are not rendered yet"),
-        "{warnings}"
-    );
+    // The bed's normal map is read, with tangents generated for its mesh.
+    assert!(alpha.material_maps.iter().any(|m| m.normal.is_some()));
+    assert!(alpha.meshes.iter().any(|m| !m.tangents.is_empty()));
     // Its alpha modes are read: one blended material, masks with three cutoffs.
     use canopy_render::texture::Coverage;
     let coverages: Vec<Coverage> = alpha
@@ -640,4 +638,63 @@ fn punctual_lights_are_placed_by_their_nodes() {
         err.contains("node 1: light 0 (\"lamp\"): a spot light's outer cone"),
         "{err}"
     );
+}
+
+/// The textured triangle (u along +x, v along +y) with a normal map of one `texel`
+/// everywhere; returns the shading normal a ray from above meets.
+fn normal_mapped_at_centre(texel: [u8; 4], tangents: bool) -> glam::Vec3 {
+    let (json, mut bin) = textured_triangle(&data_uri(&png_of([texel; 4])), "");
+    let mut json = json.replace(
+        r#""pbrMetallicRoughness":"#,
+        r#""normalTexture":{"index":0,"scale":1},"pbrMetallicRoughness":"#,
+    );
+    if tangents {
+        // The file's own tangents, as an exporter writes them for this triangle: +x (u),
+        // and handedness −1, since cross(normal, tangent) = +y is down the image here.
+        for _ in 0..3 {
+            for v in [1.0f32, 0.0, 0.0, -1.0] {
+                bin.extend(v.to_le_bytes());
+            }
+        }
+        json = json
+            .replace(r#""TEXCOORD_0":2}"#, r#""TEXCOORD_0":2,"TANGENT":3}"#)
+            .replace(r#""byteLength":68}]"#, r#""byteLength":116}]"#)
+            .replace(
+                r#"{"buffer":0,"byteOffset":44,"byteLength":24}]"#,
+                r#"{"buffer":0,"byteOffset":44,"byteLength":24},{"buffer":0,"byteOffset":68,"byteLength":48}]"#,
+            )
+            .replace(
+                r#""count":3,"type":"VEC2"}]"#,
+                r#""count":3,"type":"VEC2"},{"bufferView":3,"componentType":5126,"count":3,"type":"VEC4"}]"#,
+            );
+    }
+    let scene = parse_gltf(&glb(&json, &bin), &NoFiles, "tri").unwrap();
+    assert_eq!(
+        scene.meshes[0].tangents.len(),
+        1,
+        "tangents for the one triangle"
+    );
+    let (ray, hit) = from_above(&scene, 0.25, 0.25);
+    scene.shade(&ray, &hit).0.shading_normal
+}
+
+#[test]
+fn normal_maps_bend_the_shading_normal_in_the_tangent_frame() {
+    for tangents in [false, true] {
+        // A flat map leaves the normal as it is.
+        let flat = normal_mapped_at_centre([128, 128, 255, 255], tangents);
+        assert!((flat - glam::Vec3::Z).length() < 0.01, "{flat}");
+        // +X of the map is the tangent: along +u, here +x.
+        let along_u = normal_mapped_at_centre([218, 128, 218, 255], tangents);
+        assert!(
+            along_u.x > 0.5 && along_u.y.abs() < 0.01 && along_u.z > 0.5,
+            "{along_u}"
+        );
+        // +Y of the map points up its image, towards smaller v: here −y.
+        let up_image = normal_mapped_at_centre([128, 218, 218, 255], tangents);
+        assert!(
+            up_image.y < -0.5 && up_image.x.abs() < 0.01,
+            "{tangents}: {up_image}"
+        );
+    }
 }

@@ -114,6 +114,7 @@ fn scene(integrator: Integrator) -> Scene {
             mesh: Arc::new(cube()),
             normals: Vec::new(),
             uvs: Vec::new(),
+            tangents: Vec::new(),
         }],
         instances,
         ..Scene::default()

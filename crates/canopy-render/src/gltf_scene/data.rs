@@ -118,6 +118,12 @@ pub(super) const NORMALS: Expect = Expect {
     dimensions: Dimensions::Vec3,
 };
 
+pub(super) const TANGENTS: Expect = Expect {
+    what: "tangents",
+    types: &[DataType::F32],
+    dimensions: Dimensions::Vec4,
+};
+
 pub(super) const TEXCOORDS: Expect = Expect {
     what: "texture coordinates",
     types: &[DataType::F32, DataType::U8, DataType::U16],

@@ -15,9 +15,6 @@ pub(super) fn convert(material: &gltf::Material<'_>, notes: &mut Vec<String>) ->
         (None, _) => "the default material".to_owned(),
     };
     let pbr = material.pbr_metallic_roughness();
-    if material.normal_texture().is_some() {
-        notes.push(format!("{named}: normal maps are not rendered yet"));
-    }
     if material.emissive_texture().is_some() {
         notes.push(format!(
             "{named}: emissive textures are not rendered yet (its emissive factor is)"

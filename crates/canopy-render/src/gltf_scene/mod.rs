@@ -15,7 +15,7 @@ mod textures;
 use crate::camera::CameraSpec;
 use crate::scene::Scene;
 use crate::scene_file::Assets;
-use data::{check_accessor, describe, Buffers, INDICES, NORMALS, POSITIONS, TEXCOORDS};
+use data::{check_accessor, describe, Buffers, INDICES, NORMALS, POSITIONS, TANGENTS, TEXCOORDS};
 use glam::{Affine3A, Mat4, Vec2, Vec3};
 use gltf::mesh::Mode;
 use std::collections::HashMap;
@@ -393,9 +393,56 @@ impl<'a> Loader<'a, '_> {
             .scene
             .add_mesh(&name, positions, triangles, normals, false)?;
         if !uvs.is_empty() {
+            if primitive.material().normal_texture().is_some() {
+                self.tangents(primitive, mesh, &uvs)?;
+            }
             self.scene.set_mesh_uvs(mesh, uvs)?;
         }
         Ok(Some(mesh))
+    }
+
+    /// Tangents of mesh `mesh` (read from `primitive`) for its material's normal map:
+    /// the file's `TANGENT` attribute, or MikkTSpace's.
+    fn tangents(
+        &mut self,
+        primitive: &gltf::Primitive<'a>,
+        mesh: u32,
+        uvs: &[Vec2],
+    ) -> Result<(), String> {
+        let buffers = self.buffers;
+        let target = &self.scene.meshes[mesh as usize];
+        let triangles = target.mesh.indices();
+        let tangents = match primitive.get(&gltf::Semantic::Tangents) {
+            Some(accessor) => {
+                check_accessor(&accessor, &TANGENTS, buffers)?;
+                let count = target.mesh.vertices().len();
+                if accessor.count() != count {
+                    return Err(format!(
+                        "{} tangents for {count} positions",
+                        accessor.count()
+                    ));
+                }
+                let reader = primitive.reader(|b| buffers.get(b));
+                let per_vertex: Vec<glam::Vec4> = reader
+                    .read_tangents()
+                    .ok_or("its tangents cannot be read")?
+                    .map(glam::Vec4::from)
+                    .collect();
+                triangles
+                    .iter()
+                    .map(|t| t.map(|i| per_vertex[i as usize]))
+                    .collect()
+            }
+            None => crate::mesh::tangents::generate(
+                target.mesh.vertices(),
+                &target.normals,
+                uvs,
+                triangles,
+            )
+            .ok_or("its tangents cannot be generated from its texture coordinates")?,
+        };
+        self.scene.meshes[mesh as usize].tangents = tangents;
+        Ok(())
     }
 
     /// canopy's material for `material`, converted once.
@@ -421,9 +468,19 @@ impl<'a> Loader<'a, '_> {
                     .map_err(|e| format!("{named}: {e}")),
                 None => Ok(None),
             };
+            let base_color = texture(pbr.base_color_texture())?;
+            let metallic_roughness = texture(pbr.metallic_roughness_texture())?;
+            let normal = match material.normal_texture() {
+                Some(normal) => self
+                    .images
+                    .normal_map(self.scene, self.buffers, self.assets, &normal, &mut notes)
+                    .map_err(|e| format!("{named}: {e}"))?,
+                None => None,
+            };
             let maps = crate::texture::MaterialMaps {
-                base_color: texture(pbr.base_color_texture())?,
-                metallic_roughness: texture(pbr.metallic_roughness_texture())?,
+                base_color,
+                metallic_roughness,
+                normal,
                 coverage: materials::coverage(material),
             };
             if !maps.is_empty() {

@@ -5,7 +5,7 @@
 use super::data::{decode_data_uri, describe, percent_decoded, Buffers};
 use crate::scene::Scene;
 use crate::scene_file::Assets;
-use crate::texture::{Image, TextureRef, UvTransform, Wrap};
+use crate::texture::{Image, NormalMap, TextureRef, UvTransform, Wrap};
 use glam::Vec2;
 use gltf::texture::WrappingMode;
 use std::collections::HashMap;
@@ -25,13 +25,63 @@ impl Images {
         info: &gltf::texture::Info<'_>,
         notes: &mut Vec<String>,
     ) -> Result<Option<TextureRef>, String> {
-        let texture = info.texture();
-        let named = format!("texture {}", describe(texture.index(), texture.name()));
         let transform = info.texture_transform();
         let set = transform
             .as_ref()
             .and_then(|t| t.tex_coord())
             .unwrap_or(info.tex_coord());
+        let transform = transform.map(|t| UvTransform {
+            offset: Vec2::from(t.offset()),
+            rotation: t.rotation(),
+            scale: Vec2::from(t.scale()),
+        });
+        self.source(
+            scene,
+            buffers,
+            assets,
+            &info.texture(),
+            set,
+            transform,
+            notes,
+        )
+    }
+
+    /// A normal map, `scale` included.
+    pub fn normal_map(
+        &mut self,
+        scene: &mut Scene,
+        buffers: &Buffers,
+        assets: &dyn Assets,
+        normal: &gltf::material::NormalTexture<'_>,
+        notes: &mut Vec<String>,
+    ) -> Result<Option<NormalMap>, String> {
+        let texture = self.source(
+            scene,
+            buffers,
+            assets,
+            &normal.texture(),
+            normal.tex_coord(),
+            None,
+            notes,
+        )?;
+        Ok(texture.map(|texture| NormalMap {
+            texture,
+            scale: normal.scale(),
+        }))
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn source(
+        &mut self,
+        scene: &mut Scene,
+        buffers: &Buffers,
+        assets: &dyn Assets,
+        texture: &gltf::Texture<'_>,
+        set: u32,
+        transform: Option<UvTransform>,
+        notes: &mut Vec<String>,
+    ) -> Result<Option<TextureRef>, String> {
+        let named = format!("texture {}", describe(texture.index(), texture.name()));
         if set != 0 {
             notes.push(format!(
                 "{named} reads TEXCOORD_{set}; only TEXCOORD_0 is read (texture left out)"
@@ -48,11 +98,6 @@ impl Images {
             }
         };
         let sampler = texture.sampler();
-        let transform = transform.map(|t| UvTransform {
-            offset: Vec2::from(t.offset()),
-            rotation: t.rotation(),
-            scale: Vec2::from(t.scale()),
-        });
         Ok(Some(TextureRef {
             image,
             wrap: [wrap(sampler.wrap_s()), wrap(sampler.wrap_t())],

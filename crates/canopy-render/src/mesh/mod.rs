@@ -2,6 +2,7 @@
 
 mod obj;
 mod ply;
+pub mod tangents;
 
 use glam::{Mat4, Vec3};
 use thiserror::Error;

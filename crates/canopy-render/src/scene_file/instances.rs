@@ -136,6 +136,7 @@ impl SceneBuilder<'_> {
             mesh: Arc::new(mesh),
             normals: data.normals,
             uvs: Vec::new(),
+            tangents: Vec::new(),
         });
         Ok(())
     }
