@@ -1,6 +1,7 @@
-"""canopy_rt.distributed on a real local Ray instance (two CPUs): tiles rendered by Ray
-tasks give canopy's single-process image bit for bit, scene files ship with the files
-they read, and bad set-ups are refused before any work."""
+"""canopy_rt.distributed on a real local Ray cluster of two nodes (one CPU each): tiles
+rendered by Ray tasks give canopy's single-process image bit for bit, scene files ship
+with the files they read, a worker killed mid-task is replaced without changing the
+image, a killed driver resumes, and bad set-ups are refused before any work."""
 
 import numpy as np
 import pytest
@@ -14,11 +15,48 @@ ray = pytest.importorskip("ray")
 
 @pytest.fixture(scope="module", autouse=True)
 def local_ray():
-    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    """A Ray cluster of two nodes on this machine, one CPU each (a head and a second
+    node, as `ray start --head` and `ray start --address` make them), shut down at the
+    end whatever happens."""
+    from ray.cluster_utils import Cluster
+
+    cluster = Cluster(initialize_head=True, head_node_args=dict(num_cpus=1, include_dashboard=False))
     try:
-        yield
+        cluster.add_node(num_cpus=1)
+        ray.init(address=cluster.address, include_dashboard=False, log_to_driver=False)
+        cluster.wait_for_nodes()
+        yield cluster
     finally:
         ray.shutdown()
+        cluster.shutdown()
+
+
+def test_the_cluster_has_two_nodes_and_tiles_run_on_both():
+    alive = [n for n in ray.nodes() if n["Alive"]]
+    assert len(alive) == 2 and all(n["Resources"]["CPU"] == 1 for n in alive)
+
+    # Two one-CPU tasks held running side by side must be on different nodes.
+    @ray.remote(num_cpus=1)
+    def node_while_both_run(barrier):
+        ray.get(barrier.arrive.remote())
+        while ray.get(barrier.count.remote()) < 2:
+            pass
+        return ray.get_runtime_context().get_node_id()
+
+    @ray.remote(num_cpus=0)
+    class Barrier:
+        def __init__(self):
+            self.n = 0
+
+        def arrive(self):
+            self.n += 1
+
+        def count(self):
+            return self.n
+
+    barrier = Barrier.remote()
+    nodes = ray.get([node_while_both_run.remote(barrier) for _ in range(2)])
+    assert len(set(nodes)) == 2
 
 
 @pytest.fixture
@@ -172,3 +210,47 @@ def test_a_built_in_scene_is_not_taken_for_a_file_of_its_name(tmp_path, monkeypa
     monkeypatch.chdir(tmp_path)
     (tmp_path / "paper-3").write_text("not a scene file")
     assert distributed._bundle("paper-3") == ("paper-3", {})
+
+
+def _render_tile_workers():
+    """Pids of the Ray workers running a tile now (Ray titles a busy worker
+    `ray::<task>`)."""
+    import os
+
+    found = []
+    for pid in filter(str.isdigit, os.listdir("/proc")):
+        try:
+            with open(f"/proc/{pid}/cmdline", "rb") as f:
+                title = f.read()
+        except OSError:
+            continue
+        if title.startswith(b"ray::render_tile"):
+            found.append(int(pid))
+    return found
+
+
+@pytest.mark.skipif(not __import__("os").path.isdir("/proc"), reason="finds workers through /proc")
+def test_a_worker_killed_mid_task_is_replaced_and_the_image_is_the_same():
+    import os
+    import signal
+    import threading
+    import time
+
+    settings = dict(size=(32, 16), spp=2048, seed=5)
+    result = {}
+    driver = threading.Thread(target=lambda: result.update(
+        image=distributed.render("paper-3", tile=16, **settings)))
+    driver.start()
+    # Killed once seen rendering (an event, not a time: the processes are watched).
+    killed = None
+    deadline = time.monotonic() + 240
+    while killed is None and driver.is_alive() and time.monotonic() < deadline:
+        for pid in _render_tile_workers():
+            os.kill(pid, signal.SIGKILL)
+            killed = pid
+            break
+        time.sleep(0.005)
+    driver.join(300)
+    assert killed is not None, "no worker was seen rendering"
+    assert not driver.is_alive() and "image" in result
+    np.testing.assert_array_equal(result["image"], canopy.render("paper-3", **settings))
