@@ -39,11 +39,11 @@ pub enum PunctualLight {
 impl PunctualLight {
     /// Why it cannot be rendered, if it cannot.
     pub fn check(&self) -> Result<(), String> {
-        let (strength, positions, directions) = match *self {
+        let (strength, position, direction) = match *self {
             PunctualLight::Point {
                 position,
                 intensity,
-            } => (intensity, vec![position], vec![]),
+            } => (intensity, Some(position), None),
             PunctualLight::Spot {
                 position,
                 direction,
@@ -57,25 +57,22 @@ impl PunctualLight {
                         "a spot light's outer cone must be wider than its inner one (cosines {cos_outer} and {cos_inner})"
                     ));
                 }
-                (intensity, vec![position], vec![direction])
+                (intensity, Some(position), Some(direction))
             }
             PunctualLight::Directional {
                 direction,
                 irradiance,
-            } => (irradiance, vec![], vec![direction]),
+            } => (irradiance, None, Some(direction)),
         };
         if !(strength.is_finite() && strength.min_element() >= 0.0) {
             return Err(format!(
                 "a light's strength must be finite and >= 0, not {strength}"
             ));
         }
-        if positions.iter().any(|p| !p.is_finite()) {
+        if position.is_some_and(|p| !p.is_finite()) {
             return Err("a light's position must be finite".into());
         }
-        if directions
-            .iter()
-            .any(|d| !d.is_finite() || (d.length() - 1.0).abs() > 1e-3)
-        {
+        if direction.is_some_and(|d| !d.is_finite() || (d.length() - 1.0).abs() > 1e-3) {
             return Err("a light's direction must be a unit vector".into());
         }
         Ok(())
@@ -202,17 +199,21 @@ impl Lights {
                 power.push(radiance * scene.instance_triangle(instance, prim).area());
             }
         }
-        let bounds = scene.bounds();
-        let radius = match bounds.is_empty() {
+        // A sphere about the origin holding the scene, for directional light (the box is
+        // a pass over every primitive: only taken when there is such a light).
+        let radius = match scene.lights.is_empty() {
             true => 1.0,
-            false => (0.5 * (bounds.max - bounds.min).length()).max(1.0),
+            false => {
+                let bounds = scene.bounds();
+                match bounds.is_empty() {
+                    true => 1.0,
+                    false => {
+                        bounds.center().length()
+                            + (0.5 * (bounds.max - bounds.min).length()).max(1.0)
+                    }
+                }
+            }
         };
-        let center = if bounds.is_empty() {
-            Vec3::ZERO
-        } else {
-            bounds.center()
-        };
-        let radius = radius + center.length();
         for light in &scene.lights {
             power.push(light.power(radius));
         }

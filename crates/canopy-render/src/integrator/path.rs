@@ -74,8 +74,7 @@ impl Tracer<'_> {
                 radiance += throughput * scene.background.radiance(ray.dir);
                 break;
             };
-            let (surface, material) = scene.shade(&ray, &hit);
-            let material = &material;
+            let (surface, ref material) = scene.shade(&ray, &hit);
             radiance += throughput * material.emitted();
             let Some(sample) = material.sample(ray.dir, &surface, rng) else {
                 break;
@@ -114,8 +113,7 @@ impl Tracer<'_> {
                 radiance += throughput * weight * scene.background.radiance(ray.dir);
                 break;
             };
-            let (surface, material) = scene.shade(&ray, &hit);
-            let material = &material;
+            let (surface, ref material) = scene.shade(&ray, &hit);
             let emitted = material.emitted();
             if emitted != Vec3::ZERO {
                 let weight = match previous {
