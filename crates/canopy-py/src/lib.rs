@@ -4,6 +4,7 @@
 
 mod arrays;
 mod bvh;
+mod contents;
 mod pools;
 mod ray_scene;
 mod render;

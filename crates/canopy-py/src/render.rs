@@ -103,6 +103,14 @@ impl SceneInfo {
         self.scene.inputs.clone()
     }
 
+    /// Everything the scene holds, for handing it to another renderer: `camera`,
+    /// `background`, `materials` (tables as `Scene.add_material` takes them, textures
+    /// left out), `spheres`, `cuboids` and `triangles` (world space, mesh instances baked)
+    /// as numpy arrays with a material index each.
+    fn contents<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        crate::contents::contents(py, &self.scene)
+    }
+
     /// What is legal but probably unintended.
     #[getter]
     fn warnings(&self) -> Vec<String> {

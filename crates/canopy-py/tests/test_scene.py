@@ -83,6 +83,37 @@ def test_a_python_scene_renders_the_scene_files_pixels(tmp_path):
     np.testing.assert_array_equal(part, from_python[6:13, 5:15])
 
 
+def test_contents_give_back_every_shape_material_and_the_camera():
+    scene = table_scene()
+    contents = scene.info().contents()
+    assert contents["camera"]["look_from"] == [0, 3, 9] and contents["camera"]["vfov"] == 35
+    assert contents["background"] == {"type": "sky"}
+    materials = contents["materials"]
+    spheres = contents["spheres"]
+    np.testing.assert_array_equal(spheres["radii"], np.float32([99.5, 0.5, 0.3]))
+    np.testing.assert_array_equal(spheres["centers"][1], np.float32([2.2, 0.5, 0]))
+    assert materials[spheres["materials"][1]] == {"type": "dielectric", "ior": 1.5}
+    glossy = materials[spheres["materials"][2]]
+    assert glossy["type"] == "pbr" and glossy["metallic"] == 1
+    # A material made from its own table is the same material.
+    for m in materials:
+        wo, wi = np.array([[0.0, 0.6, 0.8]]), np.array([[0.0, 0.8, 0.6]])
+        np.testing.assert_array_equal(canopy.eval_material(m, wo, wi)[0],
+                                      canopy.eval_material(dict(m), wo, wi)[0])
+    boxes = contents["cuboids"]
+    assert boxes["rotation"].shape == (1, 3, 3)
+    corner = boxes["rotation"][0] @ boxes["max"][0] + boxes["translation"][0]
+    turn = np.radians(30)
+    np.testing.assert_allclose(corner, [-2.2 + 0.5 * np.cos(turn) + 0.5 * np.sin(turn), 0.5,
+                                        0.5 * np.cos(turn) - 0.5 * np.sin(turn)], atol=1e-5)
+    triangles = contents["triangles"]
+    vertices, faces = canopy.load_mesh(TEAPOT)
+    assert triangles["vertices"].shape == (2 * len(faces), 3, 3) and not triangles["smooth"].any()
+    # The second instance is the mesh moved back by 3: its triangles in the world.
+    np.testing.assert_allclose(triangles["vertices"][len(faces):], vertices[faces] - [0, 0, 3], atol=1e-5)
+    assert {materials[m]["type"] for m in triangles["materials"]} == {"lambertian"}
+
+
 def test_instances_take_any_invertible_transform_and_the_mesh_is_stored_once():
     scene = canopy.Scene(size=(24, 18), spp=2)
     scene.camera(look_from=(0, 0, 8), look_at=(0, 0, 0))
