@@ -194,7 +194,7 @@ def main() -> int:
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--turns", type=int, default=3, help="best of this many, each side")
     parser.add_argument("--variant", default="llvm_ad_rgb")
-    parser.add_argument("--schedule", default=None, help="canopy's integrator schedule")
+    parser.add_argument("--schedule", default=None, help="canopy's schedule: wavefront or depth")
     parser.add_argument("--images", help="write both mean images here as EXR")
     args = parser.parse_args()
     width, height = (int(v) for v in args.size.lower().split("x"))
@@ -218,6 +218,8 @@ def main() -> int:
             def run_canopy(seed: int) -> np.ndarray:
                 options = dict(spp=args.spp, size=(width, height), max_depth=args.depth,
                                seed=seed, threads=args.threads)
+                if args.schedule:
+                    options["schedule"] = args.schedule
                 return canopy.render(name, **options)
 
             times = {"canopy": [], "mitsuba": []}

@@ -11,7 +11,7 @@ use crate::scene_facts::SceneFacts;
 use crate::signals;
 use crate::Interrupted;
 use anyhow::bail;
-use canopy_job::{CheckpointPolicy, Device, Observer, RenderJob, Structure};
+use canopy_job::{CheckpointPolicy, Device, Observer, RenderJob, Schedule, Structure};
 use canopy_render::camera::Camera;
 use canopy_render::visualize::{draw_bvh, render_heatmap, LevelRange};
 use canopy_render::{
@@ -57,6 +57,11 @@ pub struct RenderArgs {
     /// builder: the same image up to rounding.
     #[arg(long, default_value = "cpu", value_parser = parse_device)]
     device: Device,
+    /// The order the CPU traces paths in: `wavefront` (many at a time, stage by stage:
+    /// hits, shading, one batch of shadow rays) or `depth` (one path at a time, the
+    /// reference). The image is the same bit for bit.
+    #[arg(long, default_value = "wavefront")]
+    schedule: Schedule,
     /// Render only this rectangle of the image, as X,Y,WIDTHxHEIGHT (0,0 is the top-left
     /// pixel): an image of that size, whose pixels are exactly those of the whole
     /// image's render.
@@ -286,6 +291,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
             optimize: args.optimize,
         },
         device: args.device,
+        schedule: args.schedule,
         threads: Some(args.threads.unwrap_or(0) as usize).filter(|&n| n > 0),
         region,
         checkpoint: CheckpointPolicy {

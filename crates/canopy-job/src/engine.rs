@@ -2,11 +2,15 @@
 
 use crate::observer::Observer;
 use crate::JobError;
-use canopy_render::{render_samples, Accel, Accumulator, RenderStats, Scene};
+use canopy_render::{render_samples_with, Accel, Accumulator, RenderStats, Scene, Schedule};
 
 /// A device ready to add samples to an accumulator.
 pub(crate) enum Engine<'a> {
-    Cpu { scene: &'a Scene, accel: &'a Accel },
+    Cpu {
+        scene: &'a Scene,
+        accel: &'a Accel,
+        schedule: Schedule,
+    },
     Gpu(Box<canopy_gpu::Renderer<'a>>),
 }
 
@@ -18,11 +22,18 @@ impl Engine<'_> {
         observer: &dyn Observer,
     ) -> Result<RenderStats, JobError> {
         match self {
-            Engine::Cpu { scene, accel } => {
-                Ok(render_samples(scene, accel, accumulator, 1, &|| {
-                    observer.rows_done(1)
-                }))
-            }
+            Engine::Cpu {
+                scene,
+                accel,
+                schedule,
+            } => Ok(render_samples_with(
+                scene,
+                accel,
+                accumulator,
+                1,
+                *schedule,
+                &|| observer.rows_done(1),
+            )),
             Engine::Gpu(renderer) => {
                 let done = renderer.render_samples(accumulator, 1)?;
                 observer.rows_done(accumulator.region.height as u64);

@@ -28,6 +28,7 @@ pub use resume::Resumed;
 
 use canopy_bvh::{BuildParams, OptimizeBudget};
 use canopy_render::checkpoint::CheckpointError;
+pub use canopy_render::Schedule;
 use canopy_render::{AccelKind, Accumulator, BvhWidth, Region, Scene};
 use std::fmt;
 use std::path::PathBuf;
@@ -120,6 +121,8 @@ pub struct RenderJob<'s> {
     pub source: String,
     pub structure: Structure,
     pub device: Device,
+    /// The order CPU workers trace paths in (the image is the same in each).
+    pub schedule: Schedule,
     /// Worker threads on the CPU; `None` is the current rayon pool (all cores).
     pub threads: Option<usize>,
     /// The pixels to render; the whole image by default.
@@ -145,6 +148,7 @@ impl<'s> RenderJob<'s> {
             source: source.into(),
             structure: Structure::default(),
             device: Device::Cpu,
+            schedule: Schedule::default(),
             threads: None,
             region: Region::full(s.width, s.height),
             checkpoint: CheckpointPolicy::default(),

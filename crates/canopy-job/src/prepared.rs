@@ -211,6 +211,7 @@ impl Prepared<'_> {
             None => Engine::Cpu {
                 scene,
                 accel: &self.accel,
+                schedule: job.schedule,
             },
             // Mesh instances in two levels, as on the CPU (the structures are binary
             // trees: built with width 2 above).

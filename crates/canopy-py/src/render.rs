@@ -2,7 +2,9 @@
 
 use crate::scene::PyScene;
 use canopy_bvh::BvhWidth;
-use canopy_job::{CheckpointPolicy, Device, JobError, Observer, RenderJob, Resumed, Structure};
+use canopy_job::{
+    CheckpointPolicy, Device, JobError, Observer, RenderJob, Resumed, Schedule, Structure,
+};
 use canopy_render::material::Material;
 use canopy_render::mesh::{parse_mesh, MeshFormat};
 use canopy_render::{load_scene as load, AccelKind, Region, Scene};
@@ -142,11 +144,12 @@ pub fn load_scene(py: Python<'_>, scene: &str) -> PyResult<SceneInfo> {
 /// `progress(done, total)` is called and Ctrl-C is honoured (KeyboardInterrupt). With
 /// `checkpoint=path` the render is saved there every `checkpoint_every` seconds and when
 /// interrupted, and `resume=path` continues such a render (its scene and settings come
-/// from the file).
+/// from the file). `schedule` is the order CPU workers trace paths in, "wavefront" or
+/// "depth": the image is the same.
 #[pyfunction]
 #[pyo3(signature = (scene=None, spp=None, size=None, seed=None, max_depth=None, integrator=None,
     russian_roulette=None, device="cpu", bvh="binned-sah", width=8, threads=None, progress=None,
-    region=None, checkpoint=None, checkpoint_every=60.0, resume=None))]
+    region=None, checkpoint=None, checkpoint_every=60.0, resume=None, schedule="wavefront"))]
 #[allow(clippy::too_many_arguments)]
 pub fn render<'py>(
     py: Python<'py>,
@@ -166,8 +169,10 @@ pub fn render<'py>(
     checkpoint: Option<PathBuf>,
     checkpoint_every: f64,
     resume: Option<PathBuf>,
+    schedule: &str,
 ) -> PyResult<Bound<'py, PyArray3<f32>>> {
     let device: Device = device.parse().map_err(PyValueError::new_err)?;
+    let schedule: Schedule = schedule.parse().map_err(PyValueError::new_err)?;
     let kind: AccelKind = bvh
         .parse()
         .map_err(|e: canopy_bvh::UnknownBuilder| PyValueError::new_err(e.to_string()))?;
@@ -237,6 +242,7 @@ pub fn render<'py>(
         ..Structure::default()
     };
     job.device = device;
+    job.schedule = schedule;
     job.threads = threads;
     if let Some((x, y, width, height)) = region {
         job.region = Region {

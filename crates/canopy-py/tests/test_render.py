@@ -65,12 +65,20 @@ def test_a_failing_progress_callback_stops_the_render():
         ({"scene": "cornell", "spp": 0}, ValueError, "spp 0"),
         ({"scene": "cornell", "size": (0, 5)}, ValueError, "empty"),
         ({"scene": "cornell", "bvh": "octree"}, ValueError, "unknown"),
+        ({"scene": "cornell", "schedule": "sideways"}, ValueError, "unknown schedule `sideways`"),
     ],
 )
 def test_bad_render_arguments_raise(kwargs, error, words):
     with pytest.raises(error) as e:
         canopy.render(**kwargs)
     assert words in str(e.value), str(e.value)
+
+
+def test_both_schedules_render_the_same_pixels():
+    wavefront = canopy.render("paper-5", size=(24, 18), spp=3)
+    depth = canopy.render("paper-5", size=(24, 18), spp=3, schedule="depth")
+    assert wavefront.max() > 0
+    np.testing.assert_array_equal(wavefront, depth)
 
 
 def test_a_region_is_exactly_those_pixels_of_the_whole_image():

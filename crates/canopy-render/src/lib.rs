@@ -34,7 +34,9 @@ pub use builtin::{BuiltinScene, BUILTIN_SCENES};
 pub use canopy_bvh::{BvhWidth, RayQuery};
 pub use error::{OutputError, SceneError};
 pub use film::Film;
-pub use integrator::{render, render_counted, render_samples, Accumulator, RenderStats};
+pub use integrator::{
+    render, render_counted, render_samples, render_samples_with, Accumulator, RenderStats, Schedule,
+};
 pub use output::write_image;
 pub use region::Region;
 pub use scene::{Integrator, MeshInstance, RenderSettings, Scene, SceneMesh};

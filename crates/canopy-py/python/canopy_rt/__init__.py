@@ -290,6 +290,7 @@ def render(
     checkpoint=None,
     checkpoint_every: float = 60.0,
     resume=None,
+    schedule: str = "wavefront",
 ) -> np.ndarray:
     """Renders a scene (built-in name, scene file or mesh, or a :class:`Scene` built in
     Python) to a linear float32 image of shape (height, width, 3), exactly as
@@ -305,6 +306,9 @@ def render(
     ``checkpoint=path`` the render is saved there every ``checkpoint_every`` seconds and
     when stopped; ``render(resume=path)`` continues it to the same image (a
     :class:`Scene` is given again: ``render(scene, resume=path)``).
+
+    ``schedule`` is the order the CPU traces paths in: ``"wavefront"`` (many at a time,
+    stage by stage) or ``"depth"`` (one at a time); the image is the same bit for bit.
     """
     if size is not None:
         size = (int(size[0]), int(size[1]))
@@ -329,6 +333,7 @@ def render(
         checkpoint=None if checkpoint is None else str(checkpoint),
         checkpoint_every=float(checkpoint_every),
         resume=None if resume is None else str(resume),
+        schedule=str(schedule),
     )
 
 

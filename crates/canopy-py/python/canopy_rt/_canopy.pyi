@@ -32,6 +32,7 @@ def render(
     checkpoint: Optional[str] = ...,
     checkpoint_every: float = ...,
     resume: Optional[str] = ...,
+    schedule: str = ...,
 ) -> np.ndarray: ...
 
 class Scene:

@@ -2,6 +2,9 @@
 //! of one sample are in [`path`].
 
 mod path;
+mod wavefront;
+
+pub use wavefront::STREAM_PATHS;
 
 use crate::accel::Accel;
 use crate::camera::Camera;
@@ -16,6 +19,44 @@ use path::{Tracer, Work};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
+
+/// The order in which a worker traces its paths. Both give the same image, bit for bit.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Schedule {
+    /// One path at a time, each segment and its shadow rays in turn (the reference).
+    Depth,
+    /// Many paths at a time, stage by stage ([`wavefront`]).
+    #[default]
+    Wavefront,
+}
+
+impl Schedule {
+    pub const ALL: [Schedule; 2] = [Schedule::Depth, Schedule::Wavefront];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Schedule::Depth => "depth",
+            Schedule::Wavefront => "wavefront",
+        }
+    }
+}
+
+impl std::fmt::Display for Schedule {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for Schedule {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Schedule::ALL
+            .into_iter()
+            .find(|k| k.name() == s)
+            .ok_or_else(|| format!("unknown schedule `{s}`, expected one of: depth, wavefront"))
+    }
+}
 
 /// What a render did, for the closing summary.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -70,6 +111,8 @@ pub fn render_counted(
 /// What a render measures besides the image: nothing, or traversal work and shadow-ray
 /// time.
 pub(crate) trait Probe: TraversalCounter + Default {
+    /// Whether it counts or times anything (then queries go ray by ray).
+    const MEASURES: bool;
     fn totals(&self) -> TraversalStats;
     /// Runs a shadow-ray query, timing it if this probe times.
     fn time_shadow(&mut self, query: impl FnOnce() -> bool) -> bool;
@@ -77,6 +120,7 @@ pub(crate) trait Probe: TraversalCounter + Default {
 }
 
 impl Probe for () {
+    const MEASURES: bool = false;
     fn totals(&self) -> TraversalStats {
         TraversalStats::default()
     }
@@ -108,6 +152,7 @@ impl TraversalCounter for Profile {
 }
 
 impl Probe for Profile {
+    const MEASURES: bool = true;
     fn totals(&self) -> TraversalStats {
         self.work
     }
@@ -133,6 +178,7 @@ fn render_with<P: Probe>(
         accel,
         &mut accumulator,
         scene.settings.spp,
+        Schedule::default(),
         on_row_done,
     );
     (accumulator.film(), stats)
@@ -192,7 +238,26 @@ pub fn render_samples(
     count: u32,
     on_row_done: &(dyn Fn() + Sync),
 ) -> RenderStats {
-    accumulate::<()>(scene, accel, accumulator, count, on_row_done)
+    render_samples_with(
+        scene,
+        accel,
+        accumulator,
+        count,
+        Schedule::default(),
+        on_row_done,
+    )
+}
+
+/// [`render_samples`] in the given schedule (the image is the same in every one).
+pub fn render_samples_with(
+    scene: &Scene,
+    accel: &Accel,
+    accumulator: &mut Accumulator,
+    count: u32,
+    schedule: Schedule,
+    on_row_done: &(dyn Fn() + Sync),
+) -> RenderStats {
+    accumulate::<()>(scene, accel, accumulator, count, schedule, on_row_done)
 }
 
 fn accumulate<P: Probe>(
@@ -200,6 +265,7 @@ fn accumulate<P: Probe>(
     accel: &Accel,
     accumulator: &mut Accumulator,
     count: u32,
+    schedule: Schedule,
     on_row_done: &(dyn Fn() + Sync),
 ) -> RenderStats {
     let settings = scene.settings;
@@ -226,24 +292,45 @@ fn accumulate<P: Probe>(
         .for_each(|(row_in_region, row)| {
             let row_start = Instant::now();
             let mut work = Work::<P>::default();
-            let mut invalid = 0;
             let y = region.y as usize + row_in_region;
-            for (x_in_region, sum) in row.iter_mut().enumerate() {
-                let x = region.x as usize + x_in_region;
-                let index = (y * width + x) as u64;
-                for sample in first_sample..first_sample + count {
-                    let mut rng = Rng::for_sample(settings.seed, index, sample as u64);
-                    let s = (x as f32 + rng.next_f32()) / settings.width as f32;
-                    let t = (y as f32 + rng.next_f32()) / settings.height as f32;
-                    let ray = camera.ray(s, t, &mut rng);
-                    let l = tracer.radiance(ray, &mut rng, &mut work);
-                    if l.is_finite() {
-                        *sum += l;
-                    } else {
-                        invalid += 1;
+            let invalid = match schedule {
+                Schedule::Depth => {
+                    let mut invalid = 0;
+                    for (x_in_region, sum) in row.iter_mut().enumerate() {
+                        let x = region.x as usize + x_in_region;
+                        let index = (y * width + x) as u64;
+                        for sample in first_sample..first_sample + count {
+                            let mut rng = Rng::for_sample(settings.seed, index, sample as u64);
+                            let s = (x as f32 + rng.next_f32()) / settings.width as f32;
+                            let t = (y as f32 + rng.next_f32()) / settings.height as f32;
+                            let ray = camera.ray(s, t, &mut rng);
+                            let l = tracer.radiance(ray, &mut rng, &mut work);
+                            if l.is_finite() {
+                                *sum += l;
+                            } else {
+                                invalid += 1;
+                            }
+                        }
                     }
+                    invalid
                 }
-            }
+                Schedule::Wavefront => {
+                    let block = wavefront::Block {
+                        x: region.x,
+                        y: y as u32,
+                        sums: row,
+                    };
+                    let samples = first_sample..first_sample + count;
+                    wavefront::render_block(
+                        &tracer,
+                        &camera,
+                        block,
+                        samples,
+                        STREAM_PATHS,
+                        &mut work,
+                    )
+                }
+            };
             totals.add(&work, invalid, row_start.elapsed());
             on_row_done();
         });

@@ -53,39 +53,124 @@ struct BsdfVertex {
     pdf: f32,
 }
 
+/// A path being traced: where it goes next and what it has gathered.
+#[derive(Clone, Copy)]
+pub(super) struct PathState {
+    /// The segment to trace next.
+    pub ray: Ray,
+    /// Segments traced so far, this one included once traced (1 for the camera ray).
+    pub segments: u32,
+    pub throughput: Vec3,
+    pub radiance: Vec3,
+    /// None for the camera ray and after delta bounces: nothing else could find the light.
+    previous: Option<BsdfVertex>,
+}
+
+impl PathState {
+    pub fn new(camera_ray: Ray) -> Self {
+        Self {
+            ray: camera_ray,
+            segments: 1,
+            throughput: Vec3::ONE,
+            radiance: Vec3::ZERO,
+            previous: None,
+        }
+    }
+}
+
+/// A shadow ray of light sampling and the light it brings where nothing blocks it.
+#[derive(Clone, Copy)]
+pub(super) struct ShadowTest {
+    pub ray: Ray,
+    pub light: Vec3,
+}
+
+/// Light sampling at one vertex: the shadow tests of an emitter sample and of a
+/// background sample (either may be absent), and the path's throughput there.
+#[derive(Clone, Copy)]
+pub(super) struct DirectLight {
+    pub tests: [Option<ShadowTest>; 2],
+    pub throughput: Vec3,
+}
+
+impl DirectLight {
+    /// The light that arrives, given which shadow rays are blocked (asked in order).
+    #[inline]
+    pub fn arriving(&self, mut blocked: impl FnMut(&Ray) -> bool) -> Vec3 {
+        let mut direct = Vec3::ZERO;
+        for test in self.tests.iter().flatten() {
+            if !blocked(&test.ray) {
+                direct += test.light;
+            }
+        }
+        self.throughput * direct
+    }
+}
+
+/// What one vertex of a path leaves to do.
+pub(super) struct Vertex {
+    /// Light sampling to finish once its shadow rays are answered.
+    pub direct: Option<DirectLight>,
+    /// Whether the path goes on (along its new `ray`).
+    pub goes_on: bool,
+}
+
 impl Tracer<'_> {
-    /// One sample of the radiance arriving along the camera ray `ray`.
+    /// One sample of the radiance arriving along the camera ray `ray`, traced depth
+    /// first: each segment and its shadow rays in turn.
     pub fn radiance<P: Probe>(&self, ray: Ray, rng: &mut Rng, work: &mut Work<P>) -> Vec3 {
+        let mut path = PathState::new(ray);
+        loop {
+            work.rays += 1;
+            let hit = self.intersect(&path.ray, rng, work);
+            let vertex = self.vertex(&mut path, hit, rng);
+            if let Some(direct) = vertex.direct {
+                path.radiance += direct.arriving(|shadow| self.occluded(shadow, rng, work));
+            }
+            if !vertex.goes_on {
+                return path.radiance;
+            }
+        }
+    }
+
+    /// Advances `path` by the segment it has just traced (`hit` is where it ends).
+    /// Randomness is drawn in one order for both schedules: light samples, then the
+    /// BSDF sample and roulette, then (for see-through surfaces) the shadow rays.
+    #[inline(always)]
+    pub fn vertex(&self, path: &mut PathState, hit: Option<Hit>, rng: &mut Rng) -> Vertex {
         match self.scene.settings.integrator {
-            Integrator::Path => self.path(ray, rng, work),
-            Integrator::Bsdf => self.bsdf_only(ray, rng, work),
+            Integrator::Path => self.path_vertex(path, hit, rng),
+            Integrator::Bsdf => Vertex {
+                direct: None,
+                goes_on: self.bsdf_vertex(path, hit, rng),
+            },
         }
     }
 
     /// The report's estimator: at most `max_depth` segments, light only where a path
     /// happens to end on an emitter or in the background.
-    fn bsdf_only<P: Probe>(&self, mut ray: Ray, rng: &mut Rng, work: &mut Work<P>) -> Vec3 {
+    #[inline(always)]
+    fn bsdf_vertex(&self, path: &mut PathState, hit: Option<Hit>, rng: &mut Rng) -> bool {
         let scene = self.scene;
-        let mut throughput = Vec3::ONE;
-        let mut radiance = Vec3::ZERO;
-        for _ in 0..scene.settings.max_depth {
-            work.rays += 1;
-            let Some(hit) = self.intersect(&ray, rng, work) else {
-                radiance += throughput * scene.background.radiance(ray.dir);
-                break;
-            };
-            let (surface, ref material) = scene.shade(&ray, &hit);
-            radiance += throughput * material.emitted();
-            let Some(sample) = material.sample(ray.dir, &surface, rng) else {
-                break;
-            };
-            throughput *= sample.weight;
-            if throughput == Vec3::ZERO {
-                break;
-            }
-            ray = spawn_ray(&surface, sample.direction);
+        let Some(hit) = hit else {
+            path.radiance += path.throughput * scene.background.radiance(path.ray.dir);
+            return false;
+        };
+        let (surface, ref material) = scene.shade(&path.ray, &hit);
+        path.radiance += path.throughput * material.emitted();
+        if path.segments == scene.settings.max_depth {
+            return false;
         }
-        radiance
+        let Some(sample) = material.sample(path.ray.dir, &surface, rng) else {
+            return false;
+        };
+        path.throughput *= sample.weight;
+        if path.throughput == Vec3::ZERO {
+            return false;
+        }
+        path.ray = spawn_ray(&surface, sample.direction);
+        path.segments += 1;
+        true
     }
 
     /// Path tracing with next-event estimation and MIS: every non-delta vertex sends one
@@ -93,81 +178,87 @@ impl Tracer<'_> {
     /// black), and the emitter or background the BSDF-sampled ray finds next is weighted
     /// against those. Paths have at most `max_depth` segments, shadow rays counted, so
     /// both estimators sum the same paths.
-    fn path<P: Probe>(&self, mut ray: Ray, rng: &mut Rng, work: &mut Work<P>) -> Vec3 {
+    #[inline(always)]
+    fn path_vertex(&self, path: &mut PathState, hit: Option<Hit>, rng: &mut Rng) -> Vertex {
         let scene = self.scene;
         let settings = scene.settings;
-        let sample_background = !scene.background.is_black();
-        let mut throughput = Vec3::ONE;
-        let mut radiance = Vec3::ZERO;
-        // None for the camera ray and after delta bounces: nothing else could find the light.
-        let mut previous: Option<BsdfVertex> = None;
-        for segments in 1..=settings.max_depth {
-            work.rays += 1;
-            let Some(hit) = self.intersect(&ray, rng, work) else {
-                let weight = match previous {
-                    Some(v) if sample_background => {
-                        power_heuristic(v.pdf, scene.background.pdf(ray.dir))
-                    }
-                    _ => 1.0,
-                };
-                radiance += throughput * weight * scene.background.radiance(ray.dir);
-                break;
-            };
-            let (surface, ref material) = scene.shade(&ray, &hit);
-            let emitted = material.emitted();
-            if emitted != Vec3::ZERO {
-                let weight = match previous {
-                    Some(v) => {
-                        let light_pdf =
-                            self.lights
-                                .pdf(scene, &hit, v.p, surface.p, surface.geometric_normal);
-                        power_heuristic(v.pdf, light_pdf)
-                    }
-                    None => 1.0,
-                };
-                radiance += throughput * weight * emitted;
-            }
-            if !material.scatters() || segments == settings.max_depth {
-                break;
-            }
-            if !material.is_delta() {
-                radiance += throughput * self.sample_lights(material, &ray, &surface, rng, work);
-            }
-            let Some(sample) = material.sample(ray.dir, &surface, rng) else {
-                break;
-            };
-            throughput *= sample.weight;
-            previous = (!sample.delta).then_some(BsdfVertex {
-                p: surface.p,
-                pdf: sample.pdf,
-            });
-            if settings.russian_roulette && segments >= ROULETTE_AFTER {
-                let survival = throughput.max_element().min(ROULETTE_MAX_SURVIVAL);
-                if rng.next_f32() >= survival {
-                    break;
+        let end = Vertex {
+            direct: None,
+            goes_on: false,
+        };
+        let Some(hit) = hit else {
+            let weight = match path.previous {
+                Some(v) if !scene.background.is_black() => {
+                    power_heuristic(v.pdf, scene.background.pdf(path.ray.dir))
                 }
-                throughput /= survival;
-            }
-            if throughput == Vec3::ZERO {
-                break;
-            }
-            ray = spawn_ray(&surface, sample.direction);
+                _ => 1.0,
+            };
+            path.radiance += path.throughput * weight * scene.background.radiance(path.ray.dir);
+            return end;
+        };
+        let (surface, ref material) = scene.shade(&path.ray, &hit);
+        let emitted = material.emitted();
+        if emitted != Vec3::ZERO {
+            let weight = match path.previous {
+                Some(v) => {
+                    let light_pdf =
+                        self.lights
+                            .pdf(scene, &hit, v.p, surface.p, surface.geometric_normal);
+                    power_heuristic(v.pdf, light_pdf)
+                }
+                None => 1.0,
+            };
+            path.radiance += path.throughput * weight * emitted;
         }
-        radiance
+        if !material.scatters() || path.segments == settings.max_depth {
+            return end;
+        }
+        let direct = (!material.is_delta()).then(|| DirectLight {
+            tests: self.light_tests(material, &path.ray, &surface, rng),
+            throughput: path.throughput,
+        });
+        let end = Vertex {
+            direct,
+            goes_on: false,
+        };
+        let Some(sample) = material.sample(path.ray.dir, &surface, rng) else {
+            return end;
+        };
+        path.throughput *= sample.weight;
+        path.previous = (!sample.delta).then_some(BsdfVertex {
+            p: surface.p,
+            pdf: sample.pdf,
+        });
+        if settings.russian_roulette && path.segments >= ROULETTE_AFTER {
+            let survival = path.throughput.max_element().min(ROULETTE_MAX_SURVIVAL);
+            if rng.next_f32() >= survival {
+                return end;
+            }
+            path.throughput /= survival;
+        }
+        if path.throughput == Vec3::ZERO {
+            return end;
+        }
+        path.ray = spawn_ray(&surface, sample.direction);
+        path.segments += 1;
+        Vertex {
+            direct,
+            goes_on: true,
+        }
     }
 
-    /// Light reaching `surface` directly, towards the viewer of `ray`: one sample of the
-    /// emitters and one of the background, each MIS-weighted against BSDF sampling.
-    fn sample_lights<P: Probe>(
+    /// Light reaching `surface` directly, towards the viewer of `ray`, as shadow tests:
+    /// one sample of the emitters and one of the background, each MIS-weighted against
+    /// BSDF sampling.
+    fn light_tests(
         &self,
         material: &Material,
         ray: &Ray,
         surface: &Surface,
         rng: &mut Rng,
-        work: &mut Work<P>,
-    ) -> Vec3 {
+    ) -> [Option<ShadowTest>; 2] {
         let scene = self.scene;
-        let mut direct = Vec3::ZERO;
+        let mut tests = [None; 2];
         if let Some(light) = self.lights.sample(scene, surface.p, rng) {
             let to_light = light.point.p - surface.p;
             let wi = to_light.normalize_or_zero();
@@ -181,35 +272,35 @@ impl Tracer<'_> {
                     light.point.p - lift
                 };
                 let origin = offset_origin(surface, wi);
-                let shadow = Ray::new(origin, target - origin, 0.0, 1.0 - SHADOW_SHORTENING);
-                if !self.occluded(&shadow, rng, work) {
-                    let weight = match light.delta {
-                        true => 1.0,
-                        false => power_heuristic(light.pdf, material.pdf(ray.dir, surface, wi)),
-                    };
-                    direct += f * light.radiance * (weight / light.pdf);
-                }
+                let weight = match light.delta {
+                    true => 1.0,
+                    false => power_heuristic(light.pdf, material.pdf(ray.dir, surface, wi)),
+                };
+                tests[0] = Some(ShadowTest {
+                    ray: Ray::new(origin, target - origin, 0.0, 1.0 - SHADOW_SHORTENING),
+                    light: f * light.radiance * (weight / light.pdf),
+                });
             }
         }
         if let Some(sky) = scene.background.sample(rng) {
             let f = material.eval(ray.dir, surface, sky.direction);
             if f != Vec3::ZERO {
                 let origin = offset_origin(surface, sky.direction);
-                let shadow = Ray::new(origin, sky.direction, 0.0, f32::INFINITY);
-                if !self.occluded(&shadow, rng, work) {
-                    let bsdf_pdf = material.pdf(ray.dir, surface, sky.direction);
-                    let weight = power_heuristic(sky.pdf, bsdf_pdf);
-                    direct += f * sky.radiance * (weight / sky.pdf);
-                }
+                let bsdf_pdf = material.pdf(ray.dir, surface, sky.direction);
+                let weight = power_heuristic(sky.pdf, bsdf_pdf);
+                tests[1] = Some(ShadowTest {
+                    ray: Ray::new(origin, sky.direction, 0.0, f32::INFINITY),
+                    light: f * sky.radiance * (weight / sky.pdf),
+                });
             }
         }
-        direct
+        tests
     }
 
     /// The first surface along `ray` that stops it: the closest hit, or, where
     /// surfaces are see-through, the closest one whose coverage stops the ray (the
     /// search goes on past each one that does not).
-    fn intersect<P: Probe>(&self, ray: &Ray, rng: &mut Rng, work: &mut Work<P>) -> Option<Hit> {
+    pub fn intersect<P: Probe>(&self, ray: &Ray, rng: &mut Rng, work: &mut Work<P>) -> Option<Hit> {
         let mut hit = self
             .accel
             .intersect_counted(ray, ALL_MASKS, &mut work.probe)?;
@@ -228,7 +319,7 @@ impl Tracer<'_> {
         Some(hit)
     }
 
-    fn occluded<P: Probe>(&self, shadow: &Ray, rng: &mut Rng, work: &mut Work<P>) -> bool {
+    pub fn occluded<P: Probe>(&self, shadow: &Ray, rng: &mut Rng, work: &mut Work<P>) -> bool {
         work.rays += 1;
         work.shadow_rays += 1;
         if self.see_through {

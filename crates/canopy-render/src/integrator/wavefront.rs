@@ -1,0 +1,241 @@
+//! The wavefront (breadth-first) schedule: a worker takes a block of pixels and keeps
+//! all their paths of a pass of samples in one stream, advancing the whole stream a
+//! stage at a time: closest hits of every path, then every path's vertex (shading,
+//! light samples, BSDF sample, roulette), then every shadow ray as one occlusion batch,
+//! then the paths that ended leave the stream (the last path taking each one's place).
+//! Each stage runs one kernel over many rays, so its code and the tree's top levels
+//! stay in the cache.
+//!
+//! The arithmetic is the depth-first schedule's ([`super::path`]) and each path draws
+//! from its own random stream in the same order, so the image is the same bit for bit.
+
+use super::path::{PathState, Tracer, Vertex, Work};
+use super::Probe;
+use crate::camera::Camera;
+use crate::rng::Rng;
+use canopy_bvh::{Hit, Ray, RayQuery, ALL_MASKS};
+use glam::Vec3;
+use std::ops::Range;
+
+/// Paths a stream holds at most: a pass takes as many samples of its block's pixels as
+/// fit (at least one). A few thousand paths of state stay within a core's L2 cache.
+pub const STREAM_PATHS: usize = 4096;
+
+/// A path in the stream: its state, its random stream and where its sample goes.
+struct StreamPath {
+    path: PathState,
+    rng: Rng,
+    /// Index of its sample in the pass (pixel-major).
+    slot: u32,
+}
+
+/// A pixel block of the image: `pixels` consecutive pixels of one image row from
+/// (`x`, `y`), the first of `sums`.
+pub(super) struct Block<'a> {
+    pub x: u32,
+    pub y: u32,
+    pub sums: &'a mut [Vec3],
+}
+
+/// Adds `samples` to every pixel of `block`, in sample order, tracing at most
+/// `stream_paths` paths at a time (at least one sample of each pixel); returns how many samples were
+/// dropped as NaN or infinite.
+pub(super) fn render_block<P: Probe>(
+    tracer: &Tracer,
+    camera: &Camera,
+    block: Block,
+    samples: Range<u32>,
+    stream_paths: usize,
+    work: &mut Work<P>,
+) -> u64 {
+    let settings = tracer.scene.settings;
+    let pixels = block.sums.len();
+    let per_pass = (stream_paths / pixels.max(1)).clamp(1, samples.len().max(1)) as u32;
+    let mut stream = Stream::default();
+    let mut invalid = 0;
+    let mut start = samples.start;
+    while start < samples.end {
+        let samples = per_pass.min(samples.end - start);
+        stream.clear_results(pixels * samples as usize);
+        for (i, _) in block.sums.iter().enumerate() {
+            let x = block.x as usize + i;
+            let index = block.y as u64 * settings.width as u64 + x as u64;
+            for k in 0..samples {
+                let sample = start + k;
+                let mut rng = Rng::for_sample(settings.seed, index, sample as u64);
+                let s = (x as f32 + rng.next_f32()) / settings.width as f32;
+                let t = (block.y as f32 + rng.next_f32()) / settings.height as f32;
+                let ray = camera.ray(s, t, &mut rng);
+                stream.paths.push(StreamPath {
+                    path: PathState::new(ray),
+                    rng,
+                    slot: (i * samples as usize + k as usize) as u32,
+                });
+            }
+        }
+        stream.trace(tracer, work);
+        for (i, sum) in block.sums.iter_mut().enumerate() {
+            for l in &stream.results[i * samples as usize..(i + 1) * samples as usize] {
+                if l.is_finite() {
+                    *sum += *l;
+                } else {
+                    invalid += 1;
+                }
+            }
+        }
+        start += samples;
+    }
+    invalid
+}
+
+/// The stream's paths and the scratch space of its stages, kept between passes.
+#[derive(Default)]
+struct Stream {
+    paths: Vec<StreamPath>,
+    hits: Vec<Option<Hit>>,
+    vertices: Vec<Vertex>,
+    /// Shadow rays of the stage, in path order, and whether each is blocked.
+    shadows: Vec<Ray>,
+    blocked: Vec<bool>,
+    /// Each finished path's radiance, by slot.
+    results: Vec<Vec3>,
+}
+
+impl Stream {
+    fn clear_results(&mut self, slots: usize) {
+        self.results.clear();
+        self.results.resize(slots, Vec3::ZERO);
+    }
+
+    /// Traces every path of the stream to its end.
+    fn trace<P: Probe>(&mut self, tracer: &Tracer, work: &mut Work<P>) {
+        while !self.paths.is_empty() {
+            self.closest_hits(tracer, work);
+            self.vertices.clear();
+            for (p, hit) in self.paths.iter_mut().zip(&self.hits) {
+                self.vertices
+                    .push(tracer.vertex(&mut p.path, *hit, &mut p.rng));
+            }
+            self.shadow_rays(tracer, work);
+            // Light that arrives, in path order, then the paths that ended leave.
+            let mut answers = self.blocked.iter();
+            for (p, vertex) in self.paths.iter_mut().zip(&self.vertices) {
+                if let Some(direct) = &vertex.direct {
+                    p.path.radiance += direct.arriving(|_| *answers.next().expect("answered"));
+                }
+                if !vertex.goes_on {
+                    self.results[p.slot as usize] = p.path.radiance;
+                }
+            }
+            // Backwards, so that each path swapped in has been looked at already.
+            for (i, vertex) in self.vertices.iter().enumerate().rev() {
+                if !vertex.goes_on {
+                    self.paths.swap_remove(i);
+                }
+            }
+        }
+    }
+
+    /// The closest hit of every path's next segment: one batch through the structure,
+    /// or ray by ray where see-through surfaces draw random numbers or work is counted.
+    fn closest_hits<P: Probe>(&mut self, tracer: &Tracer, work: &mut Work<P>) {
+        let n = self.paths.len();
+        work.rays += n as u64;
+        self.hits.clear();
+        if tracer.see_through || P::MEASURES {
+            for p in &mut self.paths {
+                let hit = tracer.intersect(&p.path.ray, &mut p.rng, work);
+                self.hits.push(hit);
+            }
+            return;
+        }
+        self.hits.resize(n, None);
+        let (paths, hits) = (&self.paths, &mut self.hits);
+        tracer
+            .accel
+            .intersect_each(n, ALL_MASKS, |i| paths[i].path.ray, |i, hit| hits[i] = hit);
+    }
+
+    /// Answers the shadow rays of every vertex of the stage, in path order.
+    fn shadow_rays<P: Probe>(&mut self, tracer: &Tracer, work: &mut Work<P>) {
+        self.blocked.clear();
+        if tracer.see_through || P::MEASURES {
+            for (p, vertex) in self.paths.iter_mut().zip(&self.vertices) {
+                let Some(direct) = &vertex.direct else {
+                    continue;
+                };
+                for test in direct.tests.iter().flatten() {
+                    let blocked = tracer.occluded(&test.ray, &mut p.rng, work);
+                    self.blocked.push(blocked);
+                }
+            }
+            return;
+        }
+        self.shadows.clear();
+        for vertex in &self.vertices {
+            if let Some(direct) = &vertex.direct {
+                self.shadows
+                    .extend(direct.tests.iter().flatten().map(|t| t.ray));
+            }
+        }
+        let n = self.shadows.len();
+        work.rays += n as u64;
+        work.shadow_rays += n as u64;
+        self.blocked.resize(n, false);
+        let (shadows, blocked) = (&self.shadows, &mut self.blocked);
+        tracer
+            .accel
+            .occluded_each(n, ALL_MASKS, |i| shadows[i], |i, b| blocked[i] = b);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::accel::{Accel, AccelKind};
+    use crate::builtin::BuiltinScene;
+    use crate::lights::Lights;
+    use canopy_bvh::{BuildParams, BvhWidth};
+
+    /// A pass may hold one path or thousands: every sample of a row sums the same.
+    #[test]
+    fn any_stream_size_gives_the_same_sums() {
+        let mut scene = BuiltinScene::find("paper-3").unwrap().load().unwrap();
+        (scene.settings.width, scene.settings.height) = (24, 16);
+        let accel = Accel::for_scene(
+            &scene,
+            AccelKind::default(),
+            BvhWidth::Four,
+            &BuildParams::default(),
+            None,
+        );
+        let lights = Lights::new(&scene);
+        let tracer = Tracer {
+            scene: &scene,
+            accel: &accel,
+            lights: &lights,
+            see_through: false,
+        };
+        let camera = Camera::new(&scene.camera, 24, 16);
+        let row = |stream_paths: usize| {
+            let mut sums = vec![Vec3::ZERO; 20];
+            let block = Block {
+                x: 2,
+                y: 9,
+                sums: &mut sums,
+            };
+            let mut work = Work::<()>::default();
+            render_block(&tracer, &camera, block, 3..10, stream_paths, &mut work);
+            (sums, work.rays)
+        };
+        let reference = row(STREAM_PATHS);
+        assert!(reference.0.iter().all(|s| *s != Vec3::ZERO));
+        for stream_paths in [1, 7, 20, 45, 1 << 20] {
+            assert_eq!(
+                row(stream_paths),
+                reference,
+                "{stream_paths} paths a stream"
+            );
+        }
+    }
+}
