@@ -7,7 +7,7 @@ use canopy_job::{
 };
 use canopy_render::material::Material;
 use canopy_render::mesh::{parse_mesh, MeshFormat};
-use canopy_render::{load_scene as load, AccelKind, Region, Scene};
+use canopy_render::{load_scene as load, AccelKind, Accumulator, Region, Scene};
 use numpy::ndarray::Array2;
 use numpy::{IntoPyArray, PyArray2, PyArray3, ToPyArray};
 use pyo3::exceptions::{PyOSError, PyRuntimeError, PyValueError};
@@ -144,12 +144,14 @@ pub fn load_scene(py: Python<'_>, scene: &str) -> PyResult<SceneInfo> {
 /// `progress(done, total)` is called and Ctrl-C is honoured (KeyboardInterrupt). With
 /// `checkpoint=path` the render is saved there every `checkpoint_every` seconds and when
 /// interrupted, and `resume=path` continues such a render (its scene and settings come
-/// from the file). `schedule` is the order CPU workers trace paths in, "wavefront" or
+/// from the file). `samples=(first, count)` renders only samples `first .. first + count`
+/// of every pixel and returns their mean. `schedule` is the order CPU workers trace paths in, "wavefront" or
 /// "depth": the image is the same.
 #[pyfunction]
 #[pyo3(signature = (scene=None, spp=None, size=None, seed=None, max_depth=None, integrator=None,
     russian_roulette=None, device="cpu", bvh="binned-sah", width=8, threads=None, progress=None,
-    region=None, checkpoint=None, checkpoint_every=60.0, resume=None, schedule="wavefront"))]
+    region=None, checkpoint=None, checkpoint_every=60.0, resume=None, schedule="wavefront",
+    samples=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn render<'py>(
     py: Python<'py>,
@@ -170,6 +172,7 @@ pub fn render<'py>(
     checkpoint_every: f64,
     resume: Option<PathBuf>,
     schedule: &str,
+    samples: Option<(u32, u32)>,
 ) -> PyResult<Bound<'py, PyArray3<f32>>> {
     let device: Device = device.parse().map_err(PyValueError::new_err)?;
     let schedule: Schedule = schedule.parse().map_err(PyValueError::new_err)?;
@@ -193,6 +196,23 @@ pub fn render<'py>(
         return Err(PyValueError::new_err(
             "a resumed render keeps its checkpoint's settings: drop spp, size, seed, max_depth, integrator, russian_roulette and region",
         ));
+    }
+    if let Some((first, count)) = samples {
+        if resume.is_some() || checkpoint.is_some() {
+            return Err(PyValueError::new_err(
+                "samples= renders a part of a render's samples: drop resume and checkpoint",
+            ));
+        }
+        if spp.is_some() {
+            return Err(PyValueError::new_err(
+                "give spp (all samples) or samples=(first, count), not both",
+            ));
+        }
+        if count == 0 || first.checked_add(count).is_none() {
+            return Err(PyValueError::new_err(format!(
+                "samples=(first, count) needs count >= 1 and first + count within range, not ({first}, {count})"
+            )));
+        }
     }
     let given = match scene {
         None => None,
@@ -226,7 +246,10 @@ pub fn render<'py>(
         if let Some((w, h)) = size {
             (s.width, s.height) = (w, h);
         }
-        s.spp = spp.unwrap_or(s.spp);
+        s.spp = match samples {
+            Some((first, count)) => first + count,
+            None => spp.unwrap_or(s.spp),
+        };
         s.seed = seed.unwrap_or(s.seed);
         s.max_depth = max_depth.unwrap_or(s.max_depth);
         if let Some(name) = integrator {
@@ -253,6 +276,12 @@ pub fn render<'py>(
         };
     }
     (job.resume, job.resume_owner) = resumed.unzip();
+    if let Some((first, _)) = samples {
+        // Samples before `first` count as done: the job adds the rest, from `first` on.
+        let mut part = Accumulator::for_region(job.region);
+        part.samples = first;
+        job.resume = Some(part);
+    }
     let checkpoint = checkpoint.or(resume);
     job.checkpoint = CheckpointPolicy {
         periodic: checkpoint.clone(),
@@ -269,10 +298,12 @@ pub fn render<'py>(
     if let Some(error) = observer.error {
         return Err(error);
     }
-    let film = outcome.accumulator.film();
-    let pixels: Vec<f32> = film.pixels.iter().flat_map(|p| p.to_array()).collect();
+    let done = &outcome.accumulator;
+    // The mean of the samples rendered here (all of them, or the range asked for).
+    let n = samples.map_or(done.samples, |(_, count)| count).max(1) as f32;
+    let pixels: Vec<f32> = done.sums.iter().flat_map(|s| (*s / n).to_array()).collect();
     let image = numpy::ndarray::Array3::from_shape_vec(
-        (film.height as usize, film.width as usize, 3),
+        (done.region.height as usize, done.region.width as usize, 3),
         pixels,
     )
     .expect("height x width x 3 values");

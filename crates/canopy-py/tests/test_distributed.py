@@ -98,6 +98,17 @@ def test_a_built_in_scene_with_overrides_renders_as_in_one_process():
     np.testing.assert_array_equal(image, canopy.render("paper-3", size=(40, 28), spp=2, seed=9))
 
 
+def test_sample_ranges_as_tasks_merge_to_the_image_up_to_rounding():
+    whole = canopy.render("paper-3", size=(30, 20), spp=7, seed=2)
+    split = distributed.render("paper-3", size=(30, 20), spp=7, seed=2, tile=16, samples_per_task=3)
+    np.testing.assert_allclose(split, whole, rtol=1e-5, atol=1e-6)
+    # One range per tile is the single-process call: bit for bit.
+    single = distributed.render("paper-3", size=(30, 20), spp=7, seed=2, tile=16, samples_per_task=7)
+    np.testing.assert_array_equal(single, whole)
+    with pytest.raises(ValueError, match="samples_per_task"):
+        distributed.render("paper-3", samples_per_task=0)
+
+
 def test_bad_set_ups_are_refused_before_work(tmp_path):
     with pytest.raises(ValueError, match="gone.toml"):
         distributed.render(tmp_path / "gone.toml")
@@ -107,6 +118,23 @@ def test_bad_set_ups_are_refused_before_work(tmp_path):
         distributed.render("paper-3", tile=0)
     with pytest.raises(RuntimeError, match="same version on every node"):
         distributed.render_tile(("paper-3", {}), (0, 0, 1, 1), {}, "0.0.0-elsewhere")
+
+
+def test_every_node_is_checked_for_canopy_before_work(tmp_path, monkeypatch):
+    addresses = distributed.check_nodes()
+    assert len(addresses) == 2
+    # A driver of another version: refused before any tile is rendered.
+    monkeypatch.setattr(distributed, "__version__", "0.0.0-elsewhere")
+    kept = tmp_path / "tiles"
+    with pytest.raises(RuntimeError) as e:
+        distributed.render("paper-3", size=(16, 8), spp=1, tile=8, resume_dir=kept)
+    assert str(e.value).count("0.0.0-elsewhere on the driver") == 2, str(e.value)
+    assert "same version on every node" in str(e.value)
+    assert not list(kept.glob("tile-*"))
+    # A node that cannot import canopy_rt is named, with what to install.
+    missing = ModuleNotFoundError("No module named 'canopy_rt'")
+    assert distributed._node_failure("10.0.0.7", missing, "1.2.3") == (
+        "node 10.0.0.7 has no canopy_rt: install canopy-rt 1.2.3 on every node")
 
 
 def test_workers_render_from_the_shipped_files_alone(tmp_path):

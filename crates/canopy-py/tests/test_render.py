@@ -81,6 +81,21 @@ def test_both_schedules_render_the_same_pixels():
     np.testing.assert_array_equal(wavefront, depth)
 
 
+def test_sample_ranges_make_the_whole_render():
+    whole = canopy.render("paper-3", size=(20, 12), spp=5, seed=4)
+    np.testing.assert_array_equal(canopy.render("paper-3", size=(20, 12), samples=(0, 5), seed=4), whole)
+    first = canopy.render("paper-3", size=(20, 12), samples=(0, 2), seed=4).astype(np.float64)
+    rest = canopy.render("paper-3", size=(20, 12), samples=(2, 3), seed=4, region=(4, 2, 10, 6))
+    merged = (2 * first[2:8, 4:14] + 3 * rest.astype(np.float64)) / 5
+    # The same samples: only the rounding of the sums differs.
+    np.testing.assert_allclose(merged, whole[2:8, 4:14], rtol=1e-5, atol=1e-6)
+    assert not np.array_equal(first[2:8, 4:14], whole[2:8, 4:14])
+    for kwargs, words in [({"samples": (0, 0)}, "count >= 1"), ({"samples": (0, 2), "spp": 2}, "not both"),
+                          ({"samples": (0, 2), "checkpoint": "x.ckpt"}, "drop resume")]:
+        with pytest.raises(ValueError, match=words):
+            canopy.render("paper-3", size=(8, 8), **kwargs)
+
+
 def test_a_region_is_exactly_those_pixels_of_the_whole_image():
     whole = canopy.render("cornell", size=(20, 12), spp=2)
     part = canopy.render("cornell", size=(20, 12), spp=2, region=(3, 4, 9, 5))

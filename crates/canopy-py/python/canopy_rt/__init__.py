@@ -291,6 +291,7 @@ def render(
     checkpoint_every: float = 60.0,
     resume=None,
     schedule: str = "wavefront",
+    samples: Optional[Tuple[int, int]] = None,
 ) -> np.ndarray:
     """Renders a scene (built-in name, scene file or mesh, or a :class:`Scene` built in
     Python) to a linear float32 image of shape (height, width, 3), exactly as
@@ -306,6 +307,11 @@ def render(
     ``checkpoint=path`` the render is saved there every ``checkpoint_every`` seconds and
     when stopped; ``render(resume=path)`` continues it to the same image (a
     :class:`Scene` is given again: ``render(scene, resume=path)``).
+
+    ``samples=(first, count)`` renders only samples ``first .. first + count`` of each
+    pixel (instead of ``spp``) and returns their mean: ranges rendered apart (on
+    several machines, say) weighted by their counts make the whole render's image, up
+    to the rounding of the sums.
 
     ``schedule`` is the order the CPU traces paths in: ``"wavefront"`` (many at a time,
     stage by stage) or ``"depth"`` (one at a time); the image is the same bit for bit.
@@ -334,6 +340,7 @@ def render(
         checkpoint_every=float(checkpoint_every),
         resume=None if resume is None else str(resume),
         schedule=str(schedule),
+        samples=None if samples is None else (int(samples[0]), int(samples[1])),
     )
 
 

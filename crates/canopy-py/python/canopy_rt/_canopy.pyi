@@ -33,6 +33,7 @@ def render(
     checkpoint_every: float = ...,
     resume: Optional[str] = ...,
     schedule: str = ...,
+    samples: Optional[Tuple[int, int]] = ...,
 ) -> np.ndarray: ...
 
 class Scene:
