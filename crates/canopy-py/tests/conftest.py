@@ -6,6 +6,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[3]
 MESHES = ROOT / "scenes" / "meshes"
+GLTF = ROOT / "scenes" / "gltf"
 
 
 @pytest.fixture(scope="session")

@@ -8,7 +8,7 @@ import pytest
 
 import canopy_rt as canopy
 import canopy_rt.distributed as distributed
-from conftest import MESHES
+from conftest import GLTF, MESHES
 
 ray = pytest.importorskip("ray")
 
@@ -112,10 +112,12 @@ def test_sample_ranges_as_tasks_merge_to_the_image_up_to_rounding():
 def test_bad_set_ups_are_refused_before_work(tmp_path):
     with pytest.raises(ValueError, match="gone.toml"):
         distributed.render(tmp_path / "gone.toml")
-    with pytest.raises(TypeError, match="cannot be shipped"):
-        distributed.render(canopy.Scene())
     with pytest.raises(ValueError, match="tile"):
         distributed.render("paper-3", tile=0)
+    with pytest.raises(ValueError, match="no node of the cluster has a GPU"):
+        distributed.render("paper-3", size=(8, 8), spp=1, device="gpu")
+    with pytest.raises(ValueError, match="device must be"):
+        distributed.render("paper-3", device="tpu")
     with pytest.raises(RuntimeError, match="same version on every node"):
         distributed.render_tile(("paper-3", {}), (0, 0, 1, 1), {}, "0.0.0-elsewhere")
 
@@ -155,6 +157,24 @@ material = { type = "lambertian", albedo = [0.8, 0.3, 0.2] }
     scene.unlink()
     task = ray.remote(distributed.render_tile)
     tile = ray.get(task.remote(bundle, (0, 0, 24, 16), {}, canopy.__version__))
+    np.testing.assert_array_equal(tile, expected)
+
+
+def test_a_python_scene_ships_with_its_files_and_renders_as_in_one_process(tmp_path):
+    model = tmp_path / "duck.glb"
+    model.write_bytes((GLTF / "Duck.glb").read_bytes())
+    scene = canopy.Scene(size=(26, 18), spp=2, name="pond")
+    scene.camera(look_from=(0, 2, 6), look_at=(0, 0.5, 0))
+    scene.add_sphere((0, -100, 0), 100, material=canopy.lambertian((0.4, 0.5, 0.3)))
+    scene.add_gltf(model, np.diag([0.01, 0.01, 0.01, 1.0]))
+    expected = canopy.render(scene)
+    np.testing.assert_array_equal(distributed.render(scene, tile=9), expected)
+    # The workers read the model from what was shipped, not from this disk.
+    bundle = distributed._bundle(scene)
+    assert sorted(bundle[1]) == [str(model)]
+    model.unlink()
+    task = ray.remote(distributed.render_tile)
+    tile = ray.get(task.remote(bundle, (0, 0, 26, 18), {}, canopy.__version__))
     np.testing.assert_array_equal(tile, expected)
 
 

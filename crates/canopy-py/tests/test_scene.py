@@ -83,6 +83,22 @@ def test_a_python_scene_renders_the_scene_files_pixels(tmp_path):
     np.testing.assert_array_equal(part, from_python[6:13, 5:15])
 
 
+def test_a_scene_pickles_to_the_same_pixels(tmp_path):
+    import pickle
+
+    scene = table_scene()
+    scene.background((0.2, 0.3, 0.4))
+    copy = pickle.loads(pickle.dumps(scene))
+    np.testing.assert_array_equal(canopy.render(copy), canopy.render(scene))
+    # Refused calls are not part of the record: the copy has what the scene has.
+    with pytest.raises(ValueError):
+        scene.add_sphere((0, 0, 0), -1, material=canopy.lambertian((1, 1, 1)))
+    assert pickle.loads(pickle.dumps(scene)).info().counts == scene.info().counts
+    # A mesh added to the copy takes the material its mesh was added with.
+    copy.add_instance(0, np.eye(4))
+    assert copy.info().counts["instances"] == scene.info().counts["instances"] + 1
+
+
 def test_contents_give_back_every_shape_material_and_the_camera():
     scene = table_scene()
     contents = scene.info().contents()

@@ -323,7 +323,7 @@ def render(
         if len(region) != 4:
             raise ValueError(f"region must be (x, y, width, height), not {region!r}")
     return _canopy.render(
-        None if scene is None else scene._native if isinstance(scene, Scene) else str(scene),
+        None if scene is None else scene._native.native if isinstance(scene, Scene) else str(scene),
         spp=spp,
         size=size,
         seed=seed,

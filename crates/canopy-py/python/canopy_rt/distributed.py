@@ -15,8 +15,9 @@ reads) is loaded and checked on the driver, and its files are shipped once throu
 object store; a worker writes them into a private directory, keeping their places relative
 to each other, and renders from there. ``ray.init(address=...)`` is called when Ray is not
 started yet (``address=None`` starts a local Ray on this machine; ``"auto"`` joins the
-cluster this machine belongs to). Before any work, every node is checked to have canopy_rt of the driver's version
-(:func:`check_nodes`). A task whose worker dies is run again by Ray.
+cluster this machine belongs to). Before any work, every node is checked to have
+canopy_rt of the driver's version (:func:`check_nodes`). A task whose worker dies is
+run again by Ray.
 
 With ``resume_dir=``, every finished tile is kept there as an EXR file (written
 atomically, its float32 pixels exact) beside a record of the scene and settings; a driver
@@ -26,7 +27,10 @@ refuses a directory that holds another render's tiles.
 Tiles may be split into ranges of samples too (``samples_per_task``); see :func:`render`
 for how that image differs in rounding.
 
-Not yet: scenes built in Python (:class:`canopy_rt.Scene`), animations.
+A scene built in Python (:class:`canopy_rt.Scene`) ships as the calls that build it,
+with the files they read (glTF models, environment maps).
+
+Not yet: animations (``render_frames``), ``canopy bench paper`` cells as tasks.
 """
 
 from __future__ import annotations
@@ -34,6 +38,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import pickle
 import tempfile
 from typing import Callable, Dict, List, Optional, Tuple
 
@@ -60,29 +65,33 @@ def tiles(width: int, height: int, tile: int) -> List[_Region]:
             for y in range(0, height, tile) for x in range(0, width, tile)]
 
 
-def _bundle(scene: str) -> Tuple[str, Dict[str, bytes]]:
-    """The scene as tasks receive it: its name or absolute path, and the bytes of every
-    file it reads by absolute path (none for a built-in scene)."""
-    info = load_scene(scene)  # raises here, before any work, when the scene is bad
-    if scene in scenes():  # a built-in scene wins over a file of the same name, as in load_scene
-        return scene, {}
+def _bundle(scene) -> Tuple[object, Dict[str, bytes]]:
+    """The scene as tasks receive it: its name or absolute path (or a scene built in
+    Python, as the calls that build it), and the bytes of every file it reads by
+    absolute path (none for a built-in scene)."""
+    if isinstance(scene, Scene):
+        inputs, source = scene.info().inputs, ("python", scene.__getstate__())
+    else:
+        scene = str(scene)
+        info = load_scene(scene)  # raises here, before any work, when the scene is bad
+        if scene in scenes():  # a built-in scene wins over a file of its name, as in load_scene
+            return scene, {}
+        inputs, source = [scene, *info.inputs], os.path.abspath(scene)
     files = {}
-    for path in [scene, *info.inputs]:
+    for path in inputs:
         path = os.path.abspath(path)
         with open(path, "rb") as f:
             files[path] = f.read()
-    return os.path.abspath(scene), files
+    return source, files
 
 
 # Per worker process: the directory a bundle's files were written to, by the bundle's key.
 _written: Dict[str, str] = {}
 
 
-def _materialize(source: str, files: Dict[str, bytes]) -> str:
-    """Where `source` is on this worker: its files written once into a private
-    directory, under their absolute paths, so that relative references still resolve."""
-    if not files:
-        return source
+def _written_root(files: Dict[str, bytes]) -> str:
+    """The private directory of this worker that holds `files` under their absolute
+    paths, written the first time they are asked for."""
     digest = hashlib.sha256()
     for path in sorted(files):
         digest.update(path.encode())
@@ -92,12 +101,28 @@ def _materialize(source: str, files: Dict[str, bytes]) -> str:
     if root is None:
         root = tempfile.mkdtemp(prefix=f"canopy-{key[:12]}-")
         for path, data in files.items():
-            target = os.path.join(root, os.path.splitdrive(path)[1].lstrip("/\\"))
+            target = _under(root, path)
             os.makedirs(os.path.dirname(target), exist_ok=True)
             with open(target, "wb") as f:
                 f.write(data)
         _written[key] = root
-    return os.path.join(root, os.path.splitdrive(source)[1].lstrip("/\\"))
+    return root
+
+
+def _under(root: str, path: str) -> str:
+    return os.path.join(root, os.path.splitdrive(path)[1].lstrip("/\\"))
+
+
+def _materialize(source, files: Dict[str, bytes]):
+    """What to render on this worker: the scene's files written once into a private
+    directory, so that relative references still resolve, and the scene (a name, a path
+    there, or a Python scene rebuilt to read its files from there)."""
+    if isinstance(source, tuple):
+        root = _written_root(files) if files else None
+        return Scene._rebuilt(source[1], (lambda path: _under(root, path)) if root else (lambda path: path))
+    if not files:
+        return source
+    return _under(_written_root(files), source)
 
 
 def render_tile(bundle, region: _Region, options: dict, version: str) -> np.ndarray:
@@ -206,6 +231,7 @@ def render(
     russian_roulette: Optional[bool] = None,
     bvh: str = "binned-sah",
     width: int = 8,
+    device: str = "cpu",
     tile: int = 64,
     samples_per_task: Optional[int] = None,
     threads_per_task: int = 1,
@@ -216,7 +242,9 @@ def render(
     """Renders ``scene`` on a Ray cluster: the same linear float32 (height, width, 3)
     image as :func:`canopy_rt.render` with the same settings, bit for bit. The image is
     split into tiles of ``tile`` x ``tile`` pixels, one Ray task each, each task using
-    ``threads_per_task`` threads (and asking Ray for as many CPUs). ``progress(done,
+    ``threads_per_task`` threads (and asking Ray for as many CPUs); with
+    ``device="gpu"`` each task renders on a GPU of its node and asks Ray for one (the
+    CPU's image up to rounding, as :func:`canopy_rt.render` says). ``progress(done,
     total)`` is called on the driver as tiles finish (tiles found in ``resume_dir`` count
     as finished at the start).
 
@@ -227,22 +255,22 @@ def render(
     per-pixel sums (relative differences of about 1e-7 per sample), because those
     add each sample to a float32 sum in turn, which no split can repeat without
     waiting for the previous range."""
-    if isinstance(scene, Scene):
-        raise TypeError("a Scene built in Python cannot be shipped to a cluster yet: "
-                        "render a scene file, mesh or glTF model")
     if int(tile) < 1:
         raise ValueError(f"tile must be at least 1 pixel, not {tile}")
     if samples_per_task is not None and int(samples_per_task) < 1:
         raise ValueError(f"samples_per_task must be at least 1, not {samples_per_task}")
     if int(threads_per_task) < 1:
         raise ValueError(f"threads_per_task must be at least 1, not {threads_per_task}")
-    scene = str(scene)
     bundle = _bundle(scene)
-    settings = load_scene(scene).settings
+    settings = (scene.info() if isinstance(scene, Scene) else load_scene(str(scene))).settings
     image_width, image_height = (int(size[0]), int(size[1])) if size else (settings["width"], settings["height"])
+    if device not in ("cpu", "gpu"):
+        raise ValueError(f'device must be "cpu" or "gpu", not {device!r}')
     options = dict(spp=spp, size=(image_width, image_height), seed=seed, max_depth=max_depth,
                    integrator=integrator, russian_roulette=russian_roulette, bvh=bvh,
                    width=width, threads=int(threads_per_task))
+    if device == "gpu":
+        options["device"] = "gpu"
 
     total_spp = int(spp) if spp is not None else settings["spp"]
     step = int(samples_per_task) if samples_per_task else total_spp
@@ -254,7 +282,10 @@ def render(
         digest = hashlib.sha256()
         for path in sorted(bundle[1]):
             digest.update(path.encode() + hashlib.sha256(bundle[1][path]).digest())
-        record = dict(scene=bundle[0], files=digest.hexdigest(), tile=int(tile),
+        source = bundle[0]
+        if isinstance(source, tuple):  # a Python scene: named by the calls that build it
+            source = "python:" + hashlib.sha256(pickle.dumps(source[1], protocol=4)).hexdigest()
+        record = dict(scene=source, files=digest.hexdigest(), tile=int(tile),
                       samples_per_task=step if len(ranges) > 1 else None,
                       version=__version__, **{k: v for k, v in options.items() if k != "threads"})
         store = _TileStore(resume_dir, json.loads(json.dumps(record)))
@@ -276,7 +307,10 @@ def render(
     if not ray.is_initialized():
         ray.init(address=address, include_dashboard=False, log_to_driver=False)
     check_nodes(__version__)
-    task = ray.remote(num_cpus=int(threads_per_task), max_retries=3)(render_tile)
+    gpus = 1 if device == "gpu" else 0
+    if gpus and not ray.cluster_resources().get("GPU"):
+        raise ValueError('device="gpu" but no node of the cluster has a GPU (Ray counts none)')
+    task = ray.remote(num_cpus=int(threads_per_task), num_gpus=gpus, max_retries=3)(render_tile)
     bundle_ref = ray.put(bundle)
 
     def options_for(first: int, count: int) -> dict:
@@ -332,6 +366,7 @@ def main(argv=None) -> int:
     command.add_argument("--seed", type=int)
     command.add_argument("--depth", type=int, dest="max_depth")
     command.add_argument("--integrator", choices=["path", "bsdf"])
+    command.add_argument("--device", choices=["cpu", "gpu"], default="cpu")
     command.add_argument("--tile", type=int, default=64, help="tile size in pixels (64)")
     command.add_argument("--samples-per-task", type=int,
                          help="split each tile's samples into tasks of this many too")
@@ -355,7 +390,7 @@ def main(argv=None) -> int:
     try:
         image = render(args.scene, spp=args.spp, size=size, seed=args.seed,
                        max_depth=args.max_depth, integrator=args.integrator, tile=args.tile,
-                       samples_per_task=args.samples_per_task,
+                       samples_per_task=args.samples_per_task, device=args.device,
                        threads_per_task=args.threads_per_task, address=args.address,
                        progress=show, resume_dir=args.resume_dir)
         write_image(args.output, image)

@@ -12,11 +12,16 @@ boxes, materials, a camera, a background and render settings, rendered by
 
 Every call is checked as the scene file parser checks its entries; a refused call
 raises ``ValueError`` naming the argument and leaves the scene as it was.
+
+A scene pickles (for multiprocessing, Ray tasks and ``canopy_rt.distributed``): it is
+rebuilt by repeating its calls, which read the files they name (glTF models,
+environment maps) again where it is unpickled.
 """
 
 from __future__ import annotations
 
-from typing import Optional, Sequence, Tuple, Union
+import os
+from typing import Callable, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -91,6 +96,46 @@ def _vec3(value, name: str) -> Tuple[float, float, float]:
     return (float(v[0]), float(v[1]), float(v[2]))
 
 
+# The arguments of these native calls that name files, by position.
+_FILE_ARGUMENTS = {"set_environment": 0, "add_gltf": 0}
+
+
+class _Recorder:
+    """The native scene, with a record of the calls that succeeded on it: enough to
+    build the same scene again elsewhere (files named by absolute paths)."""
+
+    def __init__(self, name: str):
+        self.name = name
+        self.native = _canopy.Scene(name)
+        self.calls: List[Tuple[str, tuple]] = []
+
+    def __getattr__(self, method: str):
+        native_method = getattr(self.native, method)
+
+        def call(*args):
+            if method in _FILE_ARGUMENTS:
+                args = list(args)
+                args[_FILE_ARGUMENTS[method]] = os.path.abspath(args[_FILE_ARGUMENTS[method]])
+                args = tuple(args)
+            result = native_method(*args)
+            if method.startswith(("set_", "add_")):
+                self.calls.append((method, args))
+            return result
+
+        return call
+
+    @classmethod
+    def replay(cls, name: str, calls, where: Callable[[str], str] = lambda path: path) -> "_Recorder":
+        """The scene these calls build, each file looked for at ``where(path)``."""
+        recorder = cls(name)
+        for method, args in calls:
+            if method in _FILE_ARGUMENTS:
+                args = list(args)
+                args[_FILE_ARGUMENTS[method]] = where(args[_FILE_ARGUMENTS[method]])
+            getattr(recorder, method)(*args)
+        return recorder
+
+
 class Scene:
     """A scene under construction. ``size`` is (width, height); the other settings are
     those of a scene file's ``[render]`` table."""
@@ -106,7 +151,7 @@ class Scene:
         russian_roulette: bool = True,
         name: str = "",
     ):
-        self._native = _canopy.Scene(str(name))
+        self._native = _Recorder(str(name))
         self._mesh_materials = {}
         self.settings(
             size=size,
@@ -275,5 +320,21 @@ class Scene:
         """The scene described: ``settings``, ``counts``, ``bounds``, ``warnings``."""
         return self._native.info()
 
+    def __getstate__(self) -> dict:
+        return {"name": self._native.name, "calls": list(self._native.calls),
+                "mesh_materials": dict(self._mesh_materials)}
+
+    def __setstate__(self, state: dict) -> None:
+        self._native = _Recorder.replay(state["name"], state["calls"])
+        self._mesh_materials = dict(state["mesh_materials"])
+
+    @classmethod
+    def _rebuilt(cls, state: dict, where: Callable[[str], str]) -> "Scene":
+        """The pickled scene ``state``, each file it reads looked for at ``where(path)``."""
+        scene = cls.__new__(cls)
+        scene._native = _Recorder.replay(state["name"], state["calls"], where)
+        scene._mesh_materials = dict(state["mesh_materials"])
+        return scene
+
     def __repr__(self) -> str:
-        return repr(self._native)
+        return repr(self._native.native)
