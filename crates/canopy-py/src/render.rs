@@ -9,7 +9,7 @@ use canopy_render::material::Material;
 use canopy_render::mesh::{parse_mesh, MeshFormat};
 use canopy_render::{load_scene as load, AccelKind, Accumulator, Region, Scene};
 use numpy::ndarray::Array2;
-use numpy::{IntoPyArray, PyArray2, PyArray3, ToPyArray};
+use numpy::{IntoPyArray, PyArray2, PyArray3, PyReadonlyArray2, ToPyArray};
 use pyo3::exceptions::{PyOSError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -145,13 +145,15 @@ pub fn load_scene(py: Python<'_>, scene: &str) -> PyResult<SceneInfo> {
 /// `checkpoint=path` the render is saved there every `checkpoint_every` seconds and when
 /// interrupted, and `resume=path` continues such a render (its scene and settings come
 /// from the file). `samples=(first, count)` renders only samples `first .. first + count`
-/// of every pixel and returns their mean. `schedule` is the order CPU workers trace paths in, "wavefront" or
+/// of every pixel and returns their mean. `camera={...}` moves the camera (any of
+/// look_from, look_at, up, vfov, aperture, focus_distance) and `instances={k: (3, 4)
+/// matrix}` moves mesh instances: a frame of an animation. `schedule` is the order CPU workers trace paths in, "wavefront" or
 /// "depth": the image is the same.
 #[pyfunction]
 #[pyo3(signature = (scene=None, spp=None, size=None, seed=None, max_depth=None, integrator=None,
     russian_roulette=None, device="cpu", bvh="binned-sah", width=8, threads=None, progress=None,
     region=None, checkpoint=None, checkpoint_every=60.0, resume=None, schedule="wavefront",
-    samples=None))]
+    samples=None, camera=None, instances=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn render<'py>(
     py: Python<'py>,
@@ -173,6 +175,8 @@ pub fn render<'py>(
     resume: Option<PathBuf>,
     schedule: &str,
     samples: Option<(u32, u32)>,
+    camera: Option<Bound<'py, PyDict>>,
+    instances: Option<std::collections::HashMap<u32, PyReadonlyArray2<'py, f32>>>,
 ) -> PyResult<Bound<'py, PyArray3<f32>>> {
     let device: Device = device.parse().map_err(PyValueError::new_err)?;
     let schedule: Schedule = schedule.parse().map_err(PyValueError::new_err)?;
@@ -191,10 +195,12 @@ pub fn render<'py>(
         || max_depth.is_some()
         || integrator.is_some()
         || russian_roulette.is_some()
-        || region.is_some();
+        || region.is_some()
+        || camera.is_some()
+        || instances.is_some();
     if resume.is_some() && overrides {
         return Err(PyValueError::new_err(
-            "a resumed render keeps its checkpoint's settings: drop spp, size, seed, max_depth, integrator, russian_roulette and region",
+            "a resumed render keeps its checkpoint's settings: drop spp, size, seed, max_depth, integrator, russian_roulette, region, camera and instances",
         ));
     }
     if let Some((first, count)) = samples {
@@ -257,6 +263,20 @@ pub fn render<'py>(
         }
         s.russian_roulette = russian_roulette.unwrap_or(s.russian_roulette);
         s.check().map_err(PyValueError::new_err)?;
+        if let Some(changes) = &camera {
+            let moved = moved_camera(scene.camera, changes)?;
+            scene
+                .set_camera(moved)
+                .map_err(|e| PyValueError::new_err(format!("camera: {e}")))?;
+        }
+        let mut moves: Vec<_> = instances.iter().flatten().collect();
+        moves.sort_by_key(|(index, _)| **index);
+        for (index, transform) in moves {
+            let to_world = crate::arrays::affine(transform)?;
+            scene
+                .set_instance_transform(*index, to_world)
+                .map_err(|e| PyValueError::new_err(format!("instances[{index}]: {e}")))?;
+        }
     }
     let mut job = RenderJob::new(&scene, source);
     job.structure = Structure {
@@ -308,6 +328,43 @@ pub fn render<'py>(
     )
     .expect("height x width x 3 values");
     Ok(image.to_pyarray(py))
+}
+
+/// `camera` with the entries of `changes` (look_from, look_at, up, vfov, aperture,
+/// focus_distance) put in.
+fn moved_camera(
+    mut camera: canopy_render::camera::CameraSpec,
+    changes: &Bound<'_, PyDict>,
+) -> PyResult<canopy_render::camera::CameraSpec> {
+    let bad =
+        |key: &str, what: &str| PyValueError::new_err(format!("camera: `{key}` must be {what}"));
+    for (key, value) in changes.iter() {
+        let key: String = key.extract()?;
+        let point = || -> PyResult<glam::Vec3> {
+            let v: [f32; 3] = value.extract().map_err(|_| bad(&key, "three numbers"))?;
+            Ok(v.into())
+        };
+        let number = || -> PyResult<f32> { value.extract().map_err(|_| bad(&key, "a number")) };
+        match key.as_str() {
+            "look_from" => camera.look_from = point()?,
+            "look_at" => camera.look_at = point()?,
+            "up" => camera.up = point()?,
+            "vfov" => camera.vfov = number()?,
+            "aperture" => camera.aperture = number()?,
+            "focus_distance" => {
+                camera.focus_distance = match value.is_none() {
+                    true => None,
+                    false => Some(number()?),
+                }
+            }
+            _ => {
+                return Err(PyValueError::new_err(format!(
+                    "camera: no `{key}` (it takes look_from, look_at, up, vfov, aperture, focus_distance)"
+                )))
+            }
+        }
+    }
+    Ok(camera)
 }
 
 /// A scene to render: a built-in name, a file, or a `Scene` built in Python.

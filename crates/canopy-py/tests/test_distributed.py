@@ -3,6 +3,8 @@ rendered by Ray tasks give canopy's single-process image bit for bit, scene file
 with the files they read, a worker killed mid-task is replaced without changing the
 image, a killed driver resumes, and bad set-ups are refused before any work."""
 
+import os
+
 import numpy as np
 import pytest
 
@@ -178,6 +180,39 @@ def test_a_python_scene_ships_with_its_files_and_renders_as_in_one_process(tmp_p
     np.testing.assert_array_equal(tile, expected)
 
 
+def test_frames_render_as_in_one_process_and_a_rerun_renders_only_the_missing(tmp_path):
+    scene = canopy.Scene(size=(20, 14), spp=2)
+    scene.camera(look_from=(0, 2, 7), look_at=(0, 0.5, 0))
+    scene.add_sphere((0, -100, 0), 100, material=canopy.lambertian((0.5, 0.5, 0.5)))
+    vertices, faces = canopy.load_mesh(MESHES / "teapot.obj")
+    scene.add_mesh(vertices, faces, material=canopy.lambertian((0.8, 0.3, 0.2)))
+    frames = []
+    for i in range(3):
+        turn = np.eye(4)
+        angle = 0.4 * i
+        turn[[0, 0, 2, 2], [0, 2, 0, 2]] = np.cos(angle), np.sin(angle), -np.sin(angle), np.cos(angle)
+        frames.append({"camera": {"look_from": (i, 2, 7)}, "instances": {0: turn}})
+    output = str(tmp_path / "frames" / "f{frame:03d}.exr")
+    paths = distributed.render_frames(scene, frames, output)
+    assert paths == [str(tmp_path / "frames" / f"f{i:03d}.exr") for i in range(3)]
+    for path, frame in zip(paths, frames):
+        np.testing.assert_array_equal(canopy.read_image(path), canopy.render(scene, **frame))
+    # A rerun renders only what is missing.
+    kept = os.stat(paths[0]).st_mtime_ns
+    os.remove(paths[1])
+    seen = []
+    distributed.render_frames(scene, frames, output, progress=lambda done, total: seen.append(done))
+    assert seen == [2, 3] and os.stat(paths[0]).st_mtime_ns == kept
+    np.testing.assert_array_equal(canopy.read_image(paths[1]), canopy.render(scene, **frames[1]))
+    for frames_, output_, words in [([{"lens": 1}], output, "frame 0"),
+                                    ([{"camera": {"fov": 3}}], output, "camera takes"),
+                                    ([{}, {}], str(tmp_path / "same.exr"), "same file"),
+                                    ([{"instances": {0: np.zeros((2, 2))}}], output, "instances"),
+                                    ([{"instances": {1: np.eye(4)}}], output, "instance 1 does not exist")]:
+        with pytest.raises(ValueError, match=words):
+            distributed.render_frames(scene, frames_, output_)
+
+
 def test_the_command_line_writes_the_image(tmp_path, address):
     import subprocess
     import sys
@@ -194,6 +229,28 @@ def test_the_command_line_writes_the_image(tmp_path, address):
                           "-o", str(tmp_path / "x.png")], capture_output=True, text=True, timeout=300)
     assert bad.returncode == 1 and "gone.toml" in bad.stderr
     assert not (tmp_path / "x.png").exists()
+
+
+def test_the_command_line_renders_frames_from_a_json_file(tmp_path, address):
+    import json
+    import subprocess
+    import sys
+
+    frames = [{"camera": {"look_from": [x, 3, 9]}} for x in (-1, 1)]
+    (tmp_path / "frames.json").write_text(json.dumps(frames))
+    run = subprocess.run(
+        [sys.executable, "-m", "canopy_rt.distributed", "frames", "paper-3", "--frames",
+         str(tmp_path / "frames.json"), "-o", str(tmp_path / "f{frame}.exr"), "--size", "16x12",
+         "--spp", "1", "--address", address], capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr
+    for i, frame in enumerate(frames):
+        np.testing.assert_array_equal(canopy.read_image(tmp_path / f"f{i}.exr"),
+                                      canopy.render("paper-3", size=(16, 12), spp=1, **frame))
+    (tmp_path / "bad.json").write_text("{")
+    bad = subprocess.run([sys.executable, "-m", "canopy_rt.distributed", "frames", "paper-3",
+                          "--frames", str(tmp_path / "bad.json"), "-o", "f{frame}.exr"],
+                         capture_output=True, text=True, timeout=300)
+    assert bad.returncode == 1 and "bad.json: not JSON" in bad.stderr
 
 
 def test_write_image_round_trips_exr_and_refuses_bad_images(tmp_path):

@@ -373,17 +373,7 @@ impl Scene {
         if self.instances.len() as u64 >= MAX_INSTANCES {
             return Err(format!("a scene holds at most {MAX_INSTANCES} instances"));
         }
-        let placed = Instance::new(0, to_world);
-        placed
-            .check(self.instances.len())
-            .map_err(|e| format!("the transform must be finite and invertible: {e}"))?;
-        let world = placed.world_bounds(local);
-        if !local.is_empty() && !in_range(&[world.min.to_array(), world.max.to_array()].concat()) {
-            return Err(format!(
-                "the instance reaches {} .. {}, beyond ±{MAX_COORDINATE:e}",
-                world.min, world.max
-            ));
-        }
+        check_placement(local, to_world, self.instances.len())?;
         self.instances.push(MeshInstance {
             mesh,
             to_world,
@@ -391,6 +381,41 @@ impl Scene {
         });
         Ok(self.instances.len() as u32 - 1)
     }
+
+    /// Moves mesh instance `instance` to `to_world` (a frame of an animation), checked
+    /// as [`Scene::add_instance`] checks its transform.
+    pub fn set_instance_transform(
+        &mut self,
+        instance: u32,
+        to_world: Affine3A,
+    ) -> Result<(), String> {
+        let Some(placed) = self.instances.get(instance as usize) else {
+            return Err(format!(
+                "instance {instance} does not exist (the scene has {})",
+                self.instances.len()
+            ));
+        };
+        let local = self.meshes[placed.mesh as usize].mesh.bounding_box();
+        check_placement(local, to_world, instance as usize)?;
+        self.instances[instance as usize].to_world = to_world;
+        Ok(())
+    }
+}
+
+/// Why a mesh with box `local` cannot be placed by `to_world` as instance `index`.
+fn check_placement(local: Aabb, to_world: Affine3A, index: usize) -> Result<(), String> {
+    let placed = Instance::new(0, to_world);
+    placed
+        .check(index)
+        .map_err(|e| format!("the transform must be finite and invertible: {e}"))?;
+    let world = placed.world_bounds(local);
+    if !local.is_empty() && !in_range(&[world.min.to_array(), world.max.to_array()].concat()) {
+        return Err(format!(
+            "the instance reaches {} .. {}, beyond ±{MAX_COORDINATE:e}",
+            world.min, world.max
+        ));
+    }
+    Ok(())
 }
 
 /// How long each list a loader appends to was, so that a failed load can be undone.

@@ -23,7 +23,7 @@ from typing import Callable, List, NamedTuple, Optional, Sequence, Tuple, Union
 import numpy as np
 
 from . import _canopy
-from .scene import Scene, dielectric, emissive, eval_material, lambertian, metal, pbr
+from .scene import Scene, _transform, dielectric, emissive, eval_material, lambertian, metal, pbr
 from .ray_scene import ClosestPoints, RayHitLists, RayHits, RayScene
 
 __version__: str = _canopy.__version__
@@ -292,6 +292,8 @@ def render(
     resume=None,
     schedule: str = "wavefront",
     samples: Optional[Tuple[int, int]] = None,
+    camera: Optional[dict] = None,
+    instances: Optional[dict] = None,
 ) -> np.ndarray:
     """Renders a scene (built-in name, scene file or mesh, or a :class:`Scene` built in
     Python) to a linear float32 image of shape (height, width, 3), exactly as
@@ -312,6 +314,10 @@ def render(
     pixel (instead of ``spp``) and returns their mean: ranges rendered apart (on
     several machines, say) weighted by their counts make the whole render's image, up
     to the rounding of the sums.
+
+    ``camera`` moves the camera for this render (a dict of any of ``look_from``,
+    ``look_at``, ``up``, ``vfov``, ``aperture``, ``focus_distance``) and ``instances``
+    moves mesh instances (``{index: 4x4 or 3x4 matrix}``): a frame of an animation.
 
     ``schedule`` is the order the CPU traces paths in: ``"wavefront"`` (many at a time,
     stage by stage) or ``"depth"`` (one at a time); the image is the same bit for bit.
@@ -341,6 +347,8 @@ def render(
         resume=None if resume is None else str(resume),
         schedule=str(schedule),
         samples=None if samples is None else (int(samples[0]), int(samples[1])),
+        camera=None if camera is None else dict(camera),
+        instances=None if instances is None else {int(k): _transform(v) for k, v in instances.items()},
     )
 
 

@@ -34,6 +34,8 @@ def render(
     resume: Optional[str] = ...,
     schedule: str = ...,
     samples: Optional[Tuple[int, int]] = ...,
+    camera: Optional[dict] = ...,
+    instances: Optional[dict] = ...,
 ) -> np.ndarray: ...
 
 class Scene:

@@ -30,7 +30,10 @@ for how that image differs in rounding.
 A scene built in Python (:class:`canopy_rt.Scene`) ships as the calls that build it,
 with the files they read (glTF models, environment maps).
 
-Not yet: animations (``render_frames``), ``canopy bench paper`` cells as tasks.
+Animations: :func:`render_frames` renders one task per frame (camera and instance
+moves per frame), each written atomically, skipping frames already on disk.
+
+Not yet: ``canopy bench paper`` cells as tasks.
 """
 
 from __future__ import annotations
@@ -40,11 +43,12 @@ import json
 import os
 import pickle
 import tempfile
-from typing import Callable, Dict, List, Optional, Tuple
+from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
 from . import Scene, __version__, load_scene, read_image, scenes, write_image
+from .scene import _transform
 from . import render as render_locally
 
 _Region = Tuple[int, int, int, int]
@@ -350,31 +354,161 @@ def render(
     return image
 
 
+_CAMERA_KEYS = {"look_from", "look_at", "up", "vfov", "aperture", "focus_distance"}
+
+
+def _frame_changes(index: int, frame, instance_count: int) -> dict:
+    """Frame `index`'s changes, checked on the driver: ``camera`` (a dict of camera
+    entries) and ``instances`` ({instance index: 4x4 or 3x4 matrix}) of a scene with
+    `instance_count` mesh instances."""
+    if not isinstance(frame, dict) or not set(frame) <= {"camera", "instances"}:
+        raise ValueError(f"frame {index}: a frame is a dict of `camera` and `instances`, not {frame!r}")
+    changes = {}
+    camera = frame.get("camera")
+    if camera is not None:
+        if not isinstance(camera, dict) or not set(camera) <= _CAMERA_KEYS:
+            raise ValueError(f"frame {index}: camera takes {', '.join(sorted(_CAMERA_KEYS))}, not {camera!r}")
+        changes["camera"] = dict(camera)
+    instances = frame.get("instances")
+    if instances is not None:
+        try:
+            changes["instances"] = {int(k): _transform(v) for k, v in dict(instances).items()}
+        except (TypeError, ValueError) as e:
+            raise ValueError(f"frame {index}: instances: {e}") from None
+        for k in changes["instances"]:
+            if not 0 <= k < instance_count:
+                raise ValueError(f"frame {index}: instance {k} does not exist (the scene has "
+                                 f"{instance_count})")
+    return changes
+
+
+def render_frame(bundle, changes: dict, options: dict, version: str) -> np.ndarray:
+    """One frame of an animation, as a Ray task runs it (callable directly too)."""
+    if version != __version__:
+        raise RuntimeError(
+            f"canopy_rt {__version__} on this worker, {version} on the driver: install the "
+            "same version on every node")
+    source, files = bundle
+    return render_locally(_materialize(source, files), **changes, **options)
+
+
+def render_frames(
+    scene,
+    frames: Sequence[dict],
+    output: str,
+    *,
+    spp: Optional[int] = None,
+    size: Optional[Tuple[int, int]] = None,
+    seed: Optional[int] = None,
+    max_depth: Optional[int] = None,
+    integrator: Optional[str] = None,
+    russian_roulette: Optional[bool] = None,
+    bvh: str = "binned-sah",
+    width: int = 8,
+    device: str = "cpu",
+    threads_per_task: int = 1,
+    address: Optional[str] = None,
+    progress: Optional[Callable[[int, int], None]] = None,
+) -> List[str]:
+    """Renders an animation on a Ray cluster, one task per frame, and returns the files
+    written. ``frames[i]`` changes the scene for frame ``i``: ``{"camera": {...},
+    "instances": {index: matrix}}`` (camera entries as :meth:`canopy_rt.Scene.camera`
+    takes them; mesh instances moved by 4x4 or 3x4 matrices, numbered as they were
+    placed: ``add_mesh`` places one, ``add_instance`` returns its number), either may be
+    left out.
+    ``output`` names each frame's file by its number: ``"frames/f{frame:04d}.exr"``
+    (``.png`` or ``.exr``). Each frame is the image :func:`canopy_rt.render` gives with
+    those changes, written atomically by the driver as it arrives; frames whose file
+    is already there are skipped, so running again after a failure renders only the
+    rest. ``progress(done, total)`` is called as frames are written."""
+    info = scene.info() if isinstance(scene, Scene) else load_scene(str(scene))
+    changes = [_frame_changes(i, f, info.counts["instances"]) for i, f in enumerate(frames)]
+    try:
+        paths = [str(output).format(frame=i) for i in range(len(changes))]
+    except (KeyError, IndexError, ValueError) as e:
+        raise ValueError(f"output {output!r} must name frames by {{frame}}: {e}") from None
+    if len(set(paths)) != len(paths):
+        raise ValueError(f"output {output!r} gives frames the same file: put {{frame}} in it")
+    if int(threads_per_task) < 1:
+        raise ValueError(f"threads_per_task must be at least 1, not {threads_per_task}")
+    if device not in ("cpu", "gpu"):
+        raise ValueError(f'device must be "cpu" or "gpu", not {device!r}')
+    bundle = _bundle(scene)
+    options = dict(spp=spp, size=size, seed=seed, max_depth=max_depth, integrator=integrator,
+                   russian_roulette=russian_roulette, bvh=bvh, width=width,
+                   threads=int(threads_per_task))
+    if device == "gpu":
+        options["device"] = "gpu"
+    todo = [i for i, path in enumerate(paths) if not os.path.exists(path)]
+    done = len(paths) - len(todo)
+    if progress is not None and done:
+        progress(done, len(paths))
+    if not todo:
+        return paths
+    for path in {os.path.dirname(os.path.abspath(paths[i])) for i in todo}:
+        os.makedirs(path, exist_ok=True)
+
+    ray = _ray()
+    if not ray.is_initialized():
+        ray.init(address=address, include_dashboard=False, log_to_driver=False)
+    check_nodes(__version__)
+    gpus = 1 if device == "gpu" else 0
+    if gpus and not ray.cluster_resources().get("GPU"):
+        raise ValueError('device="gpu" but no node of the cluster has a GPU (Ray counts none)')
+    task = ray.remote(num_cpus=int(threads_per_task), num_gpus=gpus, max_retries=3)(render_frame)
+    bundle_ref = ray.put(bundle)
+    pending = {task.remote(bundle_ref, changes[i], options, __version__): i for i in todo}
+    try:
+        while pending:
+            finished, _ = ray.wait(list(pending), num_returns=1)
+            for ref in finished:
+                i = pending.pop(ref)
+                write_image(paths[i], ray.get(ref))  # atomic: no half-written frame
+                done += 1
+                if progress is not None:
+                    progress(done, len(paths))
+    finally:
+        for ref in pending:
+            ray.cancel(ref)
+    return paths
+
+
 def main(argv=None) -> int:
-    """``python -m canopy_rt.distributed render SCENE -o IMAGE [options]``."""
+    """``python -m canopy_rt.distributed render SCENE -o IMAGE [options]``, or
+    ``... frames SCENE --frames FRAMES.json -o 'f{frame:04d}.exr' [options]``."""
     import argparse
     import sys
 
     parser = argparse.ArgumentParser(prog="python -m canopy_rt.distributed",
                                      description="Render a canopy scene on a Ray cluster.")
     commands = parser.add_subparsers(dest="command", required=True)
-    command = commands.add_parser("render", help="render a scene, tiles as Ray tasks")
-    command.add_argument("scene", help="built-in scene name, scene file, mesh or glTF model")
-    command.add_argument("-o", "--output", required=True, help=".png or .exr, written atomically")
-    command.add_argument("--spp", type=int)
-    command.add_argument("--size", help="WxH")
-    command.add_argument("--seed", type=int)
-    command.add_argument("--depth", type=int, dest="max_depth")
-    command.add_argument("--integrator", choices=["path", "bsdf"])
-    command.add_argument("--device", choices=["cpu", "gpu"], default="cpu")
-    command.add_argument("--tile", type=int, default=64, help="tile size in pixels (64)")
-    command.add_argument("--samples-per-task", type=int,
-                         help="split each tile's samples into tasks of this many too")
-    command.add_argument("--threads-per-task", type=int, default=1)
-    command.add_argument("--address", help="Ray cluster address ('auto': this machine's "
-                         "cluster); none starts a local Ray")
-    command.add_argument("--resume-dir", help="keep finished tiles here; run again with the "
-                         "same arguments to render only the missing ones")
+    image_command = commands.add_parser("render", help="render a scene, tiles as Ray tasks")
+    frames_command = commands.add_parser(
+        "frames", help="render an animation, one Ray task per frame")
+    for command in (image_command, frames_command):
+        command.add_argument("scene", help="built-in scene name, scene file, mesh or glTF model")
+        command.add_argument("--spp", type=int)
+        command.add_argument("--size", help="WxH")
+        command.add_argument("--seed", type=int)
+        command.add_argument("--depth", type=int, dest="max_depth")
+        command.add_argument("--integrator", choices=["path", "bsdf"])
+        command.add_argument("--device", choices=["cpu", "gpu"], default="cpu")
+        command.add_argument("--threads-per-task", type=int, default=1)
+        command.add_argument("--address", help="Ray cluster address ('auto': this machine's "
+                             "cluster); none starts a local Ray")
+    image_command.add_argument("-o", "--output", required=True,
+                               help=".png or .exr, written atomically")
+    image_command.add_argument("--tile", type=int, default=64, help="tile size in pixels (64)")
+    image_command.add_argument("--samples-per-task", type=int,
+                               help="split each tile's samples into tasks of this many too")
+    image_command.add_argument("--resume-dir", help="keep finished tiles here; run again with "
+                               "the same arguments to render only the missing ones")
+    frames_command.add_argument("--frames", required=True,
+                                help='JSON list of frames: [{"camera": {"look_from": [x, y, z]}, '
+                                '"instances": {"0": 4x4 matrix}}, ...]')
+    frames_command.add_argument("-o", "--output", required=True,
+                                help="file of each frame by its number, as f{frame:04d}.exr; "
+                                "frames already there are skipped")
     args = parser.parse_args(argv)
     size = None
     if args.size:
@@ -383,21 +517,33 @@ def main(argv=None) -> int:
             size = (w, h)
         except ValueError:
             parser.error(f"--size must be WxH, not {args.size}")
+    unit = "tiles" if args.command == "render" else "frames"
 
     def show(done: int, total: int) -> None:
-        print(f"\rtiles {done}/{total}", end="" if done < total else "\n", file=sys.stderr)
+        print(f"\r{unit} {done}/{total}", end="" if done < total else "\n", file=sys.stderr)
 
+    common = dict(spp=args.spp, size=size, seed=args.seed, max_depth=args.max_depth,
+                  integrator=args.integrator, device=args.device,
+                  threads_per_task=args.threads_per_task, address=args.address, progress=show)
     try:
-        image = render(args.scene, spp=args.spp, size=size, seed=args.seed,
-                       max_depth=args.max_depth, integrator=args.integrator, tile=args.tile,
-                       samples_per_task=args.samples_per_task, device=args.device,
-                       threads_per_task=args.threads_per_task, address=args.address,
-                       progress=show, resume_dir=args.resume_dir)
-        write_image(args.output, image)
+        if args.command == "render":
+            image = render(args.scene, tile=args.tile, samples_per_task=args.samples_per_task,
+                           resume_dir=args.resume_dir, **common)
+            write_image(args.output, image)
+            print(f"image       {args.output}", file=sys.stderr)
+        else:
+            try:
+                with open(args.frames) as f:
+                    frames = json.load(f)
+            except json.JSONDecodeError as e:
+                raise ValueError(f"{args.frames}: not JSON: {e}") from None
+            if not isinstance(frames, list):
+                raise ValueError(f"{args.frames}: a list of frames, not {type(frames).__name__}")
+            paths = render_frames(args.scene, frames, args.output, **common)
+            print(f"frames      {len(paths)}: {paths[0] if paths else ''} ...", file=sys.stderr)
     except (ValueError, TypeError, OSError, RuntimeError, ImportError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 1
-    print(f"image       {args.output}", file=sys.stderr)
     return 0
 
 
