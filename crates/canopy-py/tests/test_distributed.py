@@ -253,6 +253,28 @@ def test_the_command_line_renders_frames_from_a_json_file(tmp_path, address):
     assert bad.returncode == 1 and "bad.json: not JSON" in bad.stderr
 
 
+def test_bench_paper_cells_run_as_tasks_into_one_table(canopy_bin, tmp_path):
+    seen = []
+    md = distributed.bench_paper(tmp_path / "bench", scenes=[2, 3], methods="report", runs=2,
+                                 size=(12, 12), spp=1, canopy_bin=str(canopy_bin),
+                                 progress=lambda done, total: seen.append((done, total)))
+    assert seen[-1] == (2 * 6 * 2, 24)
+    import json
+
+    record = json.loads((tmp_path / "bench" / "results.json").read_text())
+    cells = record["measurements"]
+    assert [(m["scene"], m["method"]) for m in cells[:2]] == [("paper-2", "No BVH"), ("paper-2", "Top Down x sorted")]
+    assert len(cells) == 12 and all(len(m["seconds"]) == 2 for m in cells)
+    assert all(m["speedup"] is not None and m["speedup"] > 0 for m in cells)
+    text = open(md).read()
+    assert "paper-3" in text and "Agglom. 8 children" in text and "as Ray tasks" in text
+    assert (tmp_path / "bench" / "table3.png").exists()
+    with pytest.raises(ValueError, match="scenes are numbers"):
+        distributed.bench_paper(tmp_path / "x", scenes=[7], canopy_bin=str(canopy_bin))
+    with pytest.raises(ValueError, match="cannot run"):
+        distributed.bench_paper(tmp_path / "x", canopy_bin=str(tmp_path / "no-canopy"))
+
+
 def test_write_image_round_trips_exr_and_refuses_bad_images(tmp_path):
     image = np.random.default_rng(1).random((5, 7, 3), dtype=np.float32) * 4
     canopy.write_image(tmp_path / "a.exr", image)

@@ -59,6 +59,17 @@ struct PaperArgs {
     /// `report` for the report's six methods only, `all` to add canopy's builders.
     #[arg(long, default_value = "all", value_parser = ["report", "all"])]
     methods: String,
+    /// Only the method of this label (repeatable; `--list-methods` prints the labels):
+    /// one cell of the tables, as `canopy_rt.distributed.bench_paper` runs them.
+    #[arg(long = "method", value_name = "LABEL")]
+    only: Vec<String>,
+    /// Print the labels of the methods `--methods` selects, one a line, and stop.
+    #[arg(long)]
+    list_methods: bool,
+    /// Write only results.json: no tables, plots or pictures (`--from` makes them later,
+    /// from this run's file or from cells run elsewhere and merged).
+    #[arg(long)]
+    json_only: bool,
     /// Image size WIDTHxHEIGHT, each 1 to 65536 [default: 480x480, as in the report;
     /// 32x32 with --quick].
     #[arg(long, value_parser = limits::size)]
@@ -231,6 +242,28 @@ fn paper(args: &PaperArgs) -> anyhow::Result<()> {
         );
         return Ok(());
     }
+    let mut methods = methods(args.methods == "all");
+    if args.list_methods {
+        for method in &methods {
+            outln!("{}", method.label);
+        }
+        return Ok(());
+    }
+    if !args.only.is_empty() {
+        if let Some(unknown) = args
+            .only
+            .iter()
+            .find(|label| !methods.iter().any(|m| &m.label == *label))
+        {
+            let known: Vec<&str> = methods.iter().map(|m| m.label.as_str()).collect();
+            anyhow::bail!(
+                "no method `{unknown}` (with --methods {}: {})",
+                args.methods,
+                known.join(", ")
+            );
+        }
+        methods.retain(|m| args.only.contains(&m.label));
+    }
     let runs = args.runs.unwrap_or(if args.quick { 2 } else { 6 });
     let scene_numbers: Vec<usize> = if args.scenes.is_empty() {
         (1..=6).collect()
@@ -247,7 +280,6 @@ fn paper(args: &PaperArgs) -> anyhow::Result<()> {
         &format!("a {width}x{height} image"),
     )?;
     let spp = args.spp.unwrap_or(if args.quick { 2 } else { 128 });
-    let methods = methods(args.methods == "all");
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(args.threads.unwrap_or(0) as usize)
         .build()
@@ -308,7 +340,9 @@ fn paper(args: &PaperArgs) -> anyhow::Result<()> {
         &args.out.join("results.json"),
         &serde_json::to_string_pretty(&record)?,
     )?;
-    pool.install(|| write_outputs(&record, &args.out, &params))?;
+    if !args.json_only {
+        pool.install(|| write_outputs(&record, &args.out, &params))?;
+    }
     outln!(
         "wrote {} measurements to {}",
         record.measurements.len(),

@@ -33,7 +33,8 @@ with the files they read (glTF models, environment maps).
 Animations: :func:`render_frames` renders one task per frame (camera and instance
 moves per frame), each written atomically, skipping frames already on disk.
 
-Not yet: ``canopy bench paper`` cells as tasks.
+The laboratory: :func:`bench_paper` runs ``canopy bench paper``'s cells (scene x
+method x run) as tasks, each through the node's own ``canopy`` program, one table out.
 """
 
 from __future__ import annotations
@@ -471,6 +472,132 @@ def render_frames(
         for ref in pending:
             ray.cancel(ref)
     return paths
+
+
+def _canopy_command(canopy_bin: Optional[str]) -> str:
+    """The canopy command line program: given, else $CANOPY_BIN, else `canopy` on PATH."""
+    return canopy_bin or os.environ.get("CANOPY_BIN") or "canopy"
+
+
+def bench_cell(canopy_bin: str, scene: int, method: str, arguments: List[str], version: str) -> dict:
+    """One cell of ``canopy bench paper`` (a scene, a method, one run), as a Ray task runs
+    it: the measurement and the run's settings line, from the node's own canopy."""
+    import subprocess
+
+    if version != __version__:
+        raise RuntimeError(
+            f"canopy_rt {__version__} on this worker, {version} on the driver: install the "
+            "same version on every node")
+    with tempfile.TemporaryDirectory(prefix="canopy-cell-") as out:
+        command = [canopy_bin, "bench", "paper", "--scenes", str(scene), "--method", method,
+                   "--runs", "1", "--json-only", "--out", out, *arguments]
+        try:
+            run = subprocess.run(command, capture_output=True, text=True)
+        except OSError as e:
+            raise RuntimeError(f"cannot run {canopy_bin} on this node: {e}") from None
+        if run.returncode != 0:
+            raise RuntimeError(f"{' '.join(command)} failed: {run.stderr.strip()}")
+        with open(os.path.join(out, "results.json")) as f:
+            record = json.load(f)
+    return {"measurement": record["measurements"][0], "settings": record["settings"]}
+
+
+def bench_paper(
+    out,
+    *,
+    scenes: Sequence[int] = (1, 2, 3, 4, 5, 6),
+    methods: str = "all",
+    runs: int = 6,
+    size: Tuple[int, int] = (480, 480),
+    spp: int = 128,
+    integrator: str = "bsdf",
+    threads_per_task: int = 1,
+    canopy_bin: Optional[str] = None,
+    address: Optional[str] = None,
+    progress: Optional[Callable[[int, int], None]] = None,
+) -> str:
+    """``canopy bench paper`` with its cells (scene x method x run) as Ray tasks, one
+    table out: every node runs its own ``canopy`` program (``canopy_bin``, else
+    $CANOPY_BIN, else ``canopy`` on its PATH) for one render of one method on one scene;
+    the driver merges the runs of each cell in run order into ``out/results.json`` and
+    makes the tables, plots and pictures from it (``canopy bench paper --from``).
+    Returns the path of ``results.md``. A cell's time is one task's render, on a node
+    shared with other tasks: compare methods of one run, as the tables do."""
+    import subprocess
+
+    program = _canopy_command(canopy_bin)
+    scenes = [int(n) for n in scenes]
+    if not scenes or any(not 1 <= n <= 6 for n in scenes):
+        raise ValueError(f"scenes are numbers 1 to 6, not {scenes}")
+    if int(runs) < 1:
+        raise ValueError(f"runs must be at least 1, not {runs}")
+    try:
+        listing = subprocess.run([program, "bench", "paper", "--list-methods", "--methods", methods],
+                                 capture_output=True, text=True)
+    except OSError as e:
+        raise ValueError(f"cannot run {program} (give canopy_bin= or set CANOPY_BIN): {e}") from None
+    if listing.returncode != 0:
+        raise ValueError(f"{program} bench paper --methods {methods}: {listing.stderr.strip()}")
+    labels = listing.stdout.splitlines()
+    arguments = ["--size", f"{int(size[0])}x{int(size[1])}", "--spp", str(int(spp)),
+                 "--integrator", str(integrator), "--threads", str(int(threads_per_task))]
+
+    ray = _ray()
+    if not ray.is_initialized():
+        ray.init(address=address, include_dashboard=False, log_to_driver=False)
+    check_nodes(__version__)
+    task = ray.remote(num_cpus=int(threads_per_task), max_retries=3)(bench_cell)
+    cells = [(n, label, run) for n in scenes for label in labels for run in range(int(runs))]
+    pending = {task.remote(program, n, label, arguments, __version__): (n, label, run)
+               for n, label, run in cells}
+    found: Dict[Tuple[int, str, int], dict] = {}
+    try:
+        while pending:
+            finished, _ = ray.wait(list(pending), num_returns=1)
+            for ref in finished:
+                found[pending.pop(ref)] = ray.get(ref)
+                if progress is not None:
+                    progress(len(found), len(cells))
+    finally:
+        for ref in pending:
+            ray.cancel(ref)
+
+    measurements = []
+    for n in scenes:
+        none_mean = None
+        for label in labels:
+            results = [found[(n, label, run)]["measurement"] for run in range(int(runs))]
+            seconds = [r["seconds"][0] for r in results]
+            mean = sum(seconds) / len(seconds)
+            std = (sum((s - mean) ** 2 for s in seconds) / (len(seconds) - 1)) ** 0.5 if len(seconds) > 1 else 0.0
+            merged = dict(results[0], seconds=seconds, mean_s=mean, std_s=std,
+                          build_ms=sum(r["build_ms"] for r in results) / len(results),
+                          mrays_per_s=results[0]["rays"] / max(mean, 1e-9) / 1e6)
+            if merged["builder"] == "none":
+                none_mean = mean
+            merged["speedup"] = None if none_mean is None else none_mean / mean
+            measurements.append(merged)
+    first = found[cells[0]]["settings"]
+    settings = first.replace("1 runs per measurement", f"{int(runs)} runs per measurement (as Ray tasks)")
+    record = {
+        "settings": settings,
+        "command": f"canopy_rt.distributed.bench_paper(scenes={scenes}, methods={methods!r}, "
+                   f"runs={int(runs)}, size={tuple(size)}, spp={int(spp)}, integrator={integrator!r})",
+        "config": {"width": int(size[0]), "height": int(size[1]), "spp": int(spp), "runs": int(runs),
+                   "threads": int(threads_per_task)},
+        "measurements": measurements,
+    }
+    os.makedirs(str(out), exist_ok=True)
+    results = os.path.join(str(out), "results.json")
+    temporary = results + ".tmp"
+    with open(temporary, "w") as f:
+        json.dump(record, f, indent=2)
+    os.replace(temporary, results)
+    tables = subprocess.run([program, "bench", "paper", "--from", results, "--out", str(out)],
+                            capture_output=True, text=True)
+    if tables.returncode != 0:
+        raise RuntimeError(f"{program} bench paper --from {results}: {tables.stderr.strip()}")
+    return os.path.join(str(out), "results.md")
 
 
 def main(argv=None) -> int:
