@@ -273,7 +273,8 @@ impl<'g> Renderer<'g> {
             background: vec4(background, 0.0),
             options: [
                 light_table.len() as u32,
-                scene.background.is_black() as u32,
+                // Light sampling of the background: environment maps only, as on the CPU.
+                !scene.background.is_sampled() as u32,
                 (scene.settings.integrator == Integrator::Path) as u32,
                 scene.settings.russian_roulette as u32,
             ],

@@ -223,8 +223,9 @@ fn light_pdf(hit: SceneHit, reference: vec3<f32>, point: vec3<f32>, normal: vec3
     return lights[light].pmf * pdf_toward(lights[light].prim, reference, point, normal);
 }
 
-// A direction towards the background (xyz) and its density (w; zero for none): uniform
-// over the sphere for the sky and constant colours, by the map's distribution.
+// A direction towards the background (xyz) and its density (w; zero for none): by the
+// map's distribution; none for the sky and constant colours, which are left to BSDF
+// sampling (options.y is 1 then), as canopy-render's Background::is_sampled says.
 fn sample_background(u: vec2<f32>) -> vec4<f32> {
     if (frame.options.y == 1u) {
         return vec4<f32>(0.0);
@@ -347,6 +348,11 @@ fn sample_lights(m: Material, dir: vec3<f32>, s: Surface, rng: ptr<function, Rng
                 }
             }
         }
+    }
+    // Random numbers only for a sampled background, as on the CPU, so that both draw
+    // the same streams in the same order.
+    if (frame.options.y == 1u) {
+        return direct;
     }
     let u = vec2<f32>(next_f32(rng), next_f32(rng));
     let sky = sample_background(u);

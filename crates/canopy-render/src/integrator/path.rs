@@ -1,7 +1,7 @@
 //! The radiance along one camera ray: the report's estimator (follow the BSDF until light
 //! is found by chance) and the path tracer with next-event estimation, which also samples
-//! the lights and the background at every vertex and weights both strategies by multiple
-//! importance sampling (Veach 1997, power heuristic).
+//! the lights (and an environment map) at every vertex and weights both strategies by
+//! multiple importance sampling (Veach 1997, power heuristic).
 
 use super::Probe;
 use crate::accel::Accel;
@@ -174,9 +174,9 @@ impl Tracer<'_> {
     }
 
     /// Path tracing with next-event estimation and MIS: every non-delta vertex sends one
-    /// shadow ray to a point on a light and one towards the background (when it is not
-    /// black), and the emitter or background the BSDF-sampled ray finds next is weighted
-    /// against those. Paths have at most `max_depth` segments, shadow rays counted, so
+    /// shadow ray to a point on a light and one towards the background (where it is an
+    /// environment map: [`crate::Background::is_sampled`]), and the emitter or background
+    /// the BSDF-sampled ray finds next is weighted against those. Paths have at most `max_depth` segments, shadow rays counted, so
     /// both estimators sum the same paths.
     #[inline(always)]
     fn path_vertex(&self, path: &mut PathState, hit: Option<Hit>, rng: &mut Rng) -> Vertex {
@@ -188,7 +188,7 @@ impl Tracer<'_> {
         };
         let Some(hit) = hit else {
             let weight = match path.previous {
-                Some(v) if !scene.background.is_black() => {
+                Some(v) if scene.background.is_sampled() => {
                     power_heuristic(v.pdf, scene.background.pdf(path.ray.dir))
                 }
                 _ => 1.0,
@@ -248,8 +248,8 @@ impl Tracer<'_> {
     }
 
     /// Light reaching `surface` directly, towards the viewer of `ray`, as shadow tests:
-    /// one sample of the emitters and one of the background, each MIS-weighted against
-    /// BSDF sampling.
+    /// one sample of the emitters and one of the background where it is sampled, each
+    /// MIS-weighted against BSDF sampling.
     fn light_tests(
         &self,
         material: &Material,
@@ -281,6 +281,9 @@ impl Tracer<'_> {
                     light: f * light.radiance * (weight / light.pdf),
                 });
             }
+        }
+        if !scene.background.is_sampled() {
+            return tests;
         }
         if let Some(sky) = scene.background.sample(rng) {
             let f = material.eval(ray.dir, surface, sky.direction);
