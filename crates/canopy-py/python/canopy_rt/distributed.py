@@ -130,13 +130,45 @@ def _materialize(source, files: Dict[str, bytes]):
     return _under(_written_root(files), source)
 
 
-def render_tile(bundle, region: _Region, options: dict, version: str) -> np.ndarray:
-    """One tile, as a Ray task runs it (callable directly too): the driver's canopy
-    version must be this worker's."""
+def _same_version(version: str) -> None:
+    """Refuses to work for a driver of another canopy_rt version than this worker's."""
     if version != __version__:
         raise RuntimeError(
             f"canopy_rt {__version__} on this worker, {version} on the driver: install the "
             "same version on every node")
+
+
+def _tasks(function, address: Optional[str], threads_per_task: int, device: str = "cpu"):
+    """Ray, joined or started, and `function` as its task on ``threads_per_task`` CPUs
+    (and a GPU for ``device="gpu"``), retried where a worker dies; every node is checked
+    first (:func:`check_nodes`)."""
+    ray = _ray()
+    if not ray.is_initialized():
+        ray.init(address=address, include_dashboard=False, log_to_driver=False)
+    check_nodes(__version__)
+    gpus = 1 if device == "gpu" else 0
+    if gpus and not ray.cluster_resources().get("GPU"):
+        raise ValueError('device="gpu" but no node of the cluster has a GPU (Ray counts none)')
+    return ray, ray.remote(num_cpus=int(threads_per_task), num_gpus=gpus, max_retries=3)(function)
+
+
+def _as_they_finish(ray, pending: dict, take: Callable[[object, object], None]) -> None:
+    """Calls ``take(key, result)`` for each task of ``pending`` ({task: key}) as it
+    finishes; the tasks still running are cancelled if anything fails."""
+    try:
+        while pending:
+            finished, _ = ray.wait(list(pending), num_returns=1)
+            for ref in finished:
+                take(pending.pop(ref), ray.get(ref))
+    finally:
+        for ref in pending:
+            ray.cancel(ref)
+
+
+def render_tile(bundle, region: _Region, options: dict, version: str) -> np.ndarray:
+    """One tile, as a Ray task runs it (callable directly too): the driver's canopy
+    version must be this worker's."""
+    _same_version(version)
     source, files = bundle
     return render_locally(_materialize(source, files), region=region, **options)
 
@@ -308,14 +340,7 @@ def render(
     if not todo:
         return image
 
-    ray = _ray()
-    if not ray.is_initialized():
-        ray.init(address=address, include_dashboard=False, log_to_driver=False)
-    check_nodes(__version__)
-    gpus = 1 if device == "gpu" else 0
-    if gpus and not ray.cluster_resources().get("GPU"):
-        raise ValueError('device="gpu" but no node of the cluster has a GPU (Ray counts none)')
-    task = ray.remote(num_cpus=int(threads_per_task), num_gpus=gpus, max_retries=3)(render_tile)
+    ray, task = _tasks(render_tile, address, threads_per_task, device)
     bundle_ref = ray.put(bundle)
 
     def options_for(first: int, count: int) -> dict:
@@ -326,32 +351,30 @@ def render(
     pending = {task.remote(bundle_ref, region, options_for(*part), __version__): (region, k)
                for region in todo for k, part in enumerate(ranges)}
     parts: Dict[_Region, Dict[int, np.ndarray]] = {}
-    try:
-        while pending:
-            finished, _ = ray.wait(list(pending), num_returns=1)
-            for ref in finished:
-                region, k = pending.pop(ref)
-                parts.setdefault(region, {})[k] = ray.get(ref)
-                if len(parts[region]) < len(ranges):
-                    continue
-                means = parts.pop(region)
-                if len(ranges) == 1:
-                    merged = means[0]
-                else:
-                    total = np.zeros(means[0].shape, np.float64)
-                    for j, (_, count) in enumerate(ranges):
-                        total += count * means[j].astype(np.float64)
-                    merged = (total / total_spp).astype(np.float32)
-                x, y, w, h = region
-                image[y:y + h, x:x + w] = merged
-                if store:
-                    store.keep(region, merged)
-                done += 1
-                if progress is not None:
-                    progress(done, len(regions))
-    finally:
-        for ref in pending:
-            ray.cancel(ref)
+
+    def take(key, mean: np.ndarray) -> None:
+        nonlocal done
+        region, k = key
+        parts.setdefault(region, {})[k] = mean
+        if len(parts[region]) < len(ranges):
+            return
+        means = parts.pop(region)
+        if len(ranges) == 1:
+            merged = means[0]
+        else:
+            total = np.zeros(means[0].shape, np.float64)
+            for j, (_, count) in enumerate(ranges):
+                total += count * means[j].astype(np.float64)
+            merged = (total / total_spp).astype(np.float32)
+        x, y, w, h = region
+        image[y:y + h, x:x + w] = merged
+        if store:
+            store.keep(region, merged)
+        done += 1
+        if progress is not None:
+            progress(done, len(regions))
+
+    _as_they_finish(ray, pending, take)
     return image
 
 
@@ -385,10 +408,7 @@ def _frame_changes(index: int, frame, instance_count: int) -> dict:
 
 def render_frame(bundle, changes: dict, options: dict, version: str) -> np.ndarray:
     """One frame of an animation, as a Ray task runs it (callable directly too)."""
-    if version != __version__:
-        raise RuntimeError(
-            f"canopy_rt {__version__} on this worker, {version} on the driver: install the "
-            "same version on every node")
+    _same_version(version)
     source, files = bundle
     return render_locally(_materialize(source, files), **changes, **options)
 
@@ -449,28 +469,18 @@ def render_frames(
     for path in {os.path.dirname(os.path.abspath(paths[i])) for i in todo}:
         os.makedirs(path, exist_ok=True)
 
-    ray = _ray()
-    if not ray.is_initialized():
-        ray.init(address=address, include_dashboard=False, log_to_driver=False)
-    check_nodes(__version__)
-    gpus = 1 if device == "gpu" else 0
-    if gpus and not ray.cluster_resources().get("GPU"):
-        raise ValueError('device="gpu" but no node of the cluster has a GPU (Ray counts none)')
-    task = ray.remote(num_cpus=int(threads_per_task), num_gpus=gpus, max_retries=3)(render_frame)
+    ray, task = _tasks(render_frame, address, threads_per_task, device)
     bundle_ref = ray.put(bundle)
     pending = {task.remote(bundle_ref, changes[i], options, __version__): i for i in todo}
-    try:
-        while pending:
-            finished, _ = ray.wait(list(pending), num_returns=1)
-            for ref in finished:
-                i = pending.pop(ref)
-                write_image(paths[i], ray.get(ref))  # atomic: no half-written frame
-                done += 1
-                if progress is not None:
-                    progress(done, len(paths))
-    finally:
-        for ref in pending:
-            ray.cancel(ref)
+
+    def take(i, frame: np.ndarray) -> None:
+        nonlocal done
+        write_image(paths[i], frame)  # atomic: no half-written frame
+        done += 1
+        if progress is not None:
+            progress(done, len(paths))
+
+    _as_they_finish(ray, pending, take)
     return paths
 
 
@@ -484,10 +494,7 @@ def bench_cell(canopy_bin: str, scene: int, method: str, arguments: List[str], v
     it: the measurement and the run's settings line, from the node's own canopy."""
     import subprocess
 
-    if version != __version__:
-        raise RuntimeError(
-            f"canopy_rt {__version__} on this worker, {version} on the driver: install the "
-            "same version on every node")
+    _same_version(version)
     with tempfile.TemporaryDirectory(prefix="canopy-cell-") as out:
         command = [canopy_bin, "bench", "paper", "--scenes", str(scene), "--method", method,
                    "--runs", "1", "--json-only", "--out", out, *arguments]
@@ -542,25 +549,18 @@ def bench_paper(
     arguments = ["--size", f"{int(size[0])}x{int(size[1])}", "--spp", str(int(spp)),
                  "--integrator", str(integrator), "--threads", str(int(threads_per_task))]
 
-    ray = _ray()
-    if not ray.is_initialized():
-        ray.init(address=address, include_dashboard=False, log_to_driver=False)
-    check_nodes(__version__)
-    task = ray.remote(num_cpus=int(threads_per_task), max_retries=3)(bench_cell)
+    ray, task = _tasks(bench_cell, address, threads_per_task)
     cells = [(n, label, run) for n in scenes for label in labels for run in range(int(runs))]
     pending = {task.remote(program, n, label, arguments, __version__): (n, label, run)
                for n, label, run in cells}
     found: Dict[Tuple[int, str, int], dict] = {}
-    try:
-        while pending:
-            finished, _ = ray.wait(list(pending), num_returns=1)
-            for ref in finished:
-                found[pending.pop(ref)] = ray.get(ref)
-                if progress is not None:
-                    progress(len(found), len(cells))
-    finally:
-        for ref in pending:
-            ray.cancel(ref)
+
+    def take(cell, result: dict) -> None:
+        found[cell] = result
+        if progress is not None:
+            progress(len(found), len(cells))
+
+    _as_they_finish(ray, pending, take)
 
     measurements = []
     for n in scenes:
