@@ -15,6 +15,7 @@ use crate::camera::Camera;
 use crate::rng::Rng;
 use canopy_bvh::{Hit, Ray, RayQuery, ALL_MASKS};
 use glam::Vec3;
+use std::cell::RefCell;
 use std::ops::Range;
 
 /// Paths a stream holds at most: a pass takes as many samples of its block's pixels as
@@ -48,10 +49,30 @@ pub(super) fn render_block<P: Probe>(
     stream_paths: usize,
     work: &mut Work<P>,
 ) -> u64 {
-    let settings = tracer.scene.settings;
     let pixels = block.sums.len();
     let per_pass = (stream_paths / pixels.max(1)).clamp(1, samples.len().max(1)) as u32;
-    let mut stream = Stream::default();
+    // Each worker keeps its stream's buffers from block to block: a block is often one
+    // row of one sample, and allocating them anew cost as much as tracing short paths.
+    STREAM.with_borrow_mut(|stream| {
+        render_passes(tracer, camera, block, samples, per_pass, stream, work)
+    })
+}
+
+thread_local! {
+    static STREAM: RefCell<Stream> = RefCell::new(Stream::default());
+}
+
+fn render_passes<P: Probe>(
+    tracer: &Tracer,
+    camera: &Camera,
+    block: Block,
+    samples: Range<u32>,
+    per_pass: u32,
+    stream: &mut Stream,
+    work: &mut Work<P>,
+) -> u64 {
+    let settings = tracer.scene.settings;
+    let pixels = block.sums.len();
     let mut invalid = 0;
     let mut start = samples.start;
     while start < samples.end {
