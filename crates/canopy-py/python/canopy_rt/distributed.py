@@ -70,15 +70,22 @@ def tiles(width: int, height: int, tile: int) -> List[_Region]:
             for y in range(0, height, tile) for x in range(0, width, tile)]
 
 
-def _bundle(scene) -> Tuple[object, Dict[str, bytes]]:
+def _described(scene):
+    """The scene's description (``SceneInfo``); loading it raises, before any work,
+    when the scene is bad."""
+    return scene.info() if isinstance(scene, Scene) else load_scene(str(scene))
+
+
+def _bundle(scene, info=None) -> Tuple[object, Dict[str, bytes]]:
     """The scene as tasks receive it: its name or absolute path (or a scene built in
     Python, as the calls that build it), and the bytes of every file it reads by
-    absolute path (none for a built-in scene)."""
+    absolute path (none for a built-in scene). ``info`` is its description where the
+    caller has it already."""
+    info = info or _described(scene)
     if isinstance(scene, Scene):
-        inputs, source = scene.info().inputs, ("python", scene.__getstate__())
+        inputs, source = info.inputs, ("python", scene.__getstate__())
     else:
         scene = str(scene)
-        info = load_scene(scene)  # raises here, before any work, when the scene is bad
         if scene in scenes():  # a built-in scene wins over a file of its name, as in load_scene
             return scene, {}
         inputs, source = [scene, *info.inputs], os.path.abspath(scene)
@@ -165,9 +172,9 @@ def _as_they_finish(ray, pending: dict, take: Callable[[object, object], None]) 
             ray.cancel(ref)
 
 
-def render_tile(bundle, region: _Region, options: dict, version: str) -> np.ndarray:
-    """One tile, as a Ray task runs it (callable directly too): the driver's canopy
-    version must be this worker's."""
+def render_tile(bundle, region: Optional[_Region], options: dict, version: str) -> np.ndarray:
+    """One tile (or with ``region`` None, a whole frame), as a Ray task runs it
+    (callable directly too): the driver's canopy version must be this worker's."""
     _same_version(version)
     source, files = bundle
     return render_locally(_materialize(source, files), region=region, **options)
@@ -298,8 +305,9 @@ def render(
         raise ValueError(f"samples_per_task must be at least 1, not {samples_per_task}")
     if int(threads_per_task) < 1:
         raise ValueError(f"threads_per_task must be at least 1, not {threads_per_task}")
-    bundle = _bundle(scene)
-    settings = (scene.info() if isinstance(scene, Scene) else load_scene(str(scene))).settings
+    info = _described(scene)
+    bundle = _bundle(scene, info)
+    settings = info.settings
     image_width, image_height = (int(size[0]), int(size[1])) if size else (settings["width"], settings["height"])
     if device not in ("cpu", "gpu"):
         raise ValueError(f'device must be "cpu" or "gpu", not {device!r}')
@@ -406,13 +414,6 @@ def _frame_changes(index: int, frame, instance_count: int) -> dict:
     return changes
 
 
-def render_frame(bundle, changes: dict, options: dict, version: str) -> np.ndarray:
-    """One frame of an animation, as a Ray task runs it (callable directly too)."""
-    _same_version(version)
-    source, files = bundle
-    return render_locally(_materialize(source, files), **changes, **options)
-
-
 def render_frames(
     scene,
     frames: Sequence[dict],
@@ -442,7 +443,7 @@ def render_frames(
     those changes, written atomically by the driver as it arrives; frames whose file
     is already there are skipped, so running again after a failure renders only the
     rest. ``progress(done, total)`` is called as frames are written."""
-    info = scene.info() if isinstance(scene, Scene) else load_scene(str(scene))
+    info = _described(scene)
     changes = [_frame_changes(i, f, info.counts["instances"]) for i, f in enumerate(frames)]
     try:
         paths = [str(output).format(frame=i) for i in range(len(changes))]
@@ -454,7 +455,7 @@ def render_frames(
         raise ValueError(f"threads_per_task must be at least 1, not {threads_per_task}")
     if device not in ("cpu", "gpu"):
         raise ValueError(f'device must be "cpu" or "gpu", not {device!r}')
-    bundle = _bundle(scene)
+    bundle = _bundle(scene, info)
     options = dict(spp=spp, size=size, seed=seed, max_depth=max_depth, integrator=integrator,
                    russian_roulette=russian_roulette, bvh=bvh, width=width,
                    threads=int(threads_per_task))
@@ -469,9 +470,11 @@ def render_frames(
     for path in {os.path.dirname(os.path.abspath(paths[i])) for i in todo}:
         os.makedirs(path, exist_ok=True)
 
-    ray, task = _tasks(render_frame, address, threads_per_task, device)
+    # A frame is a whole image (no region) with its changes.
+    ray, task = _tasks(render_tile, address, threads_per_task, device)
     bundle_ref = ray.put(bundle)
-    pending = {task.remote(bundle_ref, changes[i], options, __version__): i for i in todo}
+    pending = {task.remote(bundle_ref, None, dict(options, **changes[i]), __version__): i
+               for i in todo}
 
     def take(i, frame: np.ndarray) -> None:
         nonlocal done
