@@ -4,7 +4,7 @@
 //! per instance with its transforms, root node, first primitive, material and lights.
 //! A scene without mesh instances is flattened as before: one tree, walked from node 0.
 
-use crate::render::GpuLight;
+use crate::lights::{gpu_lights, GpuLight, GpuPunctual, NO_LIGHT};
 use crate::scene::{GpuPrimitive, GpuScene, FLAT, MAX_TREE_DEPTH};
 use crate::GpuError;
 use bytemuck::{Pod, Zeroable};
@@ -27,7 +27,6 @@ pub(crate) struct GpuInstance {
 }
 
 const NO_MATERIAL: u32 = u32::MAX;
-const NO_LIGHT: u32 = u32::MAX;
 
 fn columns(m: &Affine3A) -> [[f32; 4]; 4] {
     let c = |v: glam::Vec3A| [v.x, v.y, v.z, 0.0];
@@ -51,6 +50,7 @@ pub(crate) struct Flat {
     pub top: Option<u32>,
     pub lights: Vec<GpuLight>,
     pub light_of_prim: Vec<u32>,
+    pub punctual: Vec<GpuPunctual>,
 }
 
 fn check_depth(bvh: &Bvh2) -> Result<(), GpuError> {
@@ -76,7 +76,7 @@ impl Flat {
     /// A scene without mesh instances and a tree over its primitives.
     pub fn single(scene: &Scene, bvh: &Bvh2) -> Result<Self, GpuError> {
         let flat = GpuScene::with_bvh(&scene.primitives, bvh)?;
-        let (lights, light_of_prim, _) = gpu_lights(scene, &mut Vec::new());
+        let lights = gpu_lights(scene, &mut Vec::new());
         Ok(Self {
             nodes: flat.upload_nodes().into_owned(),
             prim_indices: flat.bvh.prim_indices().to_vec(),
@@ -88,8 +88,9 @@ impl Flat {
                 info: [0, 0, NO_MATERIAL, NO_LIGHT],
             }],
             top: None,
-            lights,
-            light_of_prim,
+            lights: lights.table,
+            light_of_prim: lights.light_of_prim,
+            punctual: lights.punctual,
         })
     }
 
@@ -113,6 +114,7 @@ impl Flat {
             top: None,
             lights: Vec::new(),
             light_of_prim: Vec::new(),
+            punctual: Vec::new(),
         };
         // Each structure's root node (or none), and its first primitive.
         let mut roots = Vec::new();
@@ -146,8 +148,10 @@ impl Flat {
             let root = flat.append(&GpuBvh::from_bvh2(&bvh), |p| p + prim_base);
             roots.push((root, prim_base));
         }
-        let (lights, light_of_prim, first_light) = gpu_lights(scene, &mut flat.primitives);
-        (flat.lights, flat.light_of_prim) = (lights, light_of_prim);
+        let lights = gpu_lights(scene, &mut flat.primitives);
+        let first_light = lights.first_of_instance;
+        (flat.lights, flat.light_of_prim) = (lights.table, lights.light_of_prim);
+        flat.punctual = lights.punctual;
         // The top tree holds the instances that can be hit.
         let (mut boxes, mut placed) = (Vec::new(), Vec::new());
         for (i, instance) in world.instances().iter().enumerate() {
@@ -201,49 +205,6 @@ impl Flat {
             .extend(tree.prim_indices().iter().map(|&p| index(p)));
         node_base
     }
-}
-
-/// The scene's emitters as the GPU samples them: `canopy_render::lights::Lights`'s, with
-/// their CDF normalised to f32; each primitive's light index (or `u32::MAX`); and each
-/// instance's first light (or `NO_LIGHT`). An instance's emitting triangles are sampled
-/// in world space: their world triangles are appended to `primitives` (a scene without
-/// instances passes none).
-fn gpu_lights(
-    scene: &Scene,
-    primitives: &mut Vec<GpuPrimitive>,
-) -> (Vec<GpuLight>, Vec<u32>, Vec<u32>) {
-    let lights = canopy_render::lights::Lights::new(scene);
-    let mut light_of_prim = vec![u32::MAX; scene.primitives.len()];
-    let mut first_light = vec![NO_LIGHT; scene.instances.len() + 1];
-    let Some(choice) = lights.choice() else {
-        return (Vec::new(), light_of_prim, first_light);
-    };
-    let mut table = Vec::with_capacity(lights.len());
-    for (light, &(inst, prim)) in lights.emitters().iter().enumerate() {
-        let record = match scene.instance_of(inst) {
-            None => {
-                light_of_prim[prim as usize] = light as u32;
-                prim
-            }
-            Some(instance) => {
-                if first_light[inst as usize] == NO_LIGHT {
-                    first_light[inst as usize] = light as u32;
-                }
-                primitives.push(GpuPrimitive::new(&Primitive {
-                    shape: Shape::Triangle(scene.instance_triangle(instance, prim)),
-                    material: instance.material,
-                }));
-                primitives.len() as u32 - 1
-            }
-        };
-        table.push(GpuLight {
-            prim: record,
-            pmf: choice.pmf(light),
-            cdf_end: (choice.cdf()[light + 1] / choice.total()) as f32,
-            unused: 0,
-        });
-    }
-    (table, light_of_prim, first_light)
 }
 
 /// `FLAT` is the normals index of a flat triangle here too.

@@ -21,6 +21,7 @@
 mod chunked;
 mod context;
 mod instances;
+mod lights;
 mod render;
 mod rng_check;
 mod scene;

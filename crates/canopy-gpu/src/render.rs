@@ -111,19 +111,6 @@ fn environment_tables(map: &canopy_render::EnvironmentMap) -> EnvironmentTables 
     }
 }
 
-/// A light for the GPU: 16 bytes; WGSL `Light` in `path.wgsl`.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
-pub(crate) struct GpuLight {
-    /// The primitive record it samples (world space).
-    pub prim: u32,
-    /// Probability of choosing it.
-    pub pmf: f32,
-    /// End of its slice of the cumulative distribution, normalised to 1.
-    pub cdf_end: f32,
-    pub unused: u32,
-}
-
 fn vec4(v: Vec3, w: f32) -> [f32; 4] {
     [v.x, v.y, v.z, w]
 }
@@ -183,11 +170,6 @@ impl<'g> Renderer<'g> {
     }
 
     fn upload(gpu: &'g Gpu, scene: &Scene, flat: Flat) -> Result<Self, GpuError> {
-        if !scene.lights.is_empty() {
-            return Err(GpuError::Unsupported(
-                "point, spot or directional lights yet (render them on the CPU)",
-            ));
-        }
         if scene.is_textured() {
             // Drawn without them, the image would silently differ from the CPU's.
             return Err(GpuError::Unsupported(
@@ -224,6 +206,11 @@ impl<'g> Renderer<'g> {
         let light_of_prim = storage(
             "light of each primitive",
             bytemuck::cast_slice(&light_of_prim),
+            none,
+        )?;
+        let punctual = storage(
+            "punctual lights",
+            bytemuck::cast_slice(&flat.punctual),
             none,
         )?;
         let env_pixels = storage("environment map", bytemuck::cast_slice(&env.pixels), none)?;
@@ -328,6 +315,7 @@ impl<'g> Renderer<'g> {
                 (11, &env_cells),
                 (12, &env_rows),
                 (22, &instances),
+                (23, &punctual),
             ]
             .into_iter()
             .chain(nodes.entries(NODE_BINDINGS))

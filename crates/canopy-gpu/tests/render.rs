@@ -509,3 +509,63 @@ fn an_environment_map_lights_alike_on_cpu_and_gpu() {
     scene.background = canopy_render::Background::Environment(std::sync::Arc::new(map));
     assert_devices_agree("environment", &gpu, &scene, 10);
 }
+
+/// PBR and Lambertian spheres under a point, a spot and a directional light (one
+/// shadowed by a sphere, one with its falloff band across the ground), a small emitter
+/// and a dim constant background.
+const PUNCTUAL: &str = r#"
+name = "punctual"
+background = [0.05, 0.05, 0.06]
+[camera]
+look_from = [0, 2.5, 7]
+look_at = [0, 0.5, 0]
+vfov = 45
+[render]
+width = 32
+height = 32
+spp = 16
+max_depth = 5
+# A finite ground: the directional light's share of the choice grows with the
+# scene's size.
+[[cuboids]]
+min = [-5, -0.1, -5]
+max = [5, 0, 5]
+material = { type = "lambertian", albedo = [0.6, 0.6, 0.6] }
+[[spheres]]
+center = [-1.2, 0.7, 0]
+radius = 0.7
+material = { type = "pbr", base_color = [0.9, 0.6, 0.3], metallic = 1, roughness = 0.4 }
+[[spheres]]
+center = [1.2, 0.7, 0]
+radius = 0.7
+material = { type = "lambertian", albedo = [0.2, 0.4, 0.8] }
+[[spheres]]
+center = [0, 2.5, -2]
+radius = 0.3
+material = { type = "emissive", radiance = [3, 3, 3] }
+[[lights]]
+type = "point"
+position = [0, 3, 1]
+intensity = [8, 7, 6]
+[[lights]]
+type = "spot"
+position = [2.5, 3, 1]
+direction = [-1, -1.2, -0.3]
+intensity = [30, 25, 20]
+inner_angle = 10
+outer_angle = 25
+[[lights]]
+type = "directional"
+direction = [1, -2, -0.5]
+irradiance = [0.8, 0.8, 1.0]
+"#;
+
+#[test]
+fn point_spot_and_directional_lights_render_alike_on_cpu_and_gpu() {
+    let Some(gpu) = gpu() else { return };
+    let mut scene = scene_from("punctual", PUNCTUAL);
+    assert_eq!(scene.lights.len(), 3);
+    // Only light sampling finds punctual lights.
+    scene.settings.integrator = Integrator::Path;
+    assert_devices_agree_with("punctual (path)", &gpu, &scene, 10);
+}

@@ -120,7 +120,7 @@ impl PunctualLight {
                     return None;
                 }
                 let cd = direction.dot(to_reference / d2.sqrt());
-                let scale = 1.0 / (cos_inner - cos_outer).max(1e-3);
+                let scale = spot_falloff_scale(cos_inner, cos_outer);
                 let falloff = ((cd - cos_outer) * scale).clamp(0.0, 1.0);
                 let falloff = falloff * falloff;
                 (falloff > 0.0).then(|| (position, intensity * (falloff / d2)))
@@ -131,6 +131,12 @@ impl PunctualLight {
             } => Some((reference - 2.0 * radius * direction, irradiance)),
         }
     }
+}
+
+/// The factor a spot light's falloff is scaled by: one over the width of the band
+/// between its cones (in cosines), kept finite for a band of no width.
+pub fn spot_falloff_scale(cos_inner: f32, cos_outer: f32) -> f32 {
+    1.0 / (cos_inner - cos_outer).max(1e-3)
 }
 
 /// A point on a light, drawn for a point that wants its light.
@@ -239,6 +245,17 @@ impl Lights {
     /// The (instance, primitive) of each light, in light order.
     pub fn emitters(&self) -> &[(u32, u32)] {
         &self.emitters
+    }
+
+    /// The punctual lights, lights `emitters().len()..` in light order.
+    pub fn punctual(&self) -> &[PunctualLight] {
+        &self.punctual
+    }
+
+    /// Radius of the sphere about the origin holding the scene, from which directional
+    /// light is aimed at a point (from twice this far).
+    pub fn radius(&self) -> f32 {
+        self.radius
     }
 
     /// The distribution lights are chosen by (their power); `None` without lights.

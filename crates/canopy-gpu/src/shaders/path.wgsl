@@ -4,18 +4,31 @@
 // to render.wgsl; ports of canopy-render's integrator/path.rs, lights.rs and the shapes'
 // `sample_toward`/`pdf_toward`).
 
-// A light: its primitive, the probability of choosing it (by power) and the end of its
-// slice of the cumulative distribution, normalised to 1.
+// A light: its primitive record (or for a punctual light its index in `punctual`), the
+// probability of choosing it (by power), the end of its slice of the cumulative
+// distribution, normalised to 1, and whether it is punctual (1).
 struct Light {
-    prim: u32,
+    record: u32,
     pmf: f32,
     cdf_end: f32,
-    unused: u32,
+    punctual: u32,
+}
+
+// A point (kind.x 0), spot (1) or directional (2) light: position (w: a spot's outer
+// cosine), the direction light travels (w: a spot's falloff scale), intensity or
+// irradiance (w: the scene's radius).
+struct Punctual {
+    position: vec4<f32>,
+    direction: vec4<f32>,
+    strength: vec4<f32>,
+    kind: vec4<u32>,
 }
 
 @group(0) @binding(8) var<storage, read> lights: array<Light>;
 // Per primitive: its light, or NO_LIGHT.
 @group(0) @binding(9) var<storage, read> light_of_prim: array<u32>;
+
+@group(0) @binding(23) var<storage, read> punctual: array<Punctual>;
 
 const NO_LIGHT: u32 = 0xffffffffu;
 const SMALL_CONE_SIN2: f32 = 0.00068523;
@@ -220,7 +233,46 @@ fn light_pdf(hit: SceneHit, reference: vec3<f32>, point: vec3<f32>, normal: vec3
         return 0.0;
     }
     // The light's own record: the primitive, or an instance's triangle in world space.
-    return lights[light].pmf * pdf_toward(lights[light].prim, reference, point, normal);
+    return lights[light].pmf * pdf_toward(lights[light].record, reference, point, normal);
+}
+
+// Where punctual light `index` shines on `reference` from (origin.xyz) and what it brings
+// there at normal incidence (`irradiance`); w is 0 where it brings nothing (as
+// canopy-render's PunctualLight::toward).
+struct PunctualSample {
+    origin: vec4<f32>,
+    irradiance: vec3<f32>,
+}
+
+fn punctual_toward(index: u32, reference: vec3<f32>) -> PunctualSample {
+    let l = punctual[index];
+    var out = PunctualSample(vec4<f32>(0.0), vec3<f32>(0.0));
+    switch l.kind.x {
+        case 0u: {
+            let d = l.position.xyz - reference;
+            let d2 = dot(d, d);
+            if (d2 > 0.0) {
+                out = PunctualSample(vec4<f32>(l.position.xyz, 1.0), l.strength.xyz / d2);
+            }
+        }
+        case 1u: {
+            let to_reference = reference - l.position.xyz;
+            let d2 = dot(to_reference, to_reference);
+            if (d2 > 0.0) {
+                let cd = dot(l.direction.xyz, to_reference / sqrt(d2));
+                var falloff = clamp((cd - l.position.w) * l.direction.w, 0.0, 1.0);
+                falloff = falloff * falloff;
+                if (falloff > 0.0) {
+                    out = PunctualSample(vec4<f32>(l.position.xyz, 1.0), l.strength.xyz * (falloff / d2));
+                }
+            }
+        }
+        default: {
+            let origin = reference - 2.0 * l.strength.w * l.direction.xyz;
+            out = PunctualSample(vec4<f32>(origin, 1.0), l.strength.xyz);
+        }
+    }
+    return out;
 }
 
 // A direction towards the background (xyz) and its density (w; zero for none): by the
@@ -327,9 +379,24 @@ fn sample_lights(m: Material, dir: vec3<f32>, s: Surface, rng: ptr<function, Rng
             }
         }
         let light = lights[lo];
-        let point = sample_toward(light.prim, s.p, u);
+        var point = LightPoint(vec3<f32>(0.0), vec3<f32>(0.0), 0.0, 0.0);
+        var radiance = vec3<f32>(0.0);
+        var pdf = 0.0;
+        if (light.punctual == 1u) {
+            // Its own point, found by no other strategy: chosen with probability pmf and
+            // not weighted by MIS.
+            let toward = punctual_toward(light.record, s.p);
+            if (toward.origin.w > 0.0) {
+                point = LightPoint(toward.origin.xyz, normalize_or_zero(s.p - toward.origin.xyz), 0.0, 1.0);
+                radiance = toward.irradiance;
+                pdf = light.pmf;
+            }
+        } else {
+            point = sample_toward(light.record, s.p, u);
+            radiance = emitted(materials[prim_at(light.record).header.y]);
+            pdf = point.pdf * light.pmf;
+        }
         if (point.pdf > 0.0) {
-            let pdf = point.pdf * light.pmf;
             let to_light = point.p - s.p;
             let wi = normalize_or_zero(to_light);
             let f = material_eval(m, dir, s, wi);
@@ -342,8 +409,10 @@ fn sample_lights(m: Material, dir: vec3<f32>, s: Surface, rng: ptr<function, Rng
                 let origin = offset_origin(s, wi);
                 *rays += vec2<u32>(1u, 1u);
                 if (!scene_occluded(RayIn(origin, 0.0, aim - origin, 1.0 - SHADOW_SHORTENING))) {
-                    let radiance = emitted(materials[prim_at(light.prim).header.y]);
-                    let weight = power_heuristic(pdf, material_pdf(m, dir, s, wi));
+                    var weight = 1.0;
+                    if (light.punctual == 0u) {
+                        weight = power_heuristic(pdf, material_pdf(m, dir, s, wi));
+                    }
                     direct += f * radiance * (weight / pdf);
                 }
             }
