@@ -6,6 +6,7 @@
 
 use crate::lights::{gpu_lights, GpuLight, GpuPunctual, NO_LIGHT};
 use crate::scene::{GpuPrimitive, GpuScene, FLAT, MAX_TREE_DEPTH};
+use crate::textures::push_surface;
 use crate::GpuError;
 use bytemuck::{Pod, Zeroable};
 use canopy_bvh::{Aabb, BuildParams, Builder, Bvh2, GpuBvh, GpuNode, SahCosts, Tree, GPU_EMPTY};
@@ -45,6 +46,9 @@ pub(crate) struct Flat {
     pub primitives: Vec<GpuPrimitive>,
     /// Three per smooth triangle, as `GpuPrimitive::normals` indexes them.
     pub normals: Vec<[f32; 4]>,
+    /// Textured mesh triangles' texture coordinates and tangents, as
+    /// `GpuPrimitive::surface` indexes them (`textures::push_surface`).
+    pub surface: Vec<[f32; 4]>,
     pub instances: Vec<GpuInstance>,
     /// The top tree's root node, when the scene has mesh instances.
     pub top: Option<u32>,
@@ -82,6 +86,7 @@ impl Flat {
             prim_indices: flat.bvh.prim_indices().to_vec(),
             primitives: flat.primitives,
             normals: scene_normals(scene),
+            surface: Vec::new(),
             instances: vec![GpuInstance {
                 to_local: columns(&Affine3A::IDENTITY),
                 to_world: columns(&Affine3A::IDENTITY),
@@ -110,6 +115,7 @@ impl Flat {
             prim_indices: Vec::new(),
             primitives: scene.primitives.iter().map(GpuPrimitive::new).collect(),
             normals: scene_normals(scene),
+            surface: Vec::new(),
             instances: Vec::new(),
             top: None,
             lights: Vec::new(),
@@ -137,10 +143,12 @@ impl Flat {
                                 flat.normals.push([n.x, n.y, n.z, 0.0]);
                             }
                         }
-                        flat.primitives.push(GpuPrimitive::new(&Primitive {
+                        let mut primitive = GpuPrimitive::new(&Primitive {
                             shape: Shape::Triangle(triangle),
                             material: 0,
-                        }));
+                        });
+                        primitive.surface = push_surface(&mut flat.surface, mesh, t);
+                        flat.primitives.push(primitive);
                     }
                     base
                 }

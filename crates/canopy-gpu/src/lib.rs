@@ -25,6 +25,7 @@ mod lights;
 mod render;
 mod rng_check;
 mod scene;
+mod textures;
 mod trace;
 
 pub use chunked::CHUNKS;

@@ -5,6 +5,7 @@
 use crate::chunked::ChunkedBuffer;
 use crate::instances::Flat;
 use crate::scene::{NODE_BINDINGS, PRIM_BINDINGS};
+use crate::textures::GpuTextures;
 use crate::{Gpu, GpuError};
 use bytemuck::{Pod, Zeroable};
 use canopy_bvh::Bvh2;
@@ -69,7 +70,8 @@ struct Frame {
     env_size: [u32; 4],
     /// The region of the image rendered: x, y, width, height.
     region: [u32; 4],
-    /// Two-level traversal (1) or one tree from node 0 (0), and the top tree's root.
+    /// Two-level traversal (1) or one tree from node 0 (0), the top tree's root, whether
+    /// some surfaces let rays through (1), whether some material has textures (1).
     top: [u32; 4],
 }
 
@@ -170,12 +172,6 @@ impl<'g> Renderer<'g> {
     }
 
     fn upload(gpu: &'g Gpu, scene: &Scene, flat: Flat) -> Result<Self, GpuError> {
-        if scene.is_textured() {
-            // Drawn without them, the image would silently differ from the CPU's.
-            return Err(GpuError::Unsupported(
-                "textured or see-through materials yet (render them on the CPU)",
-            ));
-        }
         let (background_kind, background, env) = match &scene.background {
             Background::Sky => (0, Vec3::ZERO, EnvironmentTables::default()),
             Background::Constant(c) => (1, *c, EnvironmentTables::default()),
@@ -211,6 +207,19 @@ impl<'g> Renderer<'g> {
         let punctual = storage(
             "punctual lights",
             bytemuck::cast_slice(&flat.punctual),
+            none,
+        )?;
+        let textures = GpuTextures::new(scene);
+        let material_maps = storage(
+            "material textures",
+            bytemuck::cast_slice(&textures.maps),
+            none,
+        )?;
+        let images = storage("images", bytemuck::cast_slice(&textures.images), none)?;
+        let texels = storage("texels", bytemuck::cast_slice(&textures.texels), none)?;
+        let surface = storage(
+            "texture coordinates and tangents",
+            bytemuck::cast_slice(&flat.surface),
             none,
         )?;
         let env_pixels = storage("environment map", bytemuck::cast_slice(&env.pixels), none)?;
@@ -270,10 +279,12 @@ impl<'g> Renderer<'g> {
             env_z: vec4(env.to_world.z_axis, 0.0),
             env_size: [env.size[0].max(1), env.size[1].max(1), 0, 0],
             region: [0, 0, width, height],
-            top: match flat.top {
-                Some(root) => [1, root, 0, 0],
-                None => [0, 0, 0, 0],
-            },
+            top: [
+                flat.top.is_some() as u32,
+                flat.top.unwrap_or(0),
+                scene.has_see_through() as u32,
+                scene.is_textured() as u32,
+            ],
         };
         let frame_buffer = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("frame"),
@@ -291,6 +302,7 @@ impl<'g> Renderer<'g> {
                 include_str!("shaders/pbr.wgsl"),
                 include_str!("shaders/environment.wgsl"),
                 include_str!("shaders/instances.wgsl"),
+                include_str!("shaders/textures.wgsl"),
             ],
             &[
                 nodes.constants(),
@@ -316,6 +328,10 @@ impl<'g> Renderer<'g> {
                 (12, &env_rows),
                 (22, &instances),
                 (23, &punctual),
+                (24, &material_maps),
+                (25, &images),
+                (26, &texels),
+                (27, &surface),
             ]
             .into_iter()
             .chain(nodes.entries(NODE_BINDINGS))
@@ -339,6 +355,12 @@ impl<'g> Renderer<'g> {
             height,
             band_pixels: band_rows * width as u64,
         })
+    }
+
+    /// Renders with seed `seed` from now on, as a scene with that seed would (the scene
+    /// stays uploaded and its pipeline built).
+    pub fn set_seed(&mut self, seed: u64) {
+        self.frame.size[2] = canopy_render::rng::fold64(seed);
     }
 
     /// Renders `count` more samples of every pixel of the accumulator's region (samples

@@ -21,10 +21,12 @@ pub const MAX_TREE_DEPTH: usize = 64;
 /// A primitive for the GPU: 96 bytes, `#[repr(C)]`, `Pod`; WGSL reads it as
 /// `struct { header: vec4<u32>, d0: vec4<f32>, ..., d4: vec4<f32> }`.
 ///
-/// Byte layout: `kind` (0..4), `material` (4..8), `normals` (8..12), padding (12..16),
+/// Byte layout: `kind` (0..4), `material` (4..8), `normals` (8..12), `surface` (12..16),
 /// `data` (16..96) as five `[f32; 4]`:
 /// - kind 0, triangle: `data[0..3]` the vertices (`.w` unused); `normals` indexes the
-///   scene's vertex-normal triples ([`FLAT`]: none);
+///   scene's vertex-normal triples ([`FLAT`]: none); a textured mesh's triangle has its
+///   texture coordinates and tangents at `surface` in the render kernel's surface data
+///   ([`FLAT`]: none);
 /// - kind 1, sphere: `data[0]` centre and radius;
 /// - kind 2, cuboid: `data[0..3].xyz` the rows of the world-to-local rotation,
 ///   `data[0..3].w` the local box's min, `data[3].xyz` the translation, `data[4].xyz`
@@ -35,7 +37,7 @@ pub struct GpuPrimitive {
     pub kind: u32,
     pub material: u32,
     pub normals: u32,
-    pub _pad: u32,
+    pub surface: u32,
     pub data: [[f32; 4]; 5],
 }
 
@@ -81,7 +83,7 @@ impl GpuPrimitive {
             kind,
             material: p.material,
             normals,
-            _pad: 0,
+            surface: FLAT,
             data,
         }
     }

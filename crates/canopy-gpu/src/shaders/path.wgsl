@@ -360,9 +360,23 @@ fn normalize_or_zero(v: vec3<f32>) -> vec3<f32> {
     return normalize_or(v, vec3<f32>(0.0));
 }
 
-// One sample of the emitters and one of the background, MIS-weighted.
-fn sample_lights(m: Material, dir: vec3<f32>, s: Surface, rng: ptr<function, Rng>, rays: ptr<function, vec2<u32>>) -> vec3<f32> {
-    var direct = vec3<f32>(0.0);
+// The shadow rays of light sampling at one vertex (an emitter sample, then a background
+// sample; `has` says which there are) and the light each brings where nothing blocks it.
+struct LightTests {
+    rays: array<RayIn, 2>,
+    light: array<vec3<f32>, 2>,
+    has: vec2<bool>,
+}
+
+fn no_light_tests() -> LightTests {
+    let none = RayIn(vec3<f32>(0.0), 0.0, vec3<f32>(0.0), 0.0);
+    return LightTests(array<RayIn, 2>(none, none), array<vec3<f32>, 2>(vec3<f32>(0.0), vec3<f32>(0.0)), vec2<bool>(false));
+}
+
+// One sample of the emitters and one of the background, MIS-weighted, as shadow tests
+// (traced later, after the BSDF sample, as the CPU draws its numbers).
+fn light_tests(m: Material, dir: vec3<f32>, s: Surface, rng: ptr<function, Rng>) -> LightTests {
+    var tests = no_light_tests();
     let light_count = frame.options.x;
     if (light_count > 0u) {
         let pick = next_f32(rng);
@@ -407,21 +421,20 @@ fn sample_lights(m: Material, dir: vec3<f32>, s: Surface, rng: ptr<function, Rng
                     aim = point.p + lift;
                 }
                 let origin = offset_origin(s, wi);
-                *rays += vec2<u32>(1u, 1u);
-                if (!scene_occluded(RayIn(origin, 0.0, aim - origin, 1.0 - SHADOW_SHORTENING))) {
-                    var weight = 1.0;
-                    if (light.punctual == 0u) {
-                        weight = power_heuristic(pdf, material_pdf(m, dir, s, wi));
-                    }
-                    direct += f * radiance * (weight / pdf);
+                var weight = 1.0;
+                if (light.punctual == 0u) {
+                    weight = power_heuristic(pdf, material_pdf(m, dir, s, wi));
                 }
+                tests.rays[0] = RayIn(origin, 0.0, aim - origin, 1.0 - SHADOW_SHORTENING);
+                tests.light[0] = f * radiance * (weight / pdf);
+                tests.has.x = true;
             }
         }
     }
     // Random numbers only for a sampled background, as on the CPU, so that both draw
     // the same streams in the same order.
     if (frame.options.y == 1u) {
-        return direct;
+        return tests;
     }
     let u = vec2<f32>(next_f32(rng), next_f32(rng));
     let sky = sample_background(u);
@@ -429,18 +442,32 @@ fn sample_lights(m: Material, dir: vec3<f32>, s: Surface, rng: ptr<function, Rng
         let direction = sky.xyz;
         let f = material_eval(m, dir, s, direction);
         if (any(f != vec3<f32>(0.0))) {
-            let origin = offset_origin(s, direction);
+            let weight = power_heuristic(sky.w, material_pdf(m, dir, s, direction));
+            tests.rays[1] = RayIn(offset_origin(s, direction), 0.0, direction, INF);
+            tests.light[1] = f * background(direction) * (weight / sky.w);
+            tests.has.y = true;
+        }
+    }
+    return tests;
+}
+
+// The light that arrives: the shadow rays traced in order.
+fn arriving(tests: LightTests, rng: ptr<function, Rng>, rays: ptr<function, vec2<u32>>) -> vec3<f32> {
+    var direct = vec3<f32>(0.0);
+    for (var i = 0u; i < 2u; i++) {
+        if (tests.has[i]) {
             *rays += vec2<u32>(1u, 1u);
-            if (!scene_occluded(RayIn(origin, 0.0, direction, INF))) {
-                let weight = power_heuristic(sky.w, material_pdf(m, dir, s, direction));
-                direct += f * background(direction) * (weight / sky.w);
+            if (!scene_blocked(tests.rays[i], rng)) {
+                direct += tests.light[i];
             }
         }
     }
     return direct;
 }
 
-// The path estimator; counts rays (x) and shadow rays among them (y).
+// The path estimator; counts rays (x) and shadow rays among them (y). Random numbers
+// are drawn in the CPU's order: see-through layers of the segment, light samples, the
+// BSDF sample and roulette, then see-through layers of the shadow rays.
 fn radiance_path(camera_origin: vec3<f32>, camera_dir: vec3<f32>, rng: ptr<function, Rng>, rays: ptr<function, vec2<u32>>) -> vec3<f32> {
     let sample_background = frame.options.y == 0u;
     var origin = camera_origin;
@@ -452,7 +479,7 @@ fn radiance_path(camera_origin: vec3<f32>, camera_dir: vec3<f32>, rng: ptr<funct
     var previous_pdf = 0.0;
     for (var segments = 1u; segments <= frame.size.w; segments++) {
         *rays += vec2<u32>(1u, 0u);
-        let hit = scene_closest(RayIn(origin, 0.0, dir, INF));
+        let hit = scene_intersect(RayIn(origin, 0.0, dir, INF), rng);
         if (hit.hit.prim == NO_PRIM) {
             var weight = 1.0;
             if (has_previous && sample_background) {
@@ -461,8 +488,9 @@ fn radiance_path(camera_origin: vec3<f32>, camera_dir: vec3<f32>, rng: ptr<funct
             total += throughput * weight * background(dir);
             break;
         }
-        let material = scene_material(hit);
-        let s = scene_surface(origin, dir, hit);
+        let shaded = scene_shade(origin, dir, hit);
+        let material = shaded.material;
+        let s = shaded.surface;
         let light = emitted(material);
         if (any(light != vec3<f32>(0.0))) {
             var weight = 1.0;
@@ -474,25 +502,30 @@ fn radiance_path(camera_origin: vec3<f32>, camera_dir: vec3<f32>, rng: ptr<funct
         if (material.kind.x == 3u || segments == frame.size.w) {
             break;
         }
+        var tests = no_light_tests();
         if (!is_delta(material)) {
-            total += throughput * sample_lights(material, dir, s, rng, rays);
+            tests = light_tests(material, dir, s, rng);
         }
+        let vertex_throughput = throughput;
         let next = scatter(material, dir, s, rng);
-        if (!next.ok) {
-            break;
-        }
-        throughput *= next.weight;
-        has_previous = !next.delta;
-        previous_p = s.p;
-        previous_pdf = next.pdf;
-        if (frame.options.w == 1u && segments >= ROULETTE_AFTER) {
-            let survival = min(max(max(throughput.x, throughput.y), throughput.z), ROULETTE_MAX_SURVIVAL);
-            if (next_f32(rng) >= survival) {
-                break;
+        var goes_on = next.ok;
+        if (goes_on) {
+            throughput *= next.weight;
+            has_previous = !next.delta;
+            previous_p = s.p;
+            previous_pdf = next.pdf;
+            if (frame.options.w == 1u && segments >= ROULETTE_AFTER) {
+                let survival = min(max(max(throughput.x, throughput.y), throughput.z), ROULETTE_MAX_SURVIVAL);
+                if (next_f32(rng) >= survival) {
+                    goes_on = false;
+                } else {
+                    throughput /= survival;
+                }
             }
-            throughput /= survival;
+            goes_on = goes_on && any(throughput != vec3<f32>(0.0));
         }
-        if (all(throughput == vec3<f32>(0.0))) {
+        total += vertex_throughput * arriving(tests, rng, rays);
+        if (!goes_on) {
             break;
         }
         origin = offset_origin(s, next.direction);

@@ -34,7 +34,8 @@ struct Frame {
     env_size: vec4<u32>,
     // The region of the image rendered: x, y, width, height.
     region: vec4<u32>,
-    // Two-level traversal (1) or one tree from node 0 (0); the top tree's root node.
+    // Two-level traversal (1) or one tree from node 0 (0); the top tree's root node;
+    // whether some surfaces let rays through (1); whether some material has textures (1).
     top: vec4<u32>,
 }
 
@@ -323,13 +324,14 @@ fn radiance_bsdf(camera_origin: vec3<f32>, camera_dir: vec3<f32>, rng: ptr<funct
     var total = vec3<f32>(0.0);
     for (var depth = 0u; depth < frame.size.w; depth++) {
         *rays += vec2<u32>(1u, 0u);
-        let hit = scene_closest(RayIn(origin, 0.0, dir, INF));
+        let hit = scene_intersect(RayIn(origin, 0.0, dir, INF), rng);
         if (hit.hit.prim == NO_PRIM) {
             total += throughput * background(dir);
             break;
         }
-        let material = scene_material(hit);
-        let s = scene_surface(origin, dir, hit);
+        let shaded = scene_shade(origin, dir, hit);
+        let material = shaded.material;
+        let s = shaded.surface;
         total += throughput * emitted(material);
         let next = scatter(material, dir, s, rng);
         if (!next.ok) {
