@@ -80,7 +80,7 @@ impl Flat {
     /// A scene without mesh instances and a tree over its primitives.
     pub fn single(scene: &Scene, bvh: &Bvh2) -> Result<Self, GpuError> {
         let flat = GpuScene::with_bvh(&scene.primitives, bvh)?;
-        let lights = gpu_lights(scene, &mut Vec::new());
+        let lights = gpu_lights(scene, &mut Vec::new(), &[]);
         Ok(Self {
             nodes: flat.upload_nodes().into_owned(),
             prim_indices: flat.bvh.prim_indices().to_vec(),
@@ -156,7 +156,9 @@ impl Flat {
             let root = flat.append(&GpuBvh::from_bvh2(&bvh), |p| p + prim_base);
             roots.push((root, prim_base));
         }
-        let lights = gpu_lights(scene, &mut flat.primitives);
+        // Each mesh's first triangle (structure s is mesh s - 1).
+        let mesh_first: Vec<u32> = roots.iter().skip(1).map(|&(_, base)| base).collect();
+        let lights = gpu_lights(scene, &mut flat.primitives, &mesh_first);
         let first_light = lights.first_of_instance;
         (flat.lights, flat.light_of_prim) = (lights.table, lights.light_of_prim);
         flat.punctual = lights.punctual;

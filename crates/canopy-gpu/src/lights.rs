@@ -90,9 +90,14 @@ pub(crate) struct GpuLights {
 }
 
 /// The scene's lights as the GPU samples them. An instance's emitting triangles are
-/// sampled in world space: their world triangles are appended to `primitives` (a scene
-/// without instances passes none).
-pub(crate) fn gpu_lights(scene: &Scene, primitives: &mut Vec<GpuPrimitive>) -> GpuLights {
+/// sampled in world space: their world triangles are appended to `primitives`, with the
+/// texture data of the mesh's triangle (mesh `m`'s triangles start at `mesh_first[m]`;
+/// a scene without instances passes none).
+pub(crate) fn gpu_lights(
+    scene: &Scene,
+    primitives: &mut Vec<GpuPrimitive>,
+    mesh_first: &[u32],
+) -> GpuLights {
     let lights = Lights::new(scene);
     let mut out = GpuLights {
         table: Vec::with_capacity(lights.len()),
@@ -123,10 +128,13 @@ pub(crate) fn gpu_lights(scene: &Scene, primitives: &mut Vec<GpuPrimitive>) -> G
                 if out.first_of_instance[inst as usize] == NO_LIGHT {
                     out.first_of_instance[inst as usize] = light as u32;
                 }
-                primitives.push(GpuPrimitive::new(&Primitive {
+                let mut world = GpuPrimitive::new(&Primitive {
                     shape: Shape::Triangle(scene.instance_triangle(instance, prim)),
                     material: instance.material,
-                }));
+                });
+                world.surface =
+                    primitives[(mesh_first[instance.mesh as usize] + prim) as usize].surface;
+                primitives.push(world);
                 primitives.len() as u32 - 1
             }
         };

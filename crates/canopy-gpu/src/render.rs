@@ -15,16 +15,19 @@ use canopy_render::{Accel, Accumulator, Background, Integrator, Scene};
 use glam::Vec3;
 use std::time::{Duration, Instant};
 
-/// A material for the GPU: 32 bytes; WGSL `struct { kind: vec4<u32>, value: vec4<f32> }`.
+/// A material for the GPU: 48 bytes; WGSL `struct { kind: vec4<u32>, value: vec4<f32>,
+/// emission: vec4<f32> }`.
 /// `kind.x`: 0 Lambertian (`value.xyz` albedo), 1 metal (albedo, `value.w` fuzz),
 /// 2 dielectric (`value.w` index of refraction), 3 emissive (`value.xyz` radiance), 4 glTF
 /// metallic-roughness (`value.xyz` base colour, `value.w` roughness, `kind.y` the bits of
-/// the metallic factor).
+/// the metallic factor). `emission.xyz`: the radiance it emits (emissive and
+/// metallic-roughness materials).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
 pub struct GpuMaterial {
     pub kind: [u32; 4],
     pub value: [f32; 4],
+    pub emission: [f32; 4],
 }
 
 impl GpuMaterial {
@@ -39,6 +42,7 @@ impl GpuMaterial {
         Self {
             kind: [kind, extra, 0, 0],
             value: [v.x, v.y, v.z, w],
+            emission: vec4(m.emitted(), 0.0),
         }
     }
 }

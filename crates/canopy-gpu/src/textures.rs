@@ -54,13 +54,14 @@ impl GpuTexture {
     }
 }
 
-/// A material's textures and coverage: 112 bytes; WGSL `MaterialMaps`.
+/// A material's textures and coverage: 144 bytes; WGSL `MaterialMaps`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
 pub(crate) struct GpuMaterialMaps {
     base_color: GpuTexture,
     metallic_roughness: GpuTexture,
     normal: GpuTexture,
+    emissive: GpuTexture,
     /// Coverage (0 opaque, 1 mask, 2 blend), the bits of its alpha factor and cutoff,
     /// and the bits of the normal map's scale.
     coverage: [u32; 4],
@@ -78,6 +79,7 @@ impl GpuMaterialMaps {
             base_color: GpuTexture::new(maps.base_color.as_ref()),
             metallic_roughness: GpuTexture::new(maps.metallic_roughness.as_ref()),
             normal: GpuTexture::new(maps.normal.as_ref().map(|n| &n.texture)),
+            emissive: GpuTexture::new(maps.emissive.as_ref()),
             coverage: [
                 mode,
                 alpha.to_bits(),

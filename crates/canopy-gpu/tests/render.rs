@@ -659,9 +659,9 @@ fn image(width: u32, height: u32, texels: Vec<[u8; 4]>) -> std::sync::Arc<Image>
     })
 }
 
-/// Textures in every form the loader produces, each on its own quad: a colour checker
-/// (sRGB) turned and scaled by a texture transform, mirrored in s and clamped in t
-/// beyond [0, 1]; a strong normal map with a metallic-roughness texture on a metal; a
+/// Textures in every form the loader produces, each on its own quad: a glowing colour
+/// checker (sRGB) turned and scaled by a texture transform, mirrored in s and clamped in
+/// t beyond [0, 1], its emission textured too; a strong normal map with a metallic-roughness texture on a metal; a
 /// cut-out by the base colour's alpha (MASK); and a half-covering (BLEND) quad in front
 /// of a grey back wall, under the sky and a grazing directional light.
 fn texture_lab() -> Scene {
@@ -671,13 +671,16 @@ fn texture_lab() -> Scene {
         Coverage, MaterialMaps, NormalMap, TextureRef, UvTransform, Wrap,
     };
     use glam::{Affine3A, Vec2, Vec3};
-    let pbr = |base_color: Vec3, metallic: f32, roughness: f32| {
+    let glowing = |base_color: Vec3, metallic: f32, roughness: f32, emission: Vec3| {
         Material::Pbr(Pbr {
             base_color,
             metallic,
             roughness,
+            emission,
         })
     };
+    let pbr =
+        |base_color, metallic, roughness| glowing(base_color, metallic, roughness, Vec3::ZERO);
     let texture = |image: u32, wrap: [Wrap; 2], transform: Option<UvTransform>| TextureRef {
         image,
         wrap,
@@ -710,7 +713,7 @@ fn texture_lab() -> Scene {
         [200, 200, 200, 255],
     ];
     let materials = vec![
-        pbr(Vec3::ONE, 0.0, 0.7),
+        glowing(Vec3::ONE, 0.0, 0.7, Vec3::splat(0.8)),
         pbr(Vec3::splat(0.9), 1.0, 0.5),
         pbr(Vec3::new(0.9, 0.5, 0.3), 0.0, 0.5),
         Material::Lambertian {
@@ -731,6 +734,8 @@ fn texture_lab() -> Scene {
                     scale: Vec2::new(1.7, 2.3),
                 }),
             )),
+            // The checker glows too, and lights the rest through light sampling.
+            emissive: Some(texture(0, [Wrap::Repeat; 2], None)),
             ..MaterialMaps::default()
         },
         MaterialMaps {
@@ -806,13 +811,14 @@ fn texture_lab() -> Scene {
 }
 
 #[test]
-fn texture_transforms_wraps_normal_maps_and_coverage_render_alike_on_cpu_and_gpu() {
+fn textures_normal_maps_emission_and_coverage_render_alike_on_cpu_and_gpu() {
     let Some(gpu) = gpu() else { return };
     let worst = assert_devices_agree("texture lab", &gpu, &texture_lab(), 10);
     // The devices share random streams, so the renders coincide but for rounding (0.00
-    // standard errors on lavapipe); leaving out the normal map, the sRGB decoding or
-    // the texture transform, a wrap mode, the coverage or the roughness texture on the
-    // GPU puts a tile 3.5 to 20 apart.
+    // standard errors on lavapipe); leaving out the normal map, the sRGB decoding, the
+    // texture transform, a wrap mode, the coverage, the roughness texture or the
+    // emissive texture (at hits or at light samples) on the GPU puts a tile 1.3 to 170
+    // apart.
     assert!(worst < 0.5, "worst tile {worst:.2} standard errors apart");
 }
 

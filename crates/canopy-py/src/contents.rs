@@ -36,6 +36,7 @@ pub fn material_to_dict<'py>(py: Python<'py>, material: &Material) -> PyResult<B
             d.set_item("base_color", p.base_color.to_array())?;
             d.set_item("metallic", p.metallic)?;
             d.set_item("roughness", p.roughness)?;
+            d.set_item("emission", p.emission.to_array())?;
         }
     }
     Ok(d)

@@ -40,7 +40,7 @@ fn material_from_dict(table: &Bound<'_, PyDict>) -> PyResult<Material> {
         "metal" => &["type", "albedo", "fuzz"],
         "dielectric" => &["type", "ior"],
         "emissive" => &["type", "radiance"],
-        "pbr" => &["type", "base_color", "metallic", "roughness"],
+        "pbr" => &["type", "base_color", "metallic", "roughness", "emission"],
         other => {
             return Err(bad(format!(
                 "unknown type `{other}` (lambertian, metal, dielectric, emissive or pbr)"
@@ -89,6 +89,10 @@ fn material_from_dict(table: &Bound<'_, PyDict>) -> PyResult<Material> {
             base_color: colour("base_color")?,
             metallic: number("metallic", Some(0.0))?,
             roughness: number("roughness", Some(1.0))?,
+            emission: match table.get_item("emission")? {
+                Some(_) => colour("emission")?,
+                None => Vec3::ZERO,
+            },
         }),
         _ => Material::Emissive {
             radiance: colour("radiance")?,

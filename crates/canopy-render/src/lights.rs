@@ -4,7 +4,7 @@
 
 use crate::geometry::{Shape, SurfaceSample};
 use crate::rng::Rng;
-use crate::sampling::{luminance, Distribution1D};
+use crate::sampling::{luminance, uniform_triangle, Distribution1D};
 use crate::scene::{Scene, PRIMITIVES_INSTANCE};
 use canopy_bvh::Hit;
 use glam::{Vec2, Vec3};
@@ -300,9 +300,12 @@ impl Lights {
         }
         let (shape, material) = self.shape_of(scene, light);
         let point = shape.sample_toward(reference, u)?;
+        // The point's barycentrics, for an emissive texture (triangles only have them).
+        let [_, b1, b2] = uniform_triangle(u);
+        let (inst, prim) = self.emitters[light];
         Some(LightSample {
             point,
-            radiance: scene.materials[material as usize].emitted(),
+            radiance: scene.emitted_at(material, inst, prim, b1, b2),
             pdf: point.pdf * choice.pmf(light),
             delta: false,
         })

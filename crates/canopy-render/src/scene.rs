@@ -335,13 +335,34 @@ impl Scene {
 
     /// The texture coordinates where `hit` lies, for a mesh instance with them.
     pub fn hit_uv(&self, hit: &Hit) -> Option<Vec2> {
-        let instance = self.instance_of(hit.inst)?;
+        self.uv_at(hit.inst, hit.prim, hit.u, hit.v)
+    }
+
+    /// The texture coordinates at barycentrics `(u, v)` (weights of vertices 1 and 2)
+    /// of triangle `prim` of what instance index `inst` names, for a mesh instance with
+    /// them.
+    fn uv_at(&self, inst: u32, prim: u32, u: f32, v: f32) -> Option<Vec2> {
+        let instance = self.instance_of(inst)?;
         let mesh = &self.meshes[instance.mesh as usize];
         if mesh.uvs.is_empty() {
             return None;
         }
-        let [a, b, c] = mesh.mesh.indices()[hit.prim as usize].map(|i| mesh.uvs[i as usize]);
-        Some(a * (1.0 - hit.u - hit.v) + b * hit.u + c * hit.v)
+        let [a, b, c] = mesh.mesh.indices()[prim as usize].map(|i| mesh.uvs[i as usize]);
+        Some(a * (1.0 - u - v) + b * u + c * v)
+    }
+
+    /// The radiance material `material` emits at barycentrics `(u, v)` of triangle
+    /// `prim` of instance index `inst`: its emission, times its emissive texture where
+    /// it has one and the surface has texture coordinates.
+    pub fn emitted_at(&self, material: u32, inst: u32, prim: u32, u: f32, v: f32) -> Vec3 {
+        let emitted = self.materials[material as usize].emitted();
+        match self.material_maps.get(material as usize) {
+            Some(maps) if maps.emissive.is_some() => match self.uv_at(inst, prim, u, v) {
+                Some(uv) => maps.emitted(emitted, &self.images, uv),
+                None => emitted,
+            },
+            _ => emitted,
+        }
     }
 
     /// Whether any material has a texture or is not opaque.

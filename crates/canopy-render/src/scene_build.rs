@@ -94,6 +94,10 @@ impl Material {
                 "`radiance` components must be in [0, {MAX_RADIANCE:e}], not {radiance}"
             )),
             Material::Emissive { .. } => Ok(()),
+            Material::Pbr(p) if !radiance_ok(p.emission) => Err(format!(
+                "`emission` components must be in [0, {MAX_RADIANCE:e}], not {}",
+                p.emission
+            )),
             Material::Pbr(p) => colour("base_color", p.base_color)
                 .and_then(|()| fraction("metallic", p.metallic))
                 .and_then(|()| fraction("roughness", p.roughness)),
@@ -338,7 +342,14 @@ impl Scene {
     /// Scales material `material`'s parameters by textures (see [`MaterialMaps`]).
     pub fn set_material_maps(&mut self, material: u32, maps: MaterialMaps) -> Result<(), String> {
         self.check_material_index(material)?;
-        for t in [maps.base_color, maps.metallic_roughness].iter().flatten() {
+        let normal = maps.normal.map(|n| n.texture);
+        let textures = [
+            maps.base_color,
+            maps.metallic_roughness,
+            normal,
+            maps.emissive,
+        ];
+        for t in textures.iter().flatten() {
             if t.image as usize >= self.images.len() {
                 return Err(format!("image {} does not exist", t.image));
             }

@@ -188,6 +188,8 @@ enum MaterialDoc {
         metallic: f32,
         #[serde(default = "default_roughness")]
         roughness: f32,
+        #[serde(default)]
+        emission: [f32; 3],
     },
 }
 
@@ -483,10 +485,12 @@ impl SceneBuilder<'_> {
                 base_color,
                 metallic,
                 roughness,
+                emission,
             } => Material::Pbr(Pbr {
                 base_color: base_color.into(),
                 metallic,
                 roughness,
+                emission: emission.into(),
             }),
         };
         match material.check() {

@@ -237,6 +237,8 @@ pub struct MaterialMaps {
     pub metallic_roughness: Option<TextureRef>,
     /// Bends the shading normal (meshes with tangents only).
     pub normal: Option<NormalMap>,
+    /// sRGB colour times the emission (glTF's emissive factor).
+    pub emissive: Option<TextureRef>,
     /// `None`: opaque.
     pub coverage: Option<Coverage>,
 }
@@ -246,6 +248,7 @@ impl MaterialMaps {
         self.base_color.is_none()
             && self.metallic_roughness.is_none()
             && self.normal.is_none()
+            && self.emissive.is_none()
             && self.coverage.is_none()
     }
 
@@ -283,7 +286,25 @@ impl MaterialMaps {
             pbr.roughness *= c.y;
             pbr.metallic *= c.z;
         }
+        if let Some(t) = &self.emissive {
+            pbr.emission = self.emission(t, pbr.emission, images, uv);
+        }
         Material::Pbr(pbr)
+    }
+
+    /// The emission `factor` scaled by the emissive texture `t` at `uv`.
+    #[inline]
+    fn emission(&self, t: &TextureRef, factor: Vec3, images: &[Arc<Image>], uv: Vec2) -> Vec3 {
+        factor * t.lookup(images, uv, true).truncate()
+    }
+
+    /// The radiance a material emitting `factor` sends from `uv` (its emissive texture
+    /// applied, where it has one).
+    pub fn emitted(&self, factor: Vec3, images: &[Arc<Image>], uv: Vec2) -> Vec3 {
+        match &self.emissive {
+            Some(t) if factor != Vec3::ZERO => self.emission(t, factor, images, uv),
+            _ => factor,
+        }
     }
 }
 
@@ -386,33 +407,38 @@ mod tests {
     }
 
     #[test]
-    fn maps_scale_the_metallic_roughness_parameters() {
+    fn maps_scale_the_metallic_roughness_parameters_and_emission() {
         let images = [checker()];
         let maps = MaterialMaps {
             base_color: Some(plain(Wrap::Repeat)),
             metallic_roughness: Some(plain(Wrap::Repeat)),
             normal: None,
+            emissive: Some(plain(Wrap::Repeat)),
             coverage: None,
         };
         let m = Material::Pbr(crate::material::Pbr {
             base_color: Vec3::new(0.5, 1.0, 1.0),
             metallic: 1.0,
             roughness: 0.8,
+            emission: Vec3::splat(2.0),
         });
-        let Material::Pbr(p) = maps.apply(m, &images, Vec2::new(0.75, 0.25)) else {
+        let white = Vec2::new(0.75, 0.25);
+        let Material::Pbr(p) = maps.apply(m, &images, white) else {
             unreachable!()
         };
         assert_eq!(
-            (p.base_color, p.metallic, p.roughness),
-            (Vec3::new(0.5, 1.0, 1.0), 1.0, 0.8)
+            (p.base_color, p.metallic, p.roughness, p.emission),
+            (Vec3::new(0.5, 1.0, 1.0), 1.0, 0.8, Vec3::splat(2.0))
         );
-        let Material::Pbr(p) = maps.apply(m, &images, Vec2::new(0.25, 0.75)) else {
+        let red = Vec2::new(0.25, 0.75);
+        let Material::Pbr(p) = maps.apply(m, &images, red) else {
             unreachable!()
         };
         assert_eq!(
-            (p.base_color, p.metallic, p.roughness),
-            (Vec3::new(0.5, 0.0, 0.0), 0.0, 0.0)
+            (p.base_color, p.metallic, p.roughness, p.emission),
+            (Vec3::new(0.5, 0.0, 0.0), 0.0, 0.0, Vec3::new(2.0, 0.0, 0.0))
         );
+        assert_eq!(maps.emitted(Vec3::splat(2.0), &images, red), p.emission);
         let glass = Material::Dielectric { ior: 1.5 };
         assert_eq!(maps.apply(glass, &images, Vec2::ZERO), glass);
     }

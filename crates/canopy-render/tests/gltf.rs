@@ -698,3 +698,43 @@ fn normal_maps_bend_the_shading_normal_in_the_tangent_frame() {
         );
     }
 }
+
+#[test]
+fn emission_is_its_factor_times_strength_times_texture_beside_reflection() {
+    let (json, bin) = textured_triangle(&data_uri(&quadrants_png()), "");
+    let json = json
+        .replace(
+            r#""name":"paint","#,
+            r#""name":"paint","emissiveFactor":[1,0.5,0.25],"emissiveTexture":{"index":0},
+"extensions":{"KHR_materials_emissive_strength":{"emissiveStrength":4}},"#,
+        )
+        .replace(
+            r#""extensionsUsed":["KHR_texture_transform"]"#,
+            r#""extensionsUsed":["KHR_texture_transform","KHR_materials_emissive_strength"]"#,
+        );
+    let scene = parse_gltf(&glb(&json, &bin), &NoFiles, "glow").unwrap();
+    assert!(
+        scene.warnings().iter().all(|w| !w.contains("emissi")),
+        "{:?}",
+        scene.warnings()
+    );
+    // Red and green quadrants of the texture (clamped in s, mirrored in t).
+    for (x, y, expected) in [(0.2, 0.2, [4.0, 0.0, 0.0]), (0.75, 0.1, [0.0, 2.0, 0.0])] {
+        let (ray, hit) = from_above(&scene, x, y);
+        let (_, material) = scene.shade(&ray, &hit);
+        assert_eq!(
+            material.emitted(),
+            glam::Vec3::from(expected),
+            "at ({x}, {y})"
+        );
+        // It still reflects: a metallic-roughness surface that also glows.
+        assert!(matches!(
+            material,
+            canopy_render::material::Material::Pbr(_)
+        ));
+        // Light sampling reads the same emission at the same point.
+        let index = scene.material_index(&hit);
+        let sampled = scene.emitted_at(index, hit.inst, hit.prim, hit.u, hit.v);
+        assert_eq!(sampled, material.emitted());
+    }
+}

@@ -19,11 +19,12 @@ struct TileStats {
 }
 
 fn render_film(scene: &Scene) -> Film {
-    let accel = Accel::build(
+    let accel = Accel::for_scene(
+        scene,
         AccelKind::default(),
         BvhWidth::Eight,
-        &scene.primitives,
         &BuildParams::default(),
+        None,
     );
     render(scene, &accel, &|| {}).0
 }
@@ -445,4 +446,110 @@ fn light_sampled_images_do_not_depend_on_the_thread_count() {
     };
     assert_eq!(image(1).pixels, image(3).pixels);
     assert!(image(1).pixels.iter().any(|p| *p != Vec3::ZERO));
+}
+
+/// A quad mesh from `corners` (counter-clockwise seen from its front) with texture
+/// coordinates (0, 0), (1, 0), (1, 1), (0, 1) at them.
+fn quad(name: &str, corners: [Vec3; 4]) -> canopy_render::SceneMesh {
+    canopy_render::SceneMesh {
+        name: name.into(),
+        mesh: std::sync::Arc::new(
+            canopy_bvh::TriangleMesh::new(corners.to_vec(), vec![[0, 1, 2], [0, 2, 3]]).unwrap(),
+        ),
+        normals: Vec::new(),
+        uvs: vec![
+            glam::Vec2::new(0.0, 0.0),
+            glam::Vec2::new(1.0, 0.0),
+            glam::Vec2::new(1.0, 1.0),
+            glam::Vec2::new(0.0, 1.0),
+        ],
+        tangents: Vec::new(),
+    }
+}
+
+#[test]
+fn an_emissive_texture_lights_as_it_looks() {
+    use canopy_render::material::{Material, Pbr};
+    use canopy_render::texture::{Image, MaterialMaps, TextureRef, Wrap};
+    // A glowing panel over a white floor, its emission scaled by four coloured
+    // quadrants: light sampling must find each quadrant's colour where the BSDF-only
+    // estimator does (a panel sampled by its factor alone would light the floor white).
+    let quadrants = Image {
+        width: 2,
+        height: 2,
+        texels: vec![
+            [255, 0, 0, 255],
+            [0, 255, 0, 255],
+            [0, 0, 255, 255],
+            [255, 255, 255, 255],
+        ],
+    };
+    let panel = Pbr {
+        base_color: Vec3::splat(0.2),
+        metallic: 0.0,
+        roughness: 0.6,
+        emission: Vec3::splat(6.0),
+    };
+    let mut scene = Scene {
+        materials: vec![
+            Material::Lambertian {
+                albedo: Vec3::splat(0.8),
+            },
+            Material::Pbr(panel),
+        ],
+        meshes: vec![
+            quad(
+                "floor",
+                [
+                    Vec3::new(-3.0, 0.0, 3.0),
+                    Vec3::new(3.0, 0.0, 3.0),
+                    Vec3::new(3.0, 0.0, -3.0),
+                    Vec3::new(-3.0, 0.0, -3.0),
+                ],
+            ),
+            quad(
+                "panel",
+                [
+                    Vec3::new(-1.0, 1.0, -1.0),
+                    Vec3::new(1.0, 1.0, -1.0),
+                    Vec3::new(1.0, 1.0, 1.0),
+                    Vec3::new(-1.0, 1.0, 1.0),
+                ],
+            ),
+        ],
+        instances: (0..2)
+            .map(|k| canopy_render::MeshInstance {
+                mesh: k,
+                to_world: glam::Affine3A::IDENTITY,
+                material: k,
+            })
+            .collect(),
+        images: vec![std::sync::Arc::new(quadrants)],
+        background: canopy_render::Background::Constant(Vec3::ZERO),
+        ..Scene::default()
+    };
+    scene
+        .set_material_maps(
+            1,
+            MaterialMaps {
+                emissive: Some(TextureRef {
+                    image: 0,
+                    wrap: [Wrap::ClampToEdge; 2],
+                    transform: None,
+                }),
+                ..MaterialMaps::default()
+            },
+        )
+        .unwrap();
+    scene.camera.look_from = Vec3::new(0.0, 1.6, 4.0);
+    scene.camera.look_at = Vec3::new(0.0, 0.3, 0.0);
+    scene.camera.vfov = 60.0;
+    scene.settings = canopy_render::RenderSettings {
+        width: 32,
+        height: 32,
+        spp: 16,
+        max_depth: 3,
+        ..Default::default()
+    };
+    assert_integrators_agree("emissive texture", &scene, 48);
 }

@@ -31,6 +31,7 @@ fn values_and_densities_equal_mitsubas() {
             base_color: Vec3::new(r, g, b),
             metallic: 1.0,
             roughness,
+            emission: Vec3::ZERO,
         });
         let ggx = Ggx::from_roughness(roughness);
         let masking = ggx.g2(wo, wi) / (ggx.g1(wo) * ggx.g1(wi));

@@ -42,6 +42,8 @@ struct LightPoint {
     normal: vec3<f32>,
     error: f32,
     pdf: f32,
+    // A triangle's barycentrics at p (weights of vertices 1 and 2).
+    bary: vec2<f32>,
 }
 
 fn area_to_solid_angle(area_pdf: f32, reference: vec3<f32>, p: vec3<f32>, normal: vec3<f32>) -> f32 {
@@ -121,7 +123,7 @@ fn cone_of(p: Primitive, reference: vec3<f32>) -> vec2<f32> {
 // zero pdf when there is none.
 fn sample_toward(index: u32, reference: vec3<f32>, u: vec2<f32>) -> LightPoint {
     let p = prim_at(index);
-    var out = LightPoint(vec3<f32>(0.0), vec3<f32>(0.0, 1.0, 0.0), shape_error(p), 0.0);
+    var out = LightPoint(vec3<f32>(0.0), vec3<f32>(0.0, 1.0, 0.0), shape_error(p), 0.0, vec2<f32>(0.0));
     switch p.header.x {
         case 0u: {
             let s = sqrt(u.x);
@@ -129,6 +131,7 @@ fn sample_toward(index: u32, reference: vec3<f32>, u: vec2<f32>) -> LightPoint {
             let b1 = u.y * s;
             let b2 = max(1.0 - b0 - b1, 0.0);
             out.p = b0 * p.d0.xyz + b1 * p.d1.xyz + b2 * p.d2.xyz;
+            out.bary = vec2<f32>(b1, b2);
             out.normal = normalize_or(cross(p.d1.xyz - p.d0.xyz, p.d2.xyz - p.d0.xyz), vec3<f32>(0.0, 1.0, 0.0));
             out.pdf = area_to_solid_angle(1.0 / shape_area(p), reference, out.p, out.normal);
         }
@@ -393,7 +396,7 @@ fn light_tests(m: Material, dir: vec3<f32>, s: Surface, rng: ptr<function, Rng>)
             }
         }
         let light = lights[lo];
-        var point = LightPoint(vec3<f32>(0.0), vec3<f32>(0.0), 0.0, 0.0);
+        var point = LightPoint(vec3<f32>(0.0), vec3<f32>(0.0), 0.0, 0.0, vec2<f32>(0.0));
         var radiance = vec3<f32>(0.0);
         var pdf = 0.0;
         if (light.punctual == 1u) {
@@ -401,13 +404,13 @@ fn light_tests(m: Material, dir: vec3<f32>, s: Surface, rng: ptr<function, Rng>)
             // not weighted by MIS.
             let toward = punctual_toward(light.record, s.p);
             if (toward.origin.w > 0.0) {
-                point = LightPoint(toward.origin.xyz, normalize_or_zero(s.p - toward.origin.xyz), 0.0, 1.0);
+                point = LightPoint(toward.origin.xyz, normalize_or_zero(s.p - toward.origin.xyz), 0.0, 1.0, vec2<f32>(0.0));
                 radiance = toward.irradiance;
                 pdf = light.pmf;
             }
         } else {
             point = sample_toward(light.record, s.p, u);
-            radiance = emitted(materials[prim_at(light.record).header.y]);
+            radiance = light_emission(light.record, point.bary);
             pdf = point.pdf * light.pmf;
         }
         if (point.pdf > 0.0) {

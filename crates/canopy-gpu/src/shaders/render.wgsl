@@ -5,10 +5,12 @@
 // rounding.
 
 // kind 0 Lambertian (value = albedo), 1 metal (albedo, fuzz in w), 2 dielectric (ior in
-// w), 3 emissive (radiance), 4 glTF metallic-roughness (pbr.wgsl).
+// w), 3 emissive (radiance), 4 glTF metallic-roughness (pbr.wgsl); emission.xyz the
+// radiance it emits (emissive and metallic-roughness).
 struct Material {
     kind: vec4<u32>,
     value: vec4<f32>,
+    emission: vec4<f32>,
 }
 
 struct Frame {
@@ -291,10 +293,7 @@ fn scatter(m: Material, dir: vec3<f32>, s: Surface, rng: ptr<function, Rng>) -> 
 }
 
 fn emitted(m: Material) -> vec3<f32> {
-    if (m.kind.x == 3u) {
-        return m.value.xyz;
-    }
-    return vec3<f32>(0.0);
+    return m.emission.xyz;
 }
 
 fn background(dir: vec3<f32>) -> vec3<f32> {

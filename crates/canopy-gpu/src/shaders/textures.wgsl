@@ -15,6 +15,7 @@ struct MaterialMaps {
     base_color: TextureRef,
     metallic_roughness: TextureRef,
     normal: TextureRef,
+    emissive: TextureRef,
     // Coverage (0 opaque, 1 mask, 2 blend), alpha factor, cutoff, normal map scale
     // (the last three as f32 bits).
     coverage: vec4<u32>,
@@ -265,5 +266,29 @@ fn scene_shade(origin: vec3<f32>, dir: vec3<f32>, h: SceneHit) -> Shaded {
         out.material.value.w *= c.y;
         out.material.kind.y = bitcast<u32>(bitcast<f32>(out.material.kind.y) * c.z);
     }
+    if (has_image(maps.emissive)) {
+        out.material.emission = vec4<f32>(emission_at(maps, out.material.emission.xyz, uv), 0.0);
+    }
     return out;
+}
+
+// The emission `factor` times the emissive texture of `maps` at `uv`.
+fn emission_at(maps: MaterialMaps, factor: vec3<f32>, uv: vec2<f32>) -> vec3<f32> {
+    return factor * texture_lookup(maps.emissive, uv, true).xyz;
+}
+
+// The radiance light record `record` (a primitive, or an instance's triangle in world
+// space with its mesh triangle's texture data) sends from barycentrics `bary`, as
+// Scene::emitted_at.
+fn light_emission(record: u32, bary: vec2<f32>) -> vec3<f32> {
+    let p = prim_at(record);
+    let factor = emitted(materials[p.header.y]);
+    if (frame.top.w == 0u || p.header.w == NO_SURFACE || all(factor == vec3<f32>(0.0))) {
+        return factor;
+    }
+    let maps = material_maps[p.header.y];
+    if (!has_image(maps.emissive)) {
+        return factor;
+    }
+    return emission_at(maps, factor, hit_uv(p.header.w, HitOut(0.0, record, bary.x, bary.y)));
 }

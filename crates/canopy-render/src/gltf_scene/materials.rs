@@ -1,10 +1,10 @@
 //! glTF's materials as canopy's: metallic-roughness as [`Pbr`] (the specification's
-//! BRDF), transmission as glass of the material's index of refraction, and emission
-//! (times `KHR_materials_emissive_strength`) as an emitter. Base-colour and
-//! metallic-roughness textures are read by the loader ([`super::textures`]); normal and
-//! emissive ones are named in a note.
+//! BRDF) with its emission (times `KHR_materials_emissive_strength`) beside what it
+//! reflects, and transmission as glass of the material's index of refraction. The
+//! textures are read by the loader ([`super::textures`]).
 
 use crate::material::{Material, Pbr};
+use crate::scene_file::MAX_RADIANCE;
 use crate::texture::Coverage;
 use glam::Vec3;
 
@@ -15,20 +15,26 @@ pub(super) fn convert(material: &gltf::Material<'_>, notes: &mut Vec<String>) ->
         (None, _) => "the default material".to_owned(),
     };
     let pbr = material.pbr_metallic_roughness();
-    if material.emissive_texture().is_some() {
-        notes.push(format!(
-            "{named}: emissive textures are not rendered yet (its emissive factor is)"
-        ));
-    }
-    let emissive =
+    let emission =
         Vec3::from(material.emissive_factor()) * material.emissive_strength().unwrap_or(1.0);
-    if emissive.max_element() > 0.0 && emissive.is_finite() {
-        return Material::Emissive { radiance: emissive };
-    }
+    let emission = match emission.is_finite() && emission.min_element() >= 0.0 {
+        true => emission.min(Vec3::splat(MAX_RADIANCE)),
+        false => {
+            notes.push(format!(
+                "{named}: its emission {emission} is not a radiance (left out)"
+            ));
+            Vec3::ZERO
+        }
+    };
     let transmission = material
         .transmission()
         .map_or(0.0, |t| t.transmission_factor());
     if transmission >= 0.5 {
+        if emission != Vec3::ZERO {
+            notes.push(format!(
+                "{named}: glass does not emit (its emission is left out)"
+            ));
+        }
         return Material::Dielectric {
             ior: material.ior().unwrap_or(1.5),
         };
@@ -39,6 +45,7 @@ pub(super) fn convert(material: &gltf::Material<'_>, notes: &mut Vec<String>) ->
         base_color: albedo,
         metallic: finite_unit(pbr.metallic_factor()),
         roughness: finite_unit(pbr.roughness_factor()),
+        emission,
     })
 }
 

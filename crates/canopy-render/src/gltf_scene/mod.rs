@@ -5,8 +5,8 @@
 //! material canopy's nearest ([`materials`]). Every accessor is checked against its
 //! buffer before it is read ([`data`]); errors name the file and the object at fault.
 //!
-//! Not read yet (each named in the scene's warnings where a file uses it): normal and
-//! emissive textures, lights' ranges, orthographic cameras, sparse accessors.
+//! Not read yet (each named in the scene's warnings where a file uses it): lights'
+//! ranges, orthographic cameras, sparse accessors, a second set of texture coordinates.
 
 mod data;
 mod materials;
@@ -470,6 +470,7 @@ impl<'a> Loader<'a, '_> {
             };
             let base_color = texture(pbr.base_color_texture())?;
             let metallic_roughness = texture(pbr.metallic_roughness_texture())?;
+            let emissive = texture(material.emissive_texture())?;
             let normal = match material.normal_texture() {
                 Some(normal) => self
                     .images
@@ -481,6 +482,7 @@ impl<'a> Loader<'a, '_> {
                 base_color,
                 metallic_roughness,
                 normal,
+                emissive,
                 coverage: materials::coverage(material),
             };
             if !maps.is_empty() {

@@ -74,6 +74,7 @@ impl Material {
     pub fn emitted(&self) -> Vec3 {
         match self {
             Material::Emissive { radiance } => *radiance,
+            Material::Pbr(pbr) => pbr.emission,
             _ => Vec3::ZERO,
         }
     }

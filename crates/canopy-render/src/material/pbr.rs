@@ -26,6 +26,9 @@ pub struct Pbr {
     pub metallic: f32,
     /// Perceptual roughness in [0, 1]; the GGX width is its square.
     pub roughness: f32,
+    /// Radiance the surface emits on both sides, beside what it reflects (glTF's
+    /// emissive factor times its strength, times the emissive texture).
+    pub emission: Vec3,
 }
 
 impl Pbr {
@@ -130,6 +133,7 @@ mod tests {
                     base_color: Vec3::new(0.9, 0.5, 0.1),
                     metallic,
                     roughness,
+                    emission: Vec3::ZERO,
                 });
             }
         }
@@ -257,6 +261,7 @@ mod tests {
             base_color: Vec3::ONE,
             metallic: 1.0,
             roughness,
+            emission: Vec3::ZERO,
         };
         let e = |r| albedo(&white(r), Vec3::Z).x;
         let (smooth, mid, rough) = (e(0.25), e(0.6), e(1.0));
@@ -277,6 +282,7 @@ mod tests {
             base_color: Vec3::ONE,
             metallic: 0.0,
             roughness: 0.5,
+            emission: Vec3::ZERO,
         };
         let e = albedo(&m, Vec3::new(0.3, 0.1, 0.9).normalize()).x;
         assert!(e > 0.9 && e <= 1.0, "{e}");
