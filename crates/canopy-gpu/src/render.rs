@@ -47,7 +47,7 @@ impl GpuMaterial {
     }
 }
 
-/// The per-dispatch constants: 256 bytes; WGSL `Frame` in `render.wgsl`.
+/// The per-dispatch constants: 272 bytes; WGSL `Frame` in `render.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
 struct Frame {
@@ -77,6 +77,9 @@ struct Frame {
     /// Two-level traversal (1) or one tree from node 0 (0), the top tree's root, whether
     /// some surfaces let rays through (1), whether some material has textures (1).
     top: [u32; 4],
+    /// xyz: the viewing direction; w: 1 for an orthographic camera (rays start on the
+    /// view's rectangle and travel along it).
+    forward: [f32; 4],
 }
 
 /// An environment map as the GPU reads it: pixels, and per pixel the end of its slice of
@@ -289,6 +292,7 @@ impl<'g> Renderer<'g> {
                 scene.has_see_through() as u32,
                 scene.is_textured() as u32,
             ],
+            forward: vec4(camera.forward, camera.orthographic as u32 as f32),
         };
         let frame_buffer = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("frame"),

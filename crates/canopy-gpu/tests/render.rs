@@ -842,3 +842,12 @@ fn a_reseeded_renderer_renders_what_a_scene_with_that_seed_does() {
     assert_eq!(film(&reseeded), film(&seeded));
     assert_ne!(film(&reseeded), first);
 }
+
+#[test]
+fn an_orthographic_camera_sees_alike_on_cpu_and_gpu() {
+    let Some(gpu) = gpu() else { return };
+    let mut scene = scene_from("orthographic", SPHERES);
+    scene.camera.ortho_height = Some(3.0);
+    scene.camera.check().unwrap();
+    assert_devices_agree("orthographic", &gpu, &scene, 6);
+}

@@ -61,6 +61,7 @@ pub fn contents<'py>(py: Python<'py>, scene: &Scene) -> PyResult<Bound<'py, PyDi
     camera.set_item("vfov", c.vfov)?;
     camera.set_item("aperture", c.aperture)?;
     camera.set_item("focus_distance", c.focus_distance)?;
+    camera.set_item("ortho_height", c.ortho_height)?;
     d.set_item("camera", camera)?;
 
     let background = PyDict::new(py);

@@ -331,7 +331,7 @@ pub fn render<'py>(
 }
 
 /// `camera` with the entries of `changes` (look_from, look_at, up, vfov, aperture,
-/// focus_distance) put in.
+/// focus_distance, ortho_height) put in.
 fn moved_camera(
     mut camera: canopy_render::camera::CameraSpec,
     changes: &Bound<'_, PyDict>,
@@ -357,9 +357,15 @@ fn moved_camera(
                     false => Some(number()?),
                 }
             }
+            "ortho_height" => {
+                camera.ortho_height = match value.is_none() {
+                    true => None,
+                    false => Some(number()?),
+                }
+            }
             _ => {
                 return Err(PyValueError::new_err(format!(
-                    "camera: no `{key}` (it takes look_from, look_at, up, vfov, aperture, focus_distance)"
+                    "camera: no `{key}` (it takes look_from, look_at, up, vfov, aperture, focus_distance, ortho_height)"
                 )))
             }
         }

@@ -176,7 +176,8 @@ impl PyScene {
         Ok(())
     }
 
-    #[pyo3(signature = (look_from, look_at, up, vfov, aperture, focus_distance=None))]
+    #[pyo3(signature = (look_from, look_at, up, vfov, aperture, focus_distance=None, ortho_height=None))]
+    #[allow(clippy::too_many_arguments)]
     fn set_camera(
         &mut self,
         look_from: [f32; 3],
@@ -185,6 +186,7 @@ impl PyScene {
         vfov: f32,
         aperture: f32,
         focus_distance: Option<f32>,
+        ortho_height: Option<f32>,
     ) -> PyResult<()> {
         let camera = CameraSpec {
             look_from: look_from.into(),
@@ -193,6 +195,7 @@ impl PyScene {
             vfov,
             aperture,
             focus_distance,
+            ortho_height,
         };
         self.scene.set_camera(camera).map_err(refused("camera"))
     }

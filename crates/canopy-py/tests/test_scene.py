@@ -336,3 +336,25 @@ irradiance = [0.5, 0.5, 0.5]
         scene.add_spot_light((0, 1, 0), (0, -1, 0), (1, 1, 1), inner_angle=40, outer_angle=30)
     with pytest.raises(ValueError, match="add_directional_light: `direction`"):
         scene.add_directional_light((0, 0, 0), (1, 1, 1))
+
+
+def test_an_orthographic_camera_shows_true_sizes():
+    # A glowing disc-on-sight (sphere of radius 1) seen by parallel rays from a view 4
+    # high covers pi / 16 of a square image, wherever the camera stands back.
+    scene = canopy.Scene()
+    scene.settings(size=(64, 64), spp=4, max_depth=1, integrator="bsdf")
+    scene.background((0.0, 0.0, 0.0))
+    scene.add_sphere((0.0, 0.0, 0.0), 1.0, material={"type": "emissive", "radiance": [1, 1, 1]})
+    covered = []
+    for distance in (5.0, 50.0):
+        scene.camera((0.0, 0.0, distance), (0.0, 0.0, 0.0), ortho_height=4.0)
+        image = canopy.render(scene)
+        covered.append(float(image[..., 0].mean()))
+    assert covered[0] == pytest.approx(np.pi / 16, abs=0.01)
+    assert covered[1] == pytest.approx(covered[0], abs=1e-3)
+    assert scene.info().contents()["camera"]["ortho_height"] == 4.0
+    # A frame may switch the camera to perspective and back.
+    perspective = canopy.render(scene, camera={"ortho_height": None, "vfov": 20.0})
+    assert perspective[..., 0].mean() < 0.9 * covered[1]
+    with pytest.raises(ValueError, match="ortho_height"):
+        scene.camera((0.0, 0.0, 5.0), (0.0, 0.0, 0.0), ortho_height=-1.0)

@@ -1,4 +1,4 @@
-//! A thin-lens perspective camera.
+//! A thin-lens perspective camera, or an orthographic one.
 
 use crate::rng::Rng;
 use canopy_bvh::Ray;
@@ -16,6 +16,10 @@ pub struct CameraSpec {
     pub aperture: f32,
     /// Distance to the plane in focus; defaults to the distance to `look_at`.
     pub focus_distance: Option<f32>,
+    /// An orthographic camera: the height of the view in world units (its width follows
+    /// the image's aspect); rays start on the plane through `look_from` and travel along
+    /// the viewing direction (`vfov` and the lens do not apply). `None`: perspective.
+    pub ortho_height: Option<f32>,
 }
 
 impl Default for CameraSpec {
@@ -27,6 +31,7 @@ impl Default for CameraSpec {
             vfov: 40.0,
             aperture: 0.0,
             focus_distance: None,
+            ortho_height: None,
         }
     }
 }
@@ -42,6 +47,7 @@ pub struct Camera {
     v: Vec3,
     w: Vec3,
     lens_radius: f32,
+    orthographic: bool,
     width: u32,
     height: u32,
 }
@@ -49,7 +55,8 @@ pub struct Camera {
 /// A camera's frame as vectors, for renderers that generate its rays themselves (the
 /// GPU's): a ray through `(s, t)` in `[0, 1)²` aims at
 /// `upper_left + s·horizontal − t·vertical` from `origin`, moved by up to `lens_radius`
-/// along `u` and `v` for depth of field.
+/// along `u` and `v` for depth of field; for an orthographic camera it starts there and
+/// travels along `forward`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CameraBasis {
     pub origin: Vec3,
@@ -59,6 +66,9 @@ pub struct CameraBasis {
     pub u: Vec3,
     pub v: Vec3,
     pub lens_radius: f32,
+    /// The viewing direction (unit).
+    pub forward: Vec3,
+    pub orthographic: bool,
 }
 
 impl Camera {
@@ -71,6 +81,8 @@ impl Camera {
             u: self.u,
             v: self.v,
             lens_radius: self.lens_radius,
+            forward: -self.w,
+            orthographic: self.orthographic,
         }
     }
 
@@ -84,6 +96,24 @@ impl Camera {
         let focus = spec
             .focus_distance
             .unwrap_or_else(|| (spec.look_from - spec.look_at).length());
+        if let Some(view_height) = spec.ortho_height {
+            // The view's rectangle on the plane through the eye.
+            let horizontal = aspect * view_height * u;
+            let vertical = view_height * v;
+            return Self {
+                origin: spec.look_from,
+                upper_left: spec.look_from - 0.5 * horizontal + 0.5 * vertical,
+                horizontal,
+                vertical,
+                u,
+                v,
+                w,
+                lens_radius: 0.0,
+                orthographic: true,
+                width,
+                height,
+            };
+        }
         let horizontal = 2.0 * half_width * focus * u;
         let vertical = 2.0 * half_height * focus * v;
         Self {
@@ -95,6 +125,7 @@ impl Camera {
             v,
             w,
             lens_radius: spec.aperture / 2.0,
+            orthographic: false,
             width,
             height,
         }
@@ -113,6 +144,12 @@ impl Camera {
         if depth <= 0.0 {
             return None;
         }
+        if self.orthographic {
+            let on_plane = p - self.upper_left;
+            let s = on_plane.dot(self.horizontal) / self.horizontal.length_squared();
+            let t = -on_plane.dot(self.vertical) / self.vertical.length_squared();
+            return Some((s * self.width as f32, t * self.height as f32));
+        }
         // Where the line of sight crosses the image plane (at the focus distance).
         let focus = -(self.upper_left + 0.5 * self.horizontal - 0.5 * self.vertical - self.origin)
             .dot(self.w);
@@ -125,6 +162,10 @@ impl Camera {
     /// The ray through image position (`s`, `t`) in [0, 1]², `t` going down.
     #[inline]
     pub fn ray(&self, s: f32, t: f32, rng: &mut Rng) -> Ray {
+        if self.orthographic {
+            let origin = self.upper_left + s * self.horizontal - t * self.vertical;
+            return Ray::new(origin, -self.w, 0.0, f32::INFINITY);
+        }
         let origin = if self.lens_radius > 0.0 {
             let disk = self.lens_radius * rng.in_unit_disk();
             self.origin + disk.x * self.u + disk.y * self.v
@@ -181,6 +222,32 @@ mod tests {
             None,
             "behind the camera"
         );
+    }
+
+    #[test]
+    fn orthographic_rays_are_parallel_and_span_the_view() {
+        let spec = CameraSpec {
+            look_from: Vec3::new(0.0, 0.0, 5.0),
+            ortho_height: Some(4.0),
+            ..CameraSpec::default()
+        };
+        let cam = Camera::new(&spec, 200, 100);
+        let mut rng = Rng::for_sample(0, 0, 0);
+        for (s, t, x, y) in [
+            (0.5, 0.5, 0.0, 0.0),
+            (0.0, 0.0, -4.0, 2.0),
+            (1.0, 1.0, 4.0, -2.0),
+        ] {
+            let r = cam.ray(s, t, &mut rng);
+            assert_eq!(r.dir, -Vec3::Z);
+            assert!(
+                (r.origin - Vec3::new(x, y, 5.0)).length() < 1e-5,
+                "{}",
+                r.origin
+            );
+            let (px, py) = cam.project(r.at(3.0)).unwrap();
+            assert!((px - s * 200.0).abs() < 1e-3 && (py - t * 100.0).abs() < 1e-3);
+        }
     }
 
     #[test]

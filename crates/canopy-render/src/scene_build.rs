@@ -64,6 +64,15 @@ impl CameraSpec {
         if c.aperture < 0.0 || c.focus_distance.is_some_and(|f| f <= 0.0) {
             return Err("`aperture` must be >= 0 and `focus_distance` > 0".into());
         }
+        match c.ortho_height {
+            Some(h) if !(h > 0.0 && in_range(&[h])) => Err(format!(
+                "`ortho_height` must be > 0 and within ±{MAX_COORDINATE:e}, not {h}"
+            )),
+            Some(_) if c.aperture > 0.0 => {
+                Err("an orthographic camera has no lens: `aperture` must be 0".into())
+            }
+            _ => Ok(()),
+        }?;
         Ok(())
     }
 }

@@ -143,6 +143,7 @@ struct CameraDoc {
     #[serde(default)]
     aperture: f32,
     focus_distance: Option<f32>,
+    ortho_height: Option<f32>,
 }
 
 fn default_up() -> [f32; 3] {
@@ -376,6 +377,7 @@ impl SceneBuilder<'_> {
             vfov: c.vfov,
             aperture: c.aperture,
             focus_distance: c.focus_distance,
+            ortho_height: c.ortho_height,
         };
         self.scene
             .set_camera(camera)

@@ -738,3 +738,39 @@ fn emission_is_its_factor_times_strength_times_texture_beside_reflection() {
         assert_eq!(sampled, material.emitted());
     }
 }
+
+#[test]
+fn orthographic_cameras_are_used() {
+    let json = TRIANGLE.replace(
+        r#""scenes":[{"nodes":[0]}],
+"nodes":[{"mesh":0}],"#,
+        r#""scenes":[{"nodes":[0,1]}],
+"nodes":[{"mesh":0},{"camera":0,"translation":[0.3,0.3,5]}],
+"cameras":[{"type":"orthographic","orthographic":{"xmag":1,"ymag":0.5,"znear":0.01,"zfar":100}}],"#,
+    );
+    assert_ne!(json, TRIANGLE);
+    let scene = parse_gltf(&glb(&json, &triangle_bin([0, 1, 2])), &NoFiles, "ortho").unwrap();
+    let camera = scene.camera;
+    assert_eq!(camera.ortho_height, Some(1.0));
+    assert_eq!(camera.look_from, glam::Vec3::new(0.3, 0.3, 5.0));
+    assert_eq!(
+        (camera.look_at - camera.look_from).normalize(),
+        -glam::Vec3::Z
+    );
+    // The image takes the view's aspect (xmag / ymag).
+    let settings = scene.settings;
+    assert_eq!(settings.width, 2 * settings.height);
+    // Every camera ray runs straight down -z: the middle one meets the triangle at
+    // (0.3, 0.3), a corner ray misses it.
+    let view = canopy_render::camera::Camera::new(&camera, settings.width, settings.height);
+    let mut rng = canopy_render::rng::Rng::for_sample(0, 0, 0);
+    let accel = accel_of(&scene);
+    use canopy_bvh::RayQuery;
+    let middle = view.ray(0.5, 0.5, &mut rng);
+    assert_eq!(middle.dir, -glam::Vec3::Z);
+    let hit = accel
+        .intersect(&middle)
+        .expect("the middle ray meets the triangle");
+    assert!((middle.at(hit.t) - glam::Vec3::new(0.3, 0.3, 0.0)).length() < 1e-5);
+    assert!(accel.intersect(&view.ray(0.95, 0.5, &mut rng)).is_none());
+}

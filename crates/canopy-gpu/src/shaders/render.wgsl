@@ -39,6 +39,8 @@ struct Frame {
     // Two-level traversal (1) or one tree from node 0 (0); the top tree's root node;
     // whether some surfaces let rays through (1); whether some material has textures (1).
     top: vec4<u32>,
+    // The viewing direction; w: 1 for an orthographic camera.
+    forward: vec4<f32>,
 }
 
 @group(0) @binding(3) var<storage, read> materials: array<Material>;
@@ -373,11 +375,17 @@ fn render(@builtin(global_invocation_id) id: vec3<u32>) {
             origin = origin + disk.x * frame.u.xyz + disk.y * frame.v.xyz;
         }
         let aim = frame.upper_left.xyz + s * frame.horizontal.xyz - t * frame.vertical.xyz;
+        var dir = normalize(aim - origin);
+        if (frame.forward.w > 0.0) {
+            // Orthographic: parallel rays from the view's rectangle.
+            origin = aim;
+            dir = frame.forward.xyz;
+        }
         var l = vec3<f32>(0.0);
         if (frame.options.z == 1u) {
-            l = radiance_path(origin, normalize(aim - origin), &rng, &rays);
+            l = radiance_path(origin, dir, &rng, &rays);
         } else {
-            l = radiance_bsdf(origin, normalize(aim - origin), &rng, &rays);
+            l = radiance_bsdf(origin, dir, &rng, &rays);
         }
         let finite = all(l == l) && all(abs(l) < vec3<f32>(INF));
         if (finite) {

@@ -316,7 +316,7 @@ def render(
     to the rounding of the sums.
 
     ``camera`` moves the camera for this render (a dict of any of ``look_from``,
-    ``look_at``, ``up``, ``vfov``, ``aperture``, ``focus_distance``) and ``instances``
+    ``look_at``, ``up``, ``vfov``, ``aperture``, ``focus_distance``, ``ortho_height``) and ``instances``
     moves mesh instances (``{index: 4x4 or 3x4 matrix}``): a frame of an animation.
 
     ``schedule`` is the order the CPU traces paths in: ``"wavefront"`` (many at a time,

@@ -386,7 +386,7 @@ def render(
     return image
 
 
-_CAMERA_KEYS = {"look_from", "look_at", "up", "vfov", "aperture", "focus_distance"}
+_CAMERA_KEYS = {"look_from", "look_at", "up", "vfov", "aperture", "focus_distance", "ortho_height"}
 
 
 def _frame_changes(index: int, frame, instance_count: int) -> dict:

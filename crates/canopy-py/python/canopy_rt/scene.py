@@ -187,9 +187,12 @@ class Scene:
         vfov: float = 40.0,
         aperture: float = 0.0,
         focus_distance: Optional[float] = None,
+        ortho_height: Optional[float] = None,
     ) -> None:
         """Places the camera: ``vfov`` is the vertical field of view in degrees;
-        ``aperture`` > 0 blurs what is not at ``focus_distance`` (default: ``look_at``)."""
+        ``aperture`` > 0 blurs what is not at ``focus_distance`` (default: ``look_at``).
+        With ``ortho_height`` the camera is orthographic: parallel rays from a view that
+        high (in world units; its width follows the image's aspect)."""
         self._native.set_camera(
             _vec3(look_from, "look_from"),
             _vec3(look_at, "look_at"),
@@ -197,6 +200,7 @@ class Scene:
             float(vfov),
             float(aperture),
             None if focus_distance is None else float(focus_distance),
+            None if ortho_height is None else float(ortho_height),
         )
 
     def background(self, value="sky", *, environment=None, rotate=0.0, strength: float = 1.0) -> None:

@@ -1,12 +1,12 @@
 //! Scenes from glTF 2.0 files (`.glb`, `.gltf` with embedded or external buffers),
 //! through the `gltf` crate: the default scene's node hierarchy becomes instances of
 //! meshes stored once (a mesh primitive used by several nodes is one structure), the
-//! first perspective camera (or a framing of the whole model) the camera, and each
+//! first camera, perspective or orthographic (or a framing of the whole model), the camera, and each
 //! material canopy's nearest ([`materials`]). Every accessor is checked against its
 //! buffer before it is read ([`data`]); errors name the file and the object at fault.
 //!
 //! Not read yet (each named in the scene's warnings where a file uses it): lights'
-//! ranges, orthographic cameras, sparse accessors, a second set of texture coordinates.
+//! ranges, sparse accessors, a second set of texture coordinates.
 
 mod data;
 mod materials;
@@ -144,21 +144,34 @@ fn read_document(bytes: &[u8]) -> Result<(gltf::Document, Option<Vec<u8>>), Stri
 
 /// The camera `camera` placed by `world`, checked.
 fn placed_camera((camera, world): (gltf::Camera<'_>, Affine3A)) -> Result<ModelCamera, String> {
-    let gltf::camera::Projection::Perspective(p) = camera.projection() else {
-        unreachable!("only perspective cameras are kept");
-    };
     let look_from = world.transform_point3(Vec3::ZERO);
     let forward = world.transform_vector3(-Vec3::Z).normalize_or_zero();
-    let spec = CameraSpec {
+    let placed = CameraSpec {
         look_from,
         look_at: look_from + forward,
         up: world.transform_vector3(Vec3::Y).normalize_or_zero(),
-        vfov: p.yfov().to_degrees(),
         ..CameraSpec::default()
+    };
+    let (spec, aspect) = match camera.projection() {
+        gltf::camera::Projection::Perspective(p) => (
+            CameraSpec {
+                vfov: p.yfov().to_degrees(),
+                ..placed
+            },
+            p.aspect_ratio(),
+        ),
+        // xmag and ymag are half the view's width and height.
+        gltf::camera::Projection::Orthographic(o) => (
+            CameraSpec {
+                ortho_height: Some(2.0 * o.ymag().abs()),
+                ..placed
+            },
+            Some(o.xmag().abs() / o.ymag().abs()),
+        ),
     };
     spec.check()
         .map_err(|e| format!("camera {}: {e}", describe(camera.index(), camera.name())))?;
-    let aspect = p.aspect_ratio().filter(|a| a.is_finite() && *a > 0.0);
+    let aspect = aspect.filter(|a| a.is_finite() && *a > 0.0);
     Ok(ModelCamera { spec, aspect })
 }
 
@@ -171,7 +184,7 @@ struct Loader<'a, 's> {
     meshes: HashMap<(usize, usize), Option<u32>>,
     /// canopy's material of each glTF material (`None`: the default material).
     materials: HashMap<Option<usize>, u32>,
-    /// The first perspective camera met, placed.
+    /// The first camera met, placed.
     camera: Option<(gltf::Camera<'a>, Affine3A)>,
 }
 
@@ -208,14 +221,8 @@ impl<'a> Loader<'a, '_> {
         }
         let world = parent * Affine3A::from_mat4(local);
         if let Some(camera) = node.camera() {
-            match camera.projection() {
-                gltf::camera::Projection::Perspective(_) if self.camera.is_none() => {
-                    self.camera = Some((camera, world))
-                }
-                gltf::camera::Projection::Perspective(_) => {}
-                gltf::camera::Projection::Orthographic(_) => self.note(format!(
-                    "{named}: orthographic cameras are not supported (left out)"
-                )),
+            if self.camera.is_none() {
+                self.camera = Some((camera, world));
             }
         }
         if let Some(light) = node.light() {
