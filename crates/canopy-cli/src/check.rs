@@ -3,7 +3,6 @@
 use crate::scene_facts::SceneFacts;
 use crate::units::human_bytes;
 use canopy_bvh::Bvh2Node;
-use canopy_render::material::Material;
 use canopy_render::scene::Primitive;
 use canopy_render::Scene;
 use clap::Args;
@@ -81,7 +80,7 @@ fn describe(arg: &str, scene: &Scene) -> Description {
         emissive_materials: scene
             .materials
             .iter()
-            .filter(|m| matches!(m, Material::Emissive { .. }))
+            .filter(|m| m.emitted() != glam::Vec3::ZERO)
             .count(),
         textured_materials: scene.textured_materials(),
         punctual_lights: scene.lights.len(),

@@ -5,7 +5,6 @@ use canopy_bvh::BvhWidth;
 use canopy_job::{
     CheckpointPolicy, Device, JobError, Observer, RenderJob, Resumed, Schedule, Structure,
 };
-use canopy_render::material::Material;
 use canopy_render::mesh::{parse_mesh, MeshFormat};
 use canopy_render::{load_scene as load, AccelKind, Accumulator, Region, Scene};
 use numpy::ndarray::Array2;
@@ -80,7 +79,7 @@ impl SceneInfo {
             .scene
             .materials
             .iter()
-            .filter(|m| matches!(m, Material::Emissive { .. }))
+            .filter(|m| m.emitted() != glam::Vec3::ZERO)
             .count();
         d.set_item("emissive_materials", emissive)?;
         d.set_item("textured_materials", self.scene.textured_materials())?;

@@ -454,10 +454,7 @@ impl Scene {
         if self.primitives.is_empty() && self.instanced_triangles() == 0 {
             warnings.push("the scene has no primitives: nothing to see".into());
         }
-        let emitters = self
-            .materials
-            .iter()
-            .any(|m| matches!(m, crate::material::Material::Emissive { .. }));
+        let emitters = self.materials.iter().any(|m| m.emitted() != Vec3::ZERO);
         if !emitters
             && self.lights.is_empty()
             && self.background == Background::Constant(Vec3::ZERO)

@@ -774,3 +774,112 @@ fn orthographic_cameras_are_used() {
     assert!((middle.at(hit.t) - glam::Vec3::new(0.3, 0.3, 0.0)).length() < 1e-5);
     assert!(accel.intersect(&view.ray(0.95, 0.5, &mut rng)).is_none());
 }
+
+/// The triangle with its positions' accessor made sparse: `sparse` is the accessor's
+/// "sparse" member, `base_view` whether it keeps its dense view; the binary chunk adds
+/// u16 sparse indices `indices` (bytes 44..) and vec3 values (bytes 48.. then).
+fn sparse_triangle(sparse: &str, base_view: bool, indices: &[u16], values: &[[f32; 3]]) -> Vec<u8> {
+    let mut bin = triangle_bin([0, 1, 2]);
+    for i in indices {
+        bin.extend(i.to_le_bytes());
+    }
+    while bin.len() < 48 {
+        bin.push(0);
+    }
+    for v in values.iter().flatten() {
+        bin.extend(v.to_le_bytes());
+    }
+    let base = match base_view {
+        true => r#""bufferView":0,"#,
+        false => "",
+    };
+    let json = TRIANGLE
+        .replace(r#""byteLength":44}]"#, &format!(r#""byteLength":{}}}]"#, bin.len()))
+        .replace(
+            r#"{"buffer":0,"byteOffset":36,"byteLength":6}]"#,
+            &format!(
+                r#"{{"buffer":0,"byteOffset":36,"byteLength":6}},{{"buffer":0,"byteOffset":44,"byteLength":{}}},{{"buffer":0,"byteOffset":48,"byteLength":{}}}]"#,
+                (indices.len() * 2).max(1),
+                (values.len() * 12).max(1)
+            ),
+        )
+        .replace(
+            r#""accessors":[{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[1,1,0]}"#,
+            &format!(
+                r#""accessors":[{{{base}"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[1,2,0],"sparse":{sparse}}}"#
+            ),
+        );
+    glb(&json, &bin)
+}
+
+const ONE_SUBSTITUTION: &str =
+    r#"{"count":1,"indices":{"bufferView":2,"componentType":5123},"values":{"bufferView":3}}"#;
+
+#[test]
+fn sparse_accessors_substitute_their_values() {
+    let vertices = |file: Vec<u8>| {
+        let scene = parse_gltf(&file, &NoFiles, "sparse").unwrap();
+        scene.meshes[0].mesh.vertices().to_vec()
+    };
+    // Vertex 2 of the dense positions moved up.
+    let moved = sparse_triangle(ONE_SUBSTITUTION, true, &[2], &[[0.0, 2.0, 0.0]]);
+    assert_eq!(
+        vertices(moved),
+        [
+            glam::Vec3::ZERO,
+            glam::Vec3::X,
+            glam::Vec3::new(0.0, 2.0, 0.0)
+        ]
+    );
+    // Without a dense view the base is zeros.
+    let two = ONE_SUBSTITUTION.replace(r#""count":1"#, r#""count":2"#);
+    let zeros = sparse_triangle(&two, false, &[1, 2], &[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]);
+    assert_eq!(
+        vertices(zeros),
+        [glam::Vec3::ZERO, glam::Vec3::X, glam::Vec3::Y]
+    );
+}
+
+#[test]
+fn broken_sparse_accessors_are_errors_that_name_them() {
+    let error = |file: Vec<u8>| {
+        parse_gltf(&file, &NoFiles, "sparse")
+            .unwrap_err()
+            .to_string()
+    };
+    let two = ONE_SUBSTITUTION.replace(r#""count":1"#, r#""count":2"#);
+    let cases = [
+        // An index past the accessor's three elements.
+        (
+            sparse_triangle(ONE_SUBSTITUTION, true, &[3], &[[0.0; 3]]),
+            "sparse index 0 is 3",
+        ),
+        // Indices that do not rise.
+        (
+            sparse_triangle(&two, true, &[2, 1], &[[0.0; 3]; 2]),
+            "sparse index 1 is 1",
+        ),
+        // More substitutions than elements.
+        (
+            sparse_triangle(
+                &ONE_SUBSTITUTION.replace(r#""count":1"#, r#""count":4"#),
+                true,
+                &[0, 1, 2, 3],
+                &[[0.0; 3]; 4],
+            ),
+            "sparse count 4 is not within 1..=3",
+        ),
+        // Values past their view.
+        (
+            sparse_triangle(&two, true, &[0, 1], &[[0.0; 3]]),
+            "sparse values: 2 elements",
+        ),
+    ];
+    for (file, expected) in cases {
+        let message = error(file);
+        assert!(
+            message.contains("positions accessor 0") && message.contains(expected),
+            "{message}"
+        );
+    }
+}

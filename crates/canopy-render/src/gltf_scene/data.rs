@@ -158,17 +158,37 @@ pub(super) fn check_accessor(
             expect.types
         ));
     }
-    if accessor.sparse().is_some() {
-        return Err(format!("{named} is sparse, which is not supported yet"));
-    }
-    let Some(view) = accessor.view() else {
-        return Err(format!("{named} has no buffer view (no data)"));
-    };
     let count = accessor.count();
     if count == 0 {
         return Err(format!("{named} has no elements"));
     }
     let size = accessor.size();
+    match accessor.view() {
+        Some(view) => check_elements(&named, &view, accessor.offset(), count, size, buffers)?,
+        // Only a sparse accessor may leave out its view (its base is zeros), and its
+        // declared count must then fit in memory.
+        None if accessor.sparse().is_some() => {
+            let needed = (count as u64).saturating_mul(size as u64 + 16);
+            crate::files::check_memory(needed, crate::files::available_memory(), &named)?;
+        }
+        None => return Err(format!("{named} has no buffer view (no data)")),
+    }
+    match accessor.sparse() {
+        Some(sparse) => check_sparse(&named, &sparse, count, size, buffers),
+        None => Ok(()),
+    }
+}
+
+/// Checks that `count` elements of `size` bytes from byte `offset` of `view` lie
+/// inside it, and the view inside its buffer.
+fn check_elements(
+    named: &str,
+    view: &gltf::buffer::View<'_>,
+    offset: usize,
+    count: usize,
+    size: usize,
+    buffers: &Buffers,
+) -> Result<(), String> {
     let stride = view.stride().unwrap_or(size);
     if stride < size {
         return Err(format!(
@@ -177,17 +197,16 @@ pub(super) fn check_accessor(
     }
     let end = (count - 1)
         .checked_mul(stride)
-        .and_then(|span| span.checked_add(accessor.offset()))
+        .and_then(|span| span.checked_add(offset))
         .and_then(|span| span.checked_add(size));
     match end {
         Some(end) if end <= view.length() => {}
         _ => {
             return Err(format!(
-                "{named}: {count} elements from byte {} overrun its buffer view {} of {} bytes",
-                accessor.offset(),
-                view.index(),
-                view.length()
-            ))
+            "{named}: {count} elements from byte {offset} overrun its buffer view {} of {} bytes",
+            view.index(),
+            view.length()
+        ))
         }
     }
     let held = buffers.0.get(view.buffer().index()).map_or(0, Vec::len);
@@ -201,4 +220,61 @@ pub(super) fn check_accessor(
             view.buffer().index()
         )),
     }
+}
+
+/// Checks a sparse accessor's substitutions (of an accessor of `count` elements of
+/// `size` bytes): both arrays inside their views, and the indices strictly increasing
+/// and below `count`, as the specification requires (the reader relies on it).
+fn check_sparse(
+    named: &str,
+    sparse: &gltf::accessor::sparse::Sparse<'_>,
+    count: usize,
+    size: usize,
+    buffers: &Buffers,
+) -> Result<(), String> {
+    let substituted = sparse.count();
+    if substituted == 0 || substituted > count {
+        return Err(format!(
+            "{named}: its sparse count {substituted} is not within 1..={count}"
+        ));
+    }
+    let indices = sparse.indices();
+    let index_size = indices.index_type().size();
+    let (index_view, values) = (indices.view(), sparse.values());
+    let what = format!("{named}: its sparse indices");
+    check_elements(
+        &what,
+        &index_view,
+        indices.offset(),
+        substituted,
+        index_size,
+        buffers,
+    )?;
+    let what = format!("{named}: its sparse values");
+    check_elements(
+        &what,
+        &values.view(),
+        values.offset(),
+        substituted,
+        size,
+        buffers,
+    )?;
+    let buffer = &buffers.0[index_view.buffer().index()];
+    let stride = index_view.stride().unwrap_or(index_size);
+    let mut previous = None;
+    for k in 0..substituted {
+        let at = index_view.offset() + indices.offset() + k * stride;
+        let bytes = &buffer[at..at + index_size];
+        let index = bytes
+            .iter()
+            .rev()
+            .fold(0usize, |value, &byte| (value << 8) | byte as usize);
+        if index >= count || previous.is_some_and(|p| index <= p) {
+            return Err(format!(
+                "{named}: sparse index {k} is {index}; the indices must rise strictly and stay below {count}"
+            ));
+        }
+        previous = Some(index);
+    }
+    Ok(())
 }

@@ -6,7 +6,7 @@
 //! buffer before it is read ([`data`]); errors name the file and the object at fault.
 //!
 //! Not read yet (each named in the scene's warnings where a file uses it): lights'
-//! ranges, sparse accessors, a second set of texture coordinates.
+//! ranges, a second set of texture coordinates.
 
 mod data;
 mod materials;
