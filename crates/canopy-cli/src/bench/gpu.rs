@@ -14,8 +14,9 @@ use std::time::Instant;
 
 #[derive(Args)]
 pub struct GpuArgs {
-    /// Scenes: built-in names, scene files or meshes [default: paper-1, paper-5 and
-    /// bench/scenes/dragon-lit.toml (the 202k dragon) when it loads].
+    /// Scenes: built-in names, scene files, meshes or glTF models [default: paper-1,
+    /// paper-5, bench/scenes/dragon-lit.toml (the 202k dragon), and the textured
+    /// CesiumMilkTruck and AlphaBlendModeTest from scenes/gltf, where they load].
     scenes: Vec<String>,
     /// Image size WIDTHxHEIGHT, each 1 to 65536.
     #[arg(long, default_value = "480x480", value_parser = limits::size)]
@@ -90,10 +91,17 @@ pub fn run(args: &GpuArgs) -> anyhow::Result<()> {
 /// shared meshes next to the repository).
 fn default_scenes() -> Vec<String> {
     let mut scenes = vec!["paper-1".to_string(), "paper-5".to_string()];
-    let dragon = "bench/scenes/dragon-lit.toml";
-    match load_scene(dragon) {
-        Ok(_) => scenes.push(dragon.to_string()),
-        Err(e) => eprintln!("skipping {dragon}: {e}"),
+    // The 202k dragon, a textured model, and one with a normal map and see-through
+    // surfaces, where they load (run from the repository).
+    for file in [
+        "bench/scenes/dragon-lit.toml",
+        "scenes/gltf/CesiumMilkTruck.glb",
+        "scenes/gltf/AlphaBlendModeTest.glb",
+    ] {
+        match load_scene(file) {
+            Ok(_) => scenes.push(file.to_string()),
+            Err(e) => eprintln!("skipping {file}: {e}"),
+        }
     }
     scenes
 }
