@@ -129,13 +129,6 @@ fn scene_walk(r: RayIn, first_ends: bool) -> SceneHit {
     return best;
 }
 
-fn scene_closest(r: RayIn) -> SceneHit {
-    return scene_walk(r, false);
-}
-
-fn scene_occluded(r: RayIn) -> bool {
-    return scene_walk(r, true).hit.prim != NO_PRIM;
-}
 
 fn scene_material(h: SceneHit) -> Material {
     let own = instances[h.inst].info.z;

@@ -164,29 +164,34 @@ fn next_up(t: f32) -> f32 {
     return bitcast<f32>(bitcast<u32>(t) + 1u);
 }
 
-// The first surface along `r` that stops it: the closest hit, or where surfaces are
-// see-through (frame.top.z), the closest whose coverage stops the ray.
-fn scene_intersect(r: RayIn, rng: ptr<function, Rng>) -> SceneHit {
-    var hit = scene_closest(r);
-    if (frame.top.z == 0u) {
-        return hit;
-    }
-    for (var layer = 0u; layer < MAX_SEE_THROUGH_LAYERS; layer++) {
-        if (hit.hit.prim == NO_PRIM || stops_ray(hit, rng)) {
+// The first surface along `r` that stops it (with `first_ends`, any one: for shadow
+// rays): where no surface is see-through (frame.top.z == 0), the closest hit (or the first
+// found); otherwise the closest whose coverage stops the ray, the search going on past
+// each that does not (at most MAX_SEE_THROUGH_LAYERS of them, as on the CPU). One call
+// of the walk in one loop: WGSL compilers inline every call, so each call site is a
+// copy of the traversal.
+fn scene_search(r: RayIn, first_ends: bool, rng: ptr<function, Rng>) -> SceneHit {
+    let see_through = frame.top.z != 0u;
+    // A see-through surface found first may not be the one that stops the ray.
+    let any_hit = first_ends && !see_through;
+    var t_min = r.t_min;
+    for (var layer = 0u; ; layer++) {
+        let hit = scene_walk(RayIn(r.origin, t_min, r.dir, r.t_max), any_hit);
+        if (!see_through || hit.hit.prim == NO_PRIM || layer == MAX_SEE_THROUGH_LAYERS || stops_ray(hit, rng)) {
             return hit;
         }
-        hit = scene_closest(RayIn(r.origin, next_up(hit.hit.t), r.dir, r.t_max));
+        t_min = next_up(hit.hit.t);
     }
-    return hit;
+    return SceneHit(HitOut(r.t_max, NO_PRIM, 0.0, 0.0), NO_INSTANCE);
 }
 
-// Whether a shadow ray is blocked: any hit, or where surfaces are see-through, one that
-// stops it.
+fn scene_intersect(r: RayIn, rng: ptr<function, Rng>) -> SceneHit {
+    return scene_search(r, false, rng);
+}
+
+// Whether a shadow ray is blocked.
 fn scene_blocked(r: RayIn, rng: ptr<function, Rng>) -> bool {
-    if (frame.top.z == 0u) {
-        return scene_occluded(r);
-    }
-    return scene_intersect(r, rng).hit.prim != NO_PRIM;
+    return scene_search(r, true, rng).hit.prim != NO_PRIM;
 }
 
 struct Shaded {
