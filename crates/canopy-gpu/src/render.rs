@@ -64,7 +64,8 @@ struct Frame {
     /// the band being rendered.
     samples: [u32; 4],
     background: [f32; 4],
-    /// lights, background is black (1), integrator (0 bsdf, 1 path), roulette (1).
+    /// lights, background is black (1), integrator (0 bsdf, 1 path: informative; the
+    /// pipeline's `PATH_ESTIMATOR` decides), roulette (1).
     options: [u32; 4],
     /// An environment map's rotation to the world, by columns.
     env_x: [f32; 4],
@@ -313,9 +314,13 @@ impl<'g> Renderer<'g> {
                 include_str!("shaders/textures.wgsl"),
             ],
             &[
-                nodes.constants(),
-                primitives.constants(),
-                normals.constants(),
+                &nodes.constants()[..],
+                &primitives.constants(),
+                &normals.constants(),
+                &[(
+                    "PATH_ESTIMATOR".to_string(),
+                    (scene.settings.integrator == Integrator::Path) as u32 as f64,
+                )],
             ]
             .concat(),
         )?;

@@ -27,7 +27,8 @@ struct Frame {
     // the band in the region
     samples: vec4<u32>,
     background: vec4<f32>,
-    // lights, background is black (1), integrator (0 bsdf, 1 path), Russian roulette (1)
+    // lights, background is black (1), integrator (0 bsdf, 1 path; PATH_ESTIMATOR decides),
+    // Russian roulette (1)
     options: vec4<u32>,
     // An environment map's rotation to the world, by columns, and its width and height.
     env_x: vec4<f32>,
@@ -42,6 +43,10 @@ struct Frame {
     // The viewing direction; w: 1 for an orthographic camera.
     forward: vec4<f32>,
 }
+
+// The estimator, fixed when the pipeline is made (the `path` integrator, or the
+// report's `bsdf`), so that the kernel holds only one of them.
+override PATH_ESTIMATOR: bool = true;
 
 @group(0) @binding(3) var<storage, read> materials: array<Material>;
 @group(0) @binding(4) var<uniform> frame: Frame;
@@ -382,7 +387,7 @@ fn render(@builtin(global_invocation_id) id: vec3<u32>) {
             dir = frame.forward.xyz;
         }
         var l = vec3<f32>(0.0);
-        if (frame.options.z == 1u) {
+        if (PATH_ESTIMATOR) {
             l = radiance_path(origin, dir, &rng, &rays);
         } else {
             l = radiance_bsdf(origin, dir, &rng, &rays);
