@@ -358,3 +358,22 @@ def test_an_orthographic_camera_shows_true_sizes():
     assert perspective[..., 0].mean() < 0.9 * covered[1]
     with pytest.raises(ValueError, match="ortho_height"):
         scene.camera((0.0, 0.0, 5.0), (0.0, 0.0, 0.0), ortho_height=-1.0)
+
+
+def test_a_glowing_metallic_roughness_material_lights_the_scene():
+    # The only light: a reflecting sphere that also glows.
+    scene = canopy.Scene()
+    scene.settings(size=(24, 24), spp=4, max_depth=3)
+    scene.background((0.0, 0.0, 0.0))
+    scene.camera((0.0, 1.0, 6.0), (0.0, 0.5, 0.0))
+    scene.add_box((-3, -0.1, -3), (3, 0, 3), material=canopy.lambertian((0.6, 0.6, 0.6)))
+    glow = canopy.pbr((0.5, 0.5, 0.5), roughness=0.4, emission=(3.0, 2.0, 1.0))
+    scene.add_sphere((0.0, 1.0, 0.0), 0.5, material=glow)
+    image = canopy.render(scene)
+    assert image.mean() > 0.01
+    # Warm light: more red than blue on the floor too.
+    assert image[..., 0].mean() > image[..., 2].mean()
+    materials = scene.info().contents()["materials"]
+    assert [m.get("emission") for m in materials if m["type"] == "pbr"] == [[3.0, 2.0, 1.0]]
+    with pytest.raises(ValueError, match="emission"):
+        scene.add_material(canopy.pbr((0.5, 0.5, 0.5), emission=(-1.0, 0.0, 0.0)))

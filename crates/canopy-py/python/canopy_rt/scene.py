@@ -52,16 +52,20 @@ def emissive(radiance) -> dict:
     return {"type": "emissive", "radiance": [float(c) for c in radiance]}
 
 
-def pbr(base_color, metallic: float = 0.0, roughness: float = 1.0) -> dict:
+def pbr(base_color, metallic: float = 0.0, roughness: float = 1.0, emission=None) -> dict:
     """glTF's metallic-roughness material: GGX over a diffuse base. ``base_color`` is
     (r, g, b) in [0, 1] (linear), ``metallic`` 0 for a dielectric and 1 for a metal,
-    ``roughness`` from 0 (polished) to 1."""
-    return {
+    ``roughness`` from 0 (polished) to 1; with ``emission`` (an (r, g, b) radiance) the
+    surface also glows, from both sides, and is a light."""
+    material = {
         "type": "pbr",
         "base_color": [float(c) for c in base_color],
         "metallic": float(metallic),
         "roughness": float(roughness),
     }
+    if emission is not None:
+        material["emission"] = [float(c) for c in emission]
+    return material
 
 
 def eval_material(material: dict, wo, wi):
