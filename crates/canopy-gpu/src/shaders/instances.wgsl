@@ -130,12 +130,14 @@ fn scene_walk(r: RayIn, first_ends: bool) -> SceneHit {
 }
 
 
-fn scene_material(h: SceneHit) -> Material {
+// The material index of what `h` hit: its instance's, or for the scene's own
+// primitives the primitive's.
+fn material_index(h: SceneHit) -> u32 {
     let own = instances[h.inst].info.z;
     if (own == NO_MATERIAL) {
-        return materials[prim_at(h.hit.prim).header.y];
+        return prim_at(h.hit.prim).header.y;
     }
-    return materials[own];
+    return own;
 }
 
 // The surface at a hit: an instance's triangle is taken into world space (its vertices

@@ -111,15 +111,6 @@ fn has_image(t: TextureRef) -> bool {
     return t.info.x != NO_IMAGE;
 }
 
-// The material index of what `h` hit.
-fn material_index(h: SceneHit) -> u32 {
-    let own = instances[h.inst].info.z;
-    if (own == NO_MATERIAL) {
-        return prim_at(h.hit.prim).header.y;
-    }
-    return own;
-}
-
 // Where the texture data of the triangle `h` hit starts, for a mesh instance's
 // triangle with texture coordinates; NO_SURFACE otherwise.
 fn surface_index(h: SceneHit) -> u32 {
@@ -245,7 +236,8 @@ fn normal_mapped(maps: MaterialMaps, h: SceneHit, index: u32, uv: vec2<f32>, s: 
 // The surface where the ray from `origin` along `dir` hits (`h`) and its material there,
 // textures applied (where the surface has texture coordinates), as Scene::shade.
 fn scene_shade(origin: vec3<f32>, dir: vec3<f32>, h: SceneHit) -> Shaded {
-    var out = Shaded(scene_material(h), scene_surface(origin, dir, h));
+    let material = material_index(h);
+    var out = Shaded(materials[material], scene_surface(origin, dir, h));
     if (frame.top.w == 0u) {
         return out;
     }
@@ -253,7 +245,7 @@ fn scene_shade(origin: vec3<f32>, dir: vec3<f32>, h: SceneHit) -> Shaded {
     if (index == NO_SURFACE) {
         return out;
     }
-    let maps = material_maps[material_index(h)];
+    let maps = material_maps[material];
     let uv = hit_uv(index, h.hit);
     if (has_image(maps.normal)) {
         out.surface.shading = normal_mapped(maps, h, index, uv, out.surface);
