@@ -138,6 +138,7 @@ impl<G: Geometry> Blas<G> {
             }
             let mut tree = Tree::new(bvh, params.width);
             tree.pack_triangles(|p| geometry.triangle(p));
+            tree.store_spheres(|p| geometry.sphere(p));
             tree
         });
         self.triangles = geometry.has_triangles();
@@ -193,6 +194,7 @@ impl<G: Geometry> Blas<G> {
         if let Some(tree) = &mut self.tree {
             let geometry = &self.geometry;
             tree.refit(&boxes, |p| geometry.triangle(p))?;
+            tree.store_spheres(|p| geometry.sphere(p));
         }
         Ok(())
     }
@@ -313,6 +315,20 @@ impl<G: Geometry> RayQuery for Blas<G> {
         let g = &self.geometry;
         match self.tree_for_each() {
             Some(tree) => tree.intersect_each(count, ray, answer, |p, r| g.intersect_other(p, r)),
+            None => (0..count).for_each(|i| answer(i, self.intersect_masked(&ray(i), mask))),
+        }
+    }
+
+    fn intersect_coherent<R, A>(&self, count: usize, mask: u32, mut ray: R, mut answer: A)
+    where
+        R: FnMut(usize) -> Ray,
+        A: FnMut(usize, Option<Hit>),
+    {
+        let g = &self.geometry;
+        match self.tree_for_each() {
+            Some(tree) => {
+                tree.intersect_coherent(count, ray, answer, |p, r| g.intersect_other(p, r))
+            }
             None => (0..count).for_each(|i| answer(i, self.intersect_masked(&ray(i), mask))),
         }
     }

@@ -28,6 +28,14 @@ pub trait Geometry: Sync {
         None
     }
 
+    /// The centre and radius of primitive `prim` if it is a sphere whose hit is
+    /// [`crate::intersect_sphere`]'s: a wide tree then keeps it beside its leaves and
+    /// tests it itself ([`crate::BvhN::store_spheres`]).
+    #[inline]
+    fn sphere(&self, _prim: u32) -> Option<(Vec3, f32)> {
+        None
+    }
+
     /// Whether any primitive is a triangle: only then does a query prepare its ray for
     /// the triangle test ([`ShearedRay`]).
     fn has_triangles(&self) -> bool;

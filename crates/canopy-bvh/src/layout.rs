@@ -96,6 +96,16 @@ impl Tree {
         }
     }
 
+    /// Keeps the leaves' spheres beside them for the wide kernels to test (wide layouts
+    /// without triangle packs; see [`BvhN::store_spheres`]).
+    pub fn store_spheres(&mut self, sphere: impl Fn(u32) -> Option<(Vec3, f32)> + Sync) {
+        match self {
+            Tree::Binary(_) | Tree::Gpu(_) => {}
+            Tree::Four(t) => t.store_spheres(sphere),
+            Tree::Eight(t) => t.store_spheres(sphere),
+        }
+    }
+
     /// Recomputes every box from `boxes` (one per primitive) and the packed triangles
     /// from `triangle`, keeping the topology (for primitives that moved). Refuses a tree
     /// with spatial splits.
@@ -219,6 +229,23 @@ impl Tree {
             Tree::Gpu(t) => each(&mut |r| t.intersect(r, &mut hit_prim)),
             Tree::Four(t) => t.intersect_each(count, ray, answer, hit_prim),
             Tree::Eight(t) => t.intersect_each(count, ray, answer, hit_prim),
+        }
+    }
+
+    /// [`Tree::intersect_each`] for coherent rays (camera rays of neighbouring pixels):
+    /// wide layouts trace them in packets ([`crate::BvhN::intersect_coherent`]); the
+    /// answers are the same.
+    pub fn intersect_coherent<R, A, F, P>(&self, count: usize, ray: R, answer: A, hit_prim: F)
+    where
+        R: FnMut(usize) -> Ray,
+        A: FnMut(usize, Option<Hit>),
+        F: FnMut(u32, &Ray) -> Option<P>,
+        P: IntoHit,
+    {
+        match self {
+            Tree::Four(t) => t.intersect_coherent(count, ray, answer, hit_prim),
+            Tree::Eight(t) => t.intersect_coherent(count, ray, answer, hit_prim),
+            Tree::Binary(_) | Tree::Gpu(_) => self.intersect_each(count, ray, answer, hit_prim),
         }
     }
 

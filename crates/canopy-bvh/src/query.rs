@@ -72,6 +72,18 @@ pub trait RayQuery: Sync {
         }
     }
 
+    /// [`RayQuery::intersect_each`] for coherent rays: rays `i` and `i + 1` mostly start
+    /// near each other and run in similar directions (camera rays of neighbouring
+    /// pixels or of one pixel's samples). Structures may trace them as packets; the
+    /// answers are the same.
+    fn intersect_coherent<R, A>(&self, count: usize, mask: u32, ray: R, answer: A)
+    where
+        R: FnMut(usize) -> Ray,
+        A: FnMut(usize, Option<Hit>),
+    {
+        self.intersect_each(count, mask, ray, answer)
+    }
+
     /// Occlusion of rays `0..count` on this thread, as [`RayQuery::intersect_each`].
     fn occluded_each<R, A>(&self, count: usize, mask: u32, mut ray: R, mut answer: A)
     where
@@ -142,6 +154,13 @@ impl<B: RayQuery + Send> RayQuery for std::sync::Arc<B> {
         A: FnMut(usize, Option<Hit>),
     {
         (**self).intersect_each(count, mask, ray, answer)
+    }
+    fn intersect_coherent<R, A>(&self, count: usize, mask: u32, ray: R, answer: A)
+    where
+        R: FnMut(usize) -> Ray,
+        A: FnMut(usize, Option<Hit>),
+    {
+        (**self).intersect_coherent(count, mask, ray, answer)
     }
     fn occluded_each<R, A>(&self, count: usize, mask: u32, ray: R, answer: A)
     where

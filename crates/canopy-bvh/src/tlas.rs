@@ -289,6 +289,23 @@ impl<B: RayQuery> RayQuery for Tlas<B> {
         }
     }
 
+    fn intersect_coherent<R, A>(&self, count: usize, mask: u32, ray: R, mut answer: A)
+    where
+        R: FnMut(usize) -> Ray,
+        A: FnMut(usize, Option<Hit>),
+    {
+        match self.alone() {
+            // One structure placed as itself: its packets. Instances leave rays to go
+            // their own ways through the top tree.
+            Some((blas, index, only)) if only & mask != 0 => {
+                blas.intersect_coherent(count, mask, ray, |i, h| {
+                    answer(i, h.map(|h| h.into_hit(index)))
+                })
+            }
+            _ => self.intersect_each(count, mask, ray, answer),
+        }
+    }
+
     fn occluded_each<R, A>(&self, count: usize, mask: u32, mut ray: R, mut answer: A)
     where
         R: FnMut(usize) -> Ray,

@@ -75,6 +75,14 @@ impl Geometry for ShapeList {
         self.0[prim as usize].shape.triangle_vertices()
     }
 
+    #[inline]
+    fn sphere(&self, prim: u32) -> Option<(Vec3, f32)> {
+        match self.0[prim as usize].shape {
+            Shape::Sphere(s) => Some((s.center, s.radius)),
+            _ => None,
+        }
+    }
+
     fn has_triangles(&self) -> bool {
         self.0.iter().any(|p| matches!(p.shape, Shape::Triangle(_)))
     }
@@ -143,6 +151,14 @@ impl RayQuery for SceneBlas {
         A: FnMut(usize, Option<Hit>),
     {
         each_blas!(self, b => b.intersect_each(count, mask, ray, answer))
+    }
+
+    fn intersect_coherent<R, A>(&self, count: usize, mask: u32, ray: R, answer: A)
+    where
+        R: FnMut(usize) -> Ray,
+        A: FnMut(usize, Option<Hit>),
+    {
+        each_blas!(self, b => b.intersect_coherent(count, mask, ray, answer))
     }
 
     fn occluded_each<R, A>(&self, count: usize, mask: u32, ray: R, answer: A)
@@ -327,6 +343,14 @@ impl RayQuery for Accel {
         A: FnMut(usize, Option<Hit>),
     {
         self.world.intersect_each(count, mask, ray, answer)
+    }
+
+    fn intersect_coherent<R, A>(&self, count: usize, mask: u32, ray: R, answer: A)
+    where
+        R: FnMut(usize) -> Ray,
+        A: FnMut(usize, Option<Hit>),
+    {
+        self.world.intersect_coherent(count, mask, ray, answer)
     }
 
     fn occluded_each<R, A>(&self, count: usize, mask: u32, ray: R, answer: A)

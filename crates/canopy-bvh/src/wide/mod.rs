@@ -9,19 +9,23 @@
 //! their triangles in packs of four ([`BvhN::pack_triangles`]) tested together.
 
 mod kernels;
+mod packet;
 mod refit;
 mod traverse;
 
+use crate::sphere::SphereRecord;
 use crate::traverse::TraversalCounter;
 use crate::triangle::{PackHits, TrianglePack, NO_PRIM, PACK_LANES};
 use crate::view::{Child, ChildKind, TreeView};
 use crate::{Aabb, Bvh2, BvhError, Hit, IntoHit, Isa, IsaError, Ray, SahCosts, TreeStats};
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
+use packet::closest_packet;
 use rayon::prelude::*;
 use std::marker::PhantomData;
-use traverse::{closest, ClosureLeaves, PackedLeaves, Query};
+use traverse::{closest, ClosureLeaves, PackedLeaves, Query, SphereLeaves};
 
+pub use packet::PACKET;
 pub(crate) use traverse::Dispatch;
 
 /// Trees whose nodes and packs take more bytes than this are traversed with prefetches of
@@ -108,6 +112,9 @@ pub struct BvhN<const N: usize> {
     prim_indices: Vec<u32>,
     /// Empty, or `packs[k]` holds positions `4k..4k + 4` of `prim_indices`.
     packs: Vec<TrianglePack>,
+    /// Empty, or the sphere at each position of `prim_indices` (trees without triangle
+    /// packs; see [`BvhN::store_spheres`]).
+    spheres: Vec<SphereRecord>,
     isa: Isa,
     /// Taken from the binary tree (see [`Bvh2::has_spatial_splits`]).
     spatial_splits: bool,
@@ -122,6 +129,7 @@ impl<const N: usize> Default for BvhN<N> {
             nodes: Vec::new(),
             prim_indices: Vec::new(),
             packs: Vec::new(),
+            spheres: Vec::new(),
             isa: Isa::best(),
             spatial_splits: false,
         }
@@ -301,6 +309,36 @@ impl<const N: usize> BvhN<N> {
         self.prim_indices = order;
     }
 
+    /// Keeps the leaves' spheres beside them, in leaf order, so that traversal tests them
+    /// itself: a sphere test is then a load of its centre and radius, not a call of the
+    /// caller's closure and a lookup of the primitive. `sphere(prim)` gives a
+    /// primitive's centre and radius if it is a sphere whose hit is
+    /// [`crate::intersect_sphere`]'s; other primitives stay with the closure. Trees with
+    /// triangle packs, and trees without spheres, are left as they are. Call it again
+    /// after the spheres move.
+    pub fn store_spheres(&mut self, sphere: impl Fn(u32) -> Option<(Vec3, f32)> + Sync) {
+        self.spheres = Vec::new();
+        if !self.packs.is_empty() {
+            return;
+        }
+        let records: Vec<SphereRecord> = self
+            .prim_indices
+            .par_iter()
+            .map(|&p| match sphere(p) {
+                Some((center, radius)) => SphereRecord::new(center, radius),
+                None => SphereRecord::OTHER,
+            })
+            .collect();
+        if records.iter().any(SphereRecord::is_sphere) {
+            self.spheres = records;
+        }
+    }
+
+    /// Whether traversal tests spheres itself ([`BvhN::store_spheres`]).
+    pub fn has_spheres(&self) -> bool {
+        !self.spheres.is_empty()
+    }
+
     /// Checks every primitive is in exactly one leaf, every slot box is the tight box of
     /// its contents, and every node is reached exactly once.
     pub fn validate(&self, boxes: &[Aabb]) -> Result<(), BvhError> {
@@ -366,6 +404,7 @@ impl<const N: usize> TreeView for BvhN<N> {
         std::mem::size_of_val(self.nodes.as_slice())
             + std::mem::size_of_val(self.prim_indices.as_slice())
             + std::mem::size_of_val(self.packs.as_slice())
+            + std::mem::size_of_val(self.spheres.as_slice())
     }
 
     fn has_spatial_splits(&self) -> bool {
@@ -451,6 +490,32 @@ where
         WideNode::<N>::dispatch(self.isa, each)
     }
 
+    /// [`BvhN::intersect_each`] for coherent rays: rays that start near each other and
+    /// run in similar directions (camera rays of neighbouring pixels). Trees that keep
+    /// their spheres ([`BvhN::store_spheres`]) trace them as packets of [`PACKET`]
+    /// consecutive rays, each sphere tested against the packet's rays at once; others
+    /// trace them one by one (packets that test triangles ray by ray measured slower).
+    /// The answers are the same.
+    pub fn intersect_coherent<R, A, F, P>(&self, count: usize, ray: R, answer: A, hit_prim: F)
+    where
+        R: FnMut(usize) -> Ray,
+        A: FnMut(usize, Option<Hit>),
+        F: FnMut(u32, &Ray) -> Option<P>,
+        P: IntoHit,
+    {
+        if self.spheres.is_empty() {
+            return self.intersect_each(count, ray, answer, hit_prim);
+        }
+        let each = PacketEach {
+            bvh: self,
+            count,
+            ray,
+            answer,
+            test: hit_prim,
+        };
+        WideNode::<N>::dispatch(self.isa, each)
+    }
+
     /// Occlusion of rays `0..count` on this thread, as [`BvhN::intersect_each`].
     pub fn occluded_each<R, A, F>(&self, count: usize, ray: R, answer: A, hit_prim: F)
     where
@@ -505,6 +570,50 @@ where
                 },
             };
             (self.answer)(i, hit);
+        }
+    }
+}
+
+/// Closest hits of `count` rays in packets, in one dispatch ([`BvhN::intersect_coherent`]).
+struct PacketEach<'a, const N: usize, R, A, F> {
+    bvh: &'a BvhN<N>,
+    count: usize,
+    ray: R,
+    answer: A,
+    test: F,
+}
+
+impl<const N: usize, R, A, F, P> Query<N> for PacketEach<'_, N, R, A, F>
+where
+    R: FnMut(usize) -> Ray,
+    A: FnMut(usize, Option<Hit>),
+    F: FnMut(u32, &Ray) -> Option<P>,
+    P: IntoHit,
+{
+    type Out = ();
+
+    #[inline(always)]
+    unsafe fn run<K: kernels::NodeKernel<N>, T: crate::triangle::PackKernel>(mut self) {
+        let bvh = self.bvh;
+        let mut rays = [Ray::new(Vec3::ZERO, Vec3::X, 0.0, 0.0); PACKET];
+        for start in (0..self.count).step_by(PACKET) {
+            let rays = &mut rays[..PACKET.min(self.count - start)];
+            for (lane, ray) in rays.iter_mut().enumerate() {
+                *ray = (self.ray)(start + lane);
+            }
+            // `intersect_coherent` makes packets only of trees that keep their spheres.
+            let mut leaves = SphereLeaves {
+                prims: &bvh.prim_indices,
+                spheres: &bvh.spheres,
+                test: &mut self.test,
+            };
+            let hits = match bvh.nodes.is_empty() {
+                true => [None; PACKET],
+                false => closest_packet(&bvh.nodes, rays, &mut leaves),
+            };
+            for (lane, hit) in hits.into_iter().take(rays.len()).enumerate() {
+                (self.answer)(start + lane, hit);
+            }
         }
     }
 }
@@ -568,8 +677,17 @@ where
             test,
             counter,
         } = self;
-        // SAFETY (both calls): the caller guarantees the instruction sets.
-        if bvh.packs.is_empty() {
+        // SAFETY (all calls): the caller guarantees the instruction sets.
+        if !bvh.spheres.is_empty() {
+            let mut leaves = SphereLeaves {
+                prims: &bvh.prim_indices,
+                spheres: &bvh.spheres,
+                test,
+            };
+            unsafe {
+                closest::<N, K, _, _>(&bvh.nodes, ray, &mut leaves, counter, bvh.prefetches())
+            }
+        } else if bvh.packs.is_empty() {
             let mut leaves = ClosureLeaves {
                 prims: &bvh.prim_indices,
                 test,
@@ -604,8 +722,15 @@ impl<const N: usize, F: FnMut(u32, &Ray) -> bool> Query<N> for AnyQuery<'_, N, F
     #[inline(always)]
     unsafe fn run<K: kernels::NodeKernel<N>, T: crate::triangle::PackKernel>(self) -> bool {
         let Self { bvh, ray, test } = self;
-        // SAFETY (both calls): the caller guarantees the instruction sets.
-        if bvh.packs.is_empty() {
+        // SAFETY (all calls): the caller guarantees the instruction sets.
+        if !bvh.spheres.is_empty() {
+            let mut leaves = SphereLeaves {
+                prims: &bvh.prim_indices,
+                spheres: &bvh.spheres,
+                test,
+            };
+            unsafe { traverse::any::<N, K, _>(&bvh.nodes, ray, &mut leaves, bvh.prefetches()) }
+        } else if bvh.packs.is_empty() {
             let mut leaves = ClosureLeaves {
                 prims: &bvh.prim_indices,
                 test,

@@ -4,7 +4,9 @@
 //! instruction set and runs the query inside a function compiled for it.
 
 use super::kernels::{NodeKernel, OctRay, ScalarNode};
+use super::packet::{lane_mask, lanes as packet_lanes, Lanes, PacketRays, PACKET};
 use super::WideNode;
+use crate::sphere::SphereRecord;
 use crate::traverse::{TraversalCounter, TraversalStack};
 use crate::triangle::{
     triangle_lanes, PackHits, PackKernel, PackRay, ScalarPack, TrianglePack, PACK_LANES,
@@ -13,6 +15,7 @@ use crate::{Hit, IntoHit, Isa, Ray};
 use std::marker::PhantomData;
 
 /// The closest-hit search state: the ray, its `t_max` shrunk to the best hit so far.
+#[derive(Clone, Copy)]
 pub(crate) struct Closest {
     pub ray: Ray,
     pub best: Option<Hit>,
@@ -32,12 +35,31 @@ impl Closest {
 /// Tests the primitives of a leaf: `count` entries from position `first` of the tree's
 /// leaf-ordered primitive array.
 pub(crate) trait ClosestLeaves {
+    /// The next leaves tested are for another ray (a packet's next lane): forget what
+    /// was prepared for the last one.
+    #[inline(always)]
+    fn new_ray(&mut self) {}
+
     fn closest<C: TraversalCounter>(
         &mut self,
         first: u32,
         count: u32,
         search: &mut Closest,
         counter: &mut C,
+    );
+}
+
+/// Leaves tested for the rays of a packet ([`super::packet`]).
+pub(crate) trait PacketLeaves {
+    /// Tests the leaf of `count` entries at `first` for the rays in `lanes`, each against
+    /// its `t_max`, keeping its closest hit in `best` (and its `t_max` shrunk to it).
+    fn closest_lanes(
+        &mut self,
+        first: u32,
+        count: u32,
+        lanes: Lanes,
+        t_max: &mut [f32; PACKET],
+        best: &mut [Option<Hit>; PACKET],
     );
 }
 
@@ -111,6 +133,147 @@ impl<F: FnMut(u32, &Ray) -> bool> AnyLeaves for ClosureLeaves<'_, F> {
         self.prims[first..first + count as usize]
             .iter()
             .any(|&prim| (self.test)(prim, ray))
+    }
+}
+
+/// Leaves whose spheres are stored beside them ([`super::BvhN::store_spheres`]) and
+/// tested here; any other primitive goes to the caller's closure.
+pub(crate) struct SphereLeaves<'a, F> {
+    pub prims: &'a [u32],
+    /// The sphere at each position of `prims`.
+    pub spheres: &'a [SphereRecord],
+    pub test: F,
+}
+
+impl<F> PrefetchLeaves for SphereLeaves<'_, F> {
+    #[inline(always)]
+    fn prefetch(&self, first: u32, count: u32) {
+        let first = first as usize;
+        for record in &self.spheres[first..first + count as usize] {
+            prefetch(record);
+        }
+    }
+}
+
+impl<F, P> ClosestLeaves for SphereLeaves<'_, F>
+where
+    F: FnMut(u32, &Ray) -> Option<P>,
+    P: IntoHit,
+{
+    #[inline(always)]
+    fn closest<C: TraversalCounter>(&mut self, first: u32, count: u32, s: &mut Closest, c: &mut C) {
+        let range = first as usize..(first + count) as usize;
+        for (&prim, sphere) in self.prims[range.clone()].iter().zip(&self.spheres[range]) {
+            c.test_primitive();
+            if sphere.is_sphere() {
+                if let Some(t) = sphere.intersect(&s.ray) {
+                    s.offer(t.into_hit(prim));
+                }
+            } else if let Some(hit) = (self.test)(prim, &s.ray) {
+                s.offer(hit.into_hit(prim));
+            }
+        }
+    }
+}
+
+impl<F, P> PacketLeaves for SphereLeaves<'_, F>
+where
+    F: FnMut(u32, &Ray) -> Option<P>,
+    P: IntoHit,
+{
+    /// Each sphere against all the packet's rays at once; anything else one ray at a time.
+    #[inline(always)]
+    fn closest_lanes(
+        &mut self,
+        first: u32,
+        count: u32,
+        lanes: Lanes,
+        t_max: &mut [f32; PACKET],
+        best: &mut [Option<Hit>; PACKET],
+    ) {
+        for position in first as usize..(first + count) as usize {
+            let sphere = &self.spheres[position];
+            let prim = self.prims[position];
+            if !sphere.is_sphere() {
+                let mut single = ClosureLeaves {
+                    prims: self.prims,
+                    test: &mut self.test,
+                };
+                lanes.each(&mut single, position as u32, 1, t_max, best);
+                continue;
+            }
+            let t = sphere_lanes(sphere, lanes.packet, t_max);
+            let mut hit = [false; PACKET];
+            for (hit, t) in hit.iter_mut().zip(&t) {
+                *hit = !t.is_nan();
+            }
+            for lane in packet_lanes(lane_mask(&hit) & lanes.active) {
+                let hit = t[lane].into_hit(prim);
+                if best[lane].is_none_or(|b| hit.is_before(&b)) {
+                    (t_max[lane], best[lane]) = (hit.t, Some(hit));
+                }
+            }
+        }
+    }
+}
+
+/// Distance to `sphere` of every ray of `packet` (NaN where it misses or falls outside the
+/// ray's range): [`crate::intersect_sphere`] lane by lane, the same operations in the same
+/// order, so the same distances.
+#[inline(always)]
+fn sphere_lanes(
+    sphere: &SphereRecord,
+    packet: &PacketRays,
+    t_max: &[f32; PACKET],
+) -> [f32; PACKET] {
+    let [cx, cy, cz] = sphere.center;
+    let r2 = sphere.radius * sphere.radius;
+    // A loop, not `array::from_fn`: its closure would be compiled apart, without the
+    // dispatch's vector instructions.
+    let mut distance = [f32::NAN; PACKET];
+    for (lane, distance) in distance.iter_mut().enumerate() {
+        let d = [0, 1, 2].map(|axis| packet.dir[axis][lane]);
+        let o = [0, 1, 2].map(|axis| packet.origin[axis][lane]);
+        let f = [o[0] - cx, o[1] - cy, o[2] - cz];
+        let a = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+        let b = -(f[0] * d[0] + f[1] * d[1] + f[2] * d[2]);
+        let along = b / a;
+        let to_line = [0, 1, 2].map(|axis| f[axis] + along * d[axis]);
+        let line2 = to_line[0] * to_line[0] + to_line[1] * to_line[1] + to_line[2] * to_line[2];
+        let discriminant = r2 - line2;
+        let c = (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]) - r2;
+        let q = b + b.signum() * (a * discriminant).sqrt();
+        let (t0, t1) = if q == 0.0 { (0.0, 0.0) } else { (c / q, q / a) };
+        let (near, far) = if t0 <= t1 { (t0, t1) } else { (t1, t0) };
+        let in_range = |t: f32| t >= packet.t_min[lane] && t <= t_max[lane];
+        let t = if in_range(near) {
+            near
+        } else if in_range(far) {
+            far
+        } else {
+            f32::NAN
+        };
+        if discriminant >= 0.0 {
+            *distance = t;
+        }
+    }
+    distance
+}
+
+impl<F: FnMut(u32, &Ray) -> bool> AnyLeaves for SphereLeaves<'_, F> {
+    #[inline(always)]
+    fn any(&mut self, first: u32, count: u32, ray: &Ray) -> bool {
+        let range = first as usize..(first + count) as usize;
+        for (&prim, sphere) in self.prims[range.clone()].iter().zip(&self.spheres[range]) {
+            let blocked = match sphere.is_sphere() {
+                true => sphere.intersect(ray).is_some(),
+                false => (self.test)(prim, ray),
+            };
+            if blocked {
+                return true;
+            }
+        }
+        false
     }
 }
 
@@ -238,6 +401,11 @@ where
     F: FnMut(u32, &Ray) -> Option<P>,
     P: IntoHit,
 {
+    #[inline(always)]
+    fn new_ray(&mut self) {
+        self.ray = None;
+    }
+
     #[inline(always)]
     fn closest<C: TraversalCounter>(&mut self, first: u32, count: u32, s: &mut Closest, c: &mut C) {
         let pack_ray = self.pack_ray(&s.ray);

@@ -19,35 +19,12 @@ impl Sphere {
         Aabb::new(self.center - self.radius, self.center + self.radius)
     }
 
-    /// Ray/sphere roots computed the numerically careful way (Haines et al., "Precision
-    /// Improvements for Ray/Sphere Intersection", Ray Tracing Gems, 2019): the
-    /// discriminant from the distance of the centre to the ray's line, and the second
-    /// root from the first (no catastrophic cancellation), so a small sphere far away or
-    /// a huge sphere nearby (the ground ball of radius 1000) both stay precise.
+    /// The nearer hit within the ray's range, else the farther
+    /// ([`canopy_bvh::intersect_sphere`], precise for small far spheres and huge near
+    /// ones; wide trees test spheres with it too).
     #[inline(always)]
     pub fn intersect(&self, ray: &Ray) -> Option<f32> {
-        let f = ray.origin - self.center;
-        let d = ray.dir;
-        let a = d.length_squared();
-        let b = -f.dot(d);
-        let to_line = f + (b / a) * d;
-        let r2 = self.radius * self.radius;
-        let discriminant = r2 - to_line.length_squared();
-        if discriminant < 0.0 {
-            return None;
-        }
-        let c = f.length_squared() - r2;
-        let q = b + b.signum() * (a * discriminant).sqrt();
-        let (t0, t1) = if q == 0.0 { (0.0, 0.0) } else { (c / q, q / a) };
-        let (near, far) = if t0 <= t1 { (t0, t1) } else { (t1, t0) };
-        let in_range = |t: f32| t >= ray.t_min && t <= ray.t_max;
-        if in_range(near) {
-            Some(near)
-        } else if in_range(far) {
-            Some(far)
-        } else {
-            None
-        }
+        canopy_bvh::intersect_sphere(self.center, self.radius, ray)
     }
 
     pub fn area(&self) -> f32 {

@@ -130,8 +130,11 @@ impl Stream {
 
     /// Traces every path of the stream to its end.
     fn trace<P: Probe>(&mut self, tracer: &Tracer, work: &mut Work<P>) {
+        // The first segments are camera rays, a pixel's samples side by side: coherent.
+        let mut coherent = true;
         while !self.paths.is_empty() {
-            self.closest_hits(tracer, work);
+            self.closest_hits(tracer, coherent, work);
+            coherent = false;
             self.vertices.clear();
             for (p, hit) in self.paths.iter_mut().zip(&self.hits) {
                 self.vertices
@@ -157,9 +160,10 @@ impl Stream {
         }
     }
 
-    /// The closest hit of every path's next segment: one batch through the structure,
-    /// or ray by ray where see-through surfaces draw random numbers or work is counted.
-    fn closest_hits<P: Probe>(&mut self, tracer: &Tracer, work: &mut Work<P>) {
+    /// The closest hit of every path's next segment: one batch through the structure
+    /// (in packets where the rays are `coherent`), or ray by ray where see-through
+    /// surfaces draw random numbers or work is counted.
+    fn closest_hits<P: Probe>(&mut self, tracer: &Tracer, coherent: bool, work: &mut Work<P>) {
         let n = self.paths.len();
         work.rays += n as u64;
         self.hits.clear();
@@ -172,9 +176,12 @@ impl Stream {
         }
         self.hits.resize(n, None);
         let (paths, hits) = (&self.paths, &mut self.hits);
-        tracer
-            .accel
-            .intersect_each(n, ALL_MASKS, |i| paths[i].path.ray, |i, hit| hits[i] = hit);
+        let ray = |i: usize| paths[i].path.ray;
+        let answer = |i: usize, hit| hits[i] = hit;
+        match coherent {
+            true => tracer.accel.intersect_coherent(n, ALL_MASKS, ray, answer),
+            false => tracer.accel.intersect_each(n, ALL_MASKS, ray, answer),
+        }
     }
 
     /// Answers the shadow rays of every vertex of the stage, in path order.

@@ -1,0 +1,299 @@
+//! Closest hits of coherent rays (camera rays of neighbouring pixels and samples) as
+//! packets of [`PACKET`] rays: the packet walks the tree once, each node's slots tested
+//! against all its rays at once (one SIMD lane per ray), and each leaf is tested for the
+//! rays that entered it. A single ray pays a node's branches and stack work alone; a
+//! packet shares them among rays that go the same way (Wald et al., "Interactive
+//! Rendering with Coherent Ray Tracing", 2001; Áfra, "Faster Incoherent Ray Traversal
+//! Using 8-Wide AVX Instructions", 2013, for the wide nodes).
+//!
+//! Each lane's slab test is the single-ray kernel's arithmetic ([`super::kernels`]), and
+//! a subtree is skipped for a ray only where that ray's closest hit so far is nearer
+//! than the subtree's box, so every ray gets the closest hit a single-ray query gives
+//! (ties go to the lower index whatever the order of the tests).
+//!
+//! The lane loops are plain arrays: compiled inside the dispatch's AVX2 or AVX-512
+//! function they become vector instructions, and elsewhere they are the scalar twin.
+
+use super::traverse::{Closest, ClosestLeaves, PacketLeaves};
+use super::{WideNode, EMPTY_SLOT};
+use crate::aabb::{fast_max, fast_min, FAR_SLACK};
+use crate::traverse::TraversalStack;
+use crate::{Hit, Ray};
+
+/// Rays in a packet.
+pub const PACKET: usize = 16;
+
+/// A packet's rays by lane, prepared for slab tests.
+pub(crate) struct PacketRays {
+    pub origin: [[f32; PACKET]; 3],
+    pub dir: [[f32; PACKET]; 3],
+    inv: [[f32; PACKET]; 3],
+    /// Whether the ray runs down each axis (it meets the max plane first).
+    down: [[bool; PACKET]; 3],
+    pub t_min: [f32; PACKET],
+}
+
+impl PacketRays {
+    /// Lanes past the end of `rays` copy its first ray.
+    #[inline(always)]
+    fn new(rays: &[Ray]) -> Self {
+        let mut packet = Self {
+            origin: [[0.0; PACKET]; 3],
+            dir: [[0.0; PACKET]; 3],
+            inv: [[0.0; PACKET]; 3],
+            down: [[false; PACKET]; 3],
+            t_min: [0.0; PACKET],
+        };
+        for lane in 0..PACKET {
+            let r = rays.get(lane).unwrap_or(&rays[0]);
+            for axis in 0..3 {
+                packet.origin[axis][lane] = r.origin[axis];
+                packet.dir[axis][lane] = r.dir[axis];
+                packet.inv[axis][lane] = r.inv_dir[axis];
+                packet.down[axis][lane] = r.inv_dir[axis].is_sign_negative();
+            }
+            packet.t_min[lane] = r.t_min;
+        }
+        packet
+    }
+
+    /// The lanes whose rays enter `slot` of `node` within `[t_min, t_max]`, and each
+    /// lane's entry distance: [`super::kernels::ScalarNode`]'s test, lane by lane.
+    #[inline(always)]
+    fn enter<const N: usize>(
+        &self,
+        node: &WideNode<N>,
+        slot: usize,
+        t_max: &[f32; PACKET],
+    ) -> (u32, [f32; PACKET]) {
+        let b = &node.bounds;
+        let low = [b[0][slot], b[1][slot], b[2][slot]];
+        let high = [b[3][slot], b[4][slot], b[5][slot]];
+        let mut entry = [0.0; PACKET];
+        let mut hit = [false; PACKET];
+        for lane in 0..PACKET {
+            let plane = |axis: usize, near: bool| {
+                let plane = match self.down[axis][lane] == near {
+                    true => high[axis],
+                    false => low[axis],
+                };
+                (plane - self.origin[axis][lane]) * self.inv[axis][lane]
+            };
+            let enter = fast_max(
+                fast_max(plane(0, true), plane(1, true)),
+                fast_max(plane(2, true), self.t_min[lane]),
+            );
+            let exit = fast_min(fast_min(plane(0, false), plane(1, false)), plane(2, false));
+            let exit = fast_min(exit * FAR_SLACK, t_max[lane]);
+            entry[lane] = enter;
+            hit[lane] = enter <= exit;
+        }
+        (lane_mask(&hit), entry)
+    }
+}
+
+/// Bit `lane` set where `set[lane]`: eight lanes at a time, each byte's bit carried into
+/// the top byte by one multiplication.
+#[inline(always)]
+pub(crate) fn lane_mask(set: &[bool; PACKET]) -> u32 {
+    // Byte k (0 or 1) times byte 7 - k of the multiplier (2^k) lands on bit 56 + k,
+    // and no sum of the other products carries into the top byte.
+    const GATHER: u64 = 0x0102_0408_1020_4080;
+    set.chunks_exact(8).rev().fold(0, |mask, eight| {
+        let mut bytes = [0u8; 8];
+        for (byte, &set) in bytes.iter_mut().zip(eight) {
+            *byte = set as u8;
+        }
+        let bits = (u64::from_le_bytes(bytes).wrapping_mul(GATHER) >> 56) as u8;
+        mask << 8 | bits as u32
+    })
+}
+
+/// The least of `values` over the lanes in `mask` (infinity if none), reduced pairwise
+/// across halves so that it compiles to vector shuffles.
+#[inline(always)]
+fn least(values: &[f32; PACKET], mask: u32) -> f32 {
+    let mut m = [f32::INFINITY; PACKET];
+    for (lane, m) in m.iter_mut().enumerate() {
+        if mask >> lane & 1 == 1 {
+            *m = values[lane];
+        }
+    }
+    let mut half = PACKET / 2;
+    while half > 0 {
+        for lane in 0..half {
+            m[lane] = fast_min(m[lane], m[lane + half]);
+        }
+        half /= 2;
+    }
+    m[0]
+}
+
+/// The rays of a packet that a leaf is tested for.
+pub(crate) struct Lanes<'a> {
+    /// Bit `lane` set for each ray to test.
+    pub active: u32,
+    pub rays: &'a [Ray],
+    pub packet: &'a PacketRays,
+}
+
+impl Lanes<'_> {
+    /// Tests the leaf for one lane at a time through `leaves`' single-ray test (told of
+    /// each change of ray).
+    #[inline(always)]
+    pub fn each<L: ClosestLeaves + ?Sized>(
+        &self,
+        leaves: &mut L,
+        first: u32,
+        count: u32,
+        t_max: &mut [f32; PACKET],
+        best: &mut [Option<Hit>; PACKET],
+    ) {
+        for lane in lanes(self.active) {
+            let mut search = Closest {
+                ray: Ray {
+                    t_max: t_max[lane],
+                    ..self.rays[lane]
+                },
+                best: best[lane],
+            };
+            leaves.new_ray();
+            leaves.closest(first, count, &mut search, &mut ());
+            (t_max[lane], best[lane]) = (search.ray.t_max, search.best);
+        }
+    }
+}
+
+/// A subtree on the stack: a slot's `child` and `count` (see [`WideNode`]), the lanes
+/// that entered it and their entry distances.
+#[derive(Clone, Copy)]
+struct Entry {
+    child: u32,
+    count: u32,
+    lanes: u32,
+    entry: [f32; PACKET],
+}
+
+#[inline(always)]
+pub(crate) fn lanes(mut mask: u32) -> impl Iterator<Item = usize> {
+    std::iter::from_fn(move || {
+        (mask != 0).then(|| {
+            let lane = mask.trailing_zeros() as usize;
+            mask &= mask - 1;
+            lane
+        })
+    })
+}
+
+/// The closest hit of each of `rays` (at most [`PACKET`]), as [`super::traverse::closest`]
+/// gives it. `nodes` is non-empty.
+#[inline(always)]
+pub(crate) fn closest_packet<const N: usize, L: PacketLeaves>(
+    nodes: &[WideNode<N>],
+    rays: &[Ray],
+    leaves: &mut L,
+) -> [Option<Hit>; PACKET] {
+    debug_assert!(rays.len() <= PACKET);
+    // A NaN or degenerate ray misses everything (see Ray); so do the lanes past the end.
+    let traceable = rays.iter().enumerate().fold(0u32, |mask, (lane, r)| {
+        mask | (r.is_traceable() as u32) << lane
+    });
+    let packet = PacketRays::new(rays);
+    // Each ray's range, shrunk to its closest hit so far, and that hit.
+    let mut t_max = [0.0; PACKET];
+    for (t_max, ray) in t_max.iter_mut().zip(rays) {
+        *t_max = ray.t_max;
+    }
+    let mut best = [None; PACKET];
+    let mut stack = TraversalStack::<Entry>::new();
+    let (mut child, mut count, mut active) = (0u32, 0u32, traceable);
+    while active != 0 {
+        if count > 0 {
+            let lanes = Lanes {
+                active,
+                rays,
+                packet: &packet,
+            };
+            leaves.closest_lanes(child, count, lanes, &mut t_max, &mut best);
+        } else {
+            let node = &nodes[child as usize];
+            // Entered slots, by the nearest entry of their rays.
+            let mut entered = [(0usize, 0u32, 0f32); N];
+            let mut entries = [[0f32; PACKET]; N];
+            let mut n = 0;
+            for slot in 0..N {
+                if node.count[slot] == EMPTY_SLOT {
+                    break;
+                }
+                let (mask, entry) = packet.enter(node, slot, &t_max);
+                let mask = mask & active;
+                if mask == 0 {
+                    continue;
+                }
+                entered[n] = (slot, mask, least(&entry, mask));
+                entries[n] = entry;
+                n += 1;
+            }
+            if n > 0 {
+                // Far to near (insertion sort of a few); all but the nearest go on the
+                // stack, and the packet descends into the nearest.
+                let mut order: [usize; N] = std::array::from_fn(|i| i);
+                for i in 1..n {
+                    let mut j = i;
+                    while j > 0 && entered[order[j - 1]].2 < entered[order[j]].2 {
+                        order.swap(j - 1, j);
+                        j -= 1;
+                    }
+                }
+                for &k in &order[..n - 1] {
+                    let (slot, mask, _) = entered[k];
+                    stack.push(Entry {
+                        child: node.child[slot],
+                        count: node.count[slot],
+                        lanes: mask,
+                        entry: entries[k],
+                    });
+                }
+                let (slot, mask, _) = entered[order[n - 1]];
+                (child, count, active) = (node.child[slot], node.count[slot], mask);
+                continue;
+            }
+        }
+        // Pop the next subtree that can still hold a closer hit for one of its rays.
+        active = 0;
+        while let Some(e) = stack.pop() {
+            let mut open = [false; PACKET];
+            for lane in 0..PACKET {
+                open[lane] = e.entry[lane] <= t_max[lane];
+            }
+            let live = lane_mask(&open) & e.lanes;
+            if live != 0 {
+                (child, count, active) = (e.child, e.count, live);
+                break;
+            }
+        }
+    }
+    best
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn lane_masks_carry_each_lane_to_its_bit() {
+        for pattern in [0u32, 1, 0x8000, 0xffff, 0xa5c3, 0x0180, 0x7ffe] {
+            let set: [bool; PACKET] = std::array::from_fn(|lane| pattern >> lane & 1 == 1);
+            assert_eq!(lane_mask(&set), pattern);
+        }
+    }
+
+    #[test]
+    fn least_takes_the_lanes_in_the_mask() {
+        let values: [f32; PACKET] = std::array::from_fn(|lane| 20.0 - lane as f32);
+        assert_eq!(least(&values, 0), f32::INFINITY);
+        assert_eq!(least(&values, 0b101), 18.0);
+        assert_eq!(least(&values, 1 << 15), 5.0);
+        assert_eq!(least(&values, 0xffff), 5.0);
+    }
+}

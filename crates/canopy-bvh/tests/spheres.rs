@@ -1,0 +1,213 @@
+//! Spheres a wide tree keeps beside its leaves and tests itself, one ray at a time or in
+//! packets of coherent rays: the same closest hits (primitive and distance, bit for
+//! bit) and the same occlusion as a loop over every primitive, in every layout and
+//! instruction set, before and after the spheres move.
+
+mod common;
+
+use canopy_bvh::{
+    intersect_sphere, Aabb, Blas, BlasParams, Builder, BvhWidth, Geometry, Hit, Isa, PrimHit, Ray,
+    RayQuery, ShearedRay, ALL_MASKS, PACKET,
+};
+use common::uniform;
+use glam::Vec3;
+
+/// Spheres, and some boxes among them (primitives the tree leaves to the closure).
+#[derive(Clone)]
+struct Balls {
+    spheres: Vec<(Vec3, f32)>,
+    /// Every `box_every`-th primitive is its sphere's box instead.
+    box_every: usize,
+}
+
+impl Balls {
+    fn is_box(&self, prim: u32) -> bool {
+        self.box_every > 0 && prim as usize % self.box_every == self.box_every - 1
+    }
+
+    fn sphere_box(&self, prim: u32) -> Aabb {
+        let (c, r) = self.spheres[prim as usize];
+        Aabb::new(c - r, c + r)
+    }
+}
+
+impl Geometry for Balls {
+    fn len(&self) -> usize {
+        self.spheres.len()
+    }
+
+    fn bounds(&self, prim: u32) -> Aabb {
+        self.sphere_box(prim)
+    }
+
+    fn sphere(&self, prim: u32) -> Option<(Vec3, f32)> {
+        (!self.is_box(prim)).then(|| self.spheres[prim as usize])
+    }
+
+    fn has_triangles(&self) -> bool {
+        false
+    }
+
+    fn intersect(&self, prim: u32, ray: &Ray, _: &ShearedRay) -> Option<PrimHit> {
+        let t = match self.is_box(prim) {
+            true => self.sphere_box(prim).ray_entry(ray),
+            false => {
+                let (c, r) = self.spheres[prim as usize];
+                intersect_sphere(c, r, ray)
+            }
+        };
+        t.map(PrimHit::from)
+    }
+}
+
+/// `count` spheres in a slab above a huge ground sphere (the report's scenes), some
+/// duplicated (ties go to the lower index) and some nested.
+fn balls(count: usize, box_every: usize, seed: u32) -> Balls {
+    let mut u = uniform(seed);
+    let mut spheres = vec![(Vec3::new(0.0, -1000.0, 0.0), 1000.0)];
+    while spheres.len() < count {
+        let c = Vec3::new(20.0 * u() - 10.0, 2.0 * u(), 20.0 * u() - 10.0);
+        let r = 0.05 + 0.6 * u();
+        spheres.push((c, r));
+        match spheres.len() % 17 {
+            0 => spheres.push((c, r)),
+            5 => spheres.push((c, 0.5 * r)),
+            _ => {}
+        }
+    }
+    spheres.truncate(count);
+    Balls { spheres, box_every }
+}
+
+/// Camera rays as a wavefront stream holds them (each pixel's samples side by side, a
+/// defocused lens), then scattered rays from points in the scene, some with a finite
+/// range, and a few rays that are not traceable. The count is not a multiple of a packet.
+fn rays(seed: u32) -> Vec<Ray> {
+    let mut u = uniform(seed);
+    let eye = Vec3::new(13.0, 2.0, 3.0);
+    let mut rays = Vec::new();
+    for y in 0..24 {
+        for x in 0..32 {
+            for _ in 0..6 {
+                let target = Vec3::new(
+                    (x as f32 + u()) / 32.0 * 20.0 - 10.0,
+                    3.0 - (y as f32 + u()) / 24.0 * 4.0,
+                    0.0,
+                );
+                let origin = eye + 0.1 * Vec3::new(u() - 0.5, u() - 0.5, 0.0);
+                rays.push(Ray::new(origin, target - origin, 0.0, f32::INFINITY));
+            }
+        }
+    }
+    for i in 0..1500 {
+        let origin = Vec3::new(20.0 * u() - 10.0, 2.5 * u(), 20.0 * u() - 10.0);
+        let dir = Vec3::new(u() - 0.5, u() - 0.5, u() - 0.5);
+        let t_max = if i % 3 == 0 { 4.0 * u() } else { f32::INFINITY };
+        rays.push(Ray::new(origin, dir, 0.0, t_max));
+    }
+    rays.push(Ray::new(Vec3::NAN, Vec3::X, 0.0, f32::INFINITY));
+    rays.push(Ray::new(eye, Vec3::ZERO, 0.0, f32::INFINITY));
+    rays.push(Ray::new(eye, -eye, f32::NAN, f32::INFINITY));
+    rays.insert(100, Ray::new(eye, -eye, 0.0, f32::NAN));
+    rays
+}
+
+fn closest_each(blas: &impl RayQuery, rays: &[Ray]) -> Vec<Option<Hit>> {
+    let mut hits = vec![None; rays.len()];
+    blas.intersect_each(rays.len(), ALL_MASKS, |i| rays[i], |i, h| hits[i] = h);
+    hits
+}
+
+fn closest_in_packets(blas: &impl RayQuery, rays: &[Ray]) -> Vec<Option<Hit>> {
+    let mut hits = vec![None; rays.len()];
+    blas.intersect_coherent(rays.len(), ALL_MASKS, |i| rays[i], |i, h| hits[i] = h);
+    hits
+}
+
+fn occluded_each(blas: &impl RayQuery, rays: &[Ray]) -> Vec<bool> {
+    let mut blocked = vec![false; rays.len()];
+    blas.occluded_each(rays.len(), ALL_MASKS, |i| rays[i], |i, b| blocked[i] = b);
+    blocked
+}
+
+/// Every layout, leaf size and instruction set against brute force, for `geometry`.
+fn check_against_brute_force(geometry: &Balls, rays: &[Ray], what: &str) {
+    let brute = Blas::build(geometry.clone(), &BlasParams::new(None, BvhWidth::Eight));
+    let expected = closest_each(&brute, rays);
+    let expected_blocked: Vec<bool> = rays.iter().map(|r| brute.occluded(r)).collect();
+    assert!(expected.iter().filter(|h| h.is_some()).count() > rays.len() / 2);
+    let small_ones_hit = expected.iter().flatten().any(|h| h.prim != 0);
+    assert_eq!(
+        small_ones_hit,
+        geometry.len() > 1,
+        "{what}: rays meet the small spheres"
+    );
+    for width in BvhWidth::ALL {
+        for leaf in [1, 4, 8] {
+            let mut params = BlasParams::new(Some(Builder::BinnedSah), width);
+            params.build.max_leaf_size = leaf;
+            let mut blas = Blas::build(geometry.clone(), &params);
+            let keeps = blas.tree().is_some_and(|t| match t {
+                canopy_bvh::Tree::Four(t) => t.has_spheres(),
+                canopy_bvh::Tree::Eight(t) => t.has_spheres(),
+                _ => false,
+            });
+            assert_eq!(
+                keeps,
+                width != BvhWidth::Two,
+                "{what}: {width} wide keeps its spheres"
+            );
+            for isa in Isa::supported() {
+                blas.tree_mut().unwrap().set_isa(isa).unwrap();
+                let context = format!("{what}, {width} wide, leaves of {leaf}, {isa:?}");
+                let single = closest_each(&blas, rays);
+                let packets = closest_in_packets(&blas, rays);
+                for (i, expected) in expected.iter().enumerate() {
+                    let bits = |h: &Option<Hit>| h.map(|h| (h.prim, h.t.to_bits()));
+                    assert_eq!(bits(&single[i]), bits(expected), "{context}: ray {i} alone");
+                    assert_eq!(
+                        bits(&packets[i]),
+                        bits(expected),
+                        "{context}: ray {i} in a packet"
+                    );
+                }
+                assert_eq!(occluded_each(&blas, rays), expected_blocked, "{context}");
+            }
+        }
+    }
+}
+
+#[test]
+fn kept_spheres_give_brute_force_answers_alone_and_in_packets() {
+    for (count, seed) in [(1, 3), (7, 5), (PACKET + 1, 7), (300, 11)] {
+        let geometry = balls(count, 0, seed);
+        check_against_brute_force(&geometry, &rays(seed + 1), &format!("{count} spheres"));
+    }
+}
+
+#[test]
+fn boxes_among_the_spheres_go_to_the_closure() {
+    let geometry = balls(200, 4, 13);
+    check_against_brute_force(&geometry, &rays(17), "spheres and boxes");
+}
+
+#[test]
+fn moved_spheres_are_tested_where_they_are_now() {
+    let params = BlasParams::new(Some(Builder::BinnedSah), BvhWidth::Eight);
+    let mut blas = Blas::build(balls(150, 0, 19), &params);
+    let rays = rays(23);
+    let before = closest_in_packets(&blas, &rays);
+    blas.update(|g| {
+        for (c, r) in &mut g.spheres[1..] {
+            *c += Vec3::new(0.3, 0.1, -0.2);
+            *r *= 1.1;
+        }
+    })
+    .unwrap();
+    let moved = blas.geometry().clone();
+    let brute = Blas::build(moved, &BlasParams::new(None, BvhWidth::Eight));
+    let expected = closest_each(&brute, &rays);
+    assert_ne!(before, expected, "the move changes some hits");
+    assert_eq!(closest_in_packets(&blas, &rays), expected);
+    assert_eq!(closest_each(&blas, &rays), expected);
+}

@@ -1,0 +1,109 @@
+//! Camera rays one by one against the same rays in packets ([`RayQuery::intersect_coherent`]),
+//! single thread, in turns (this machine's speed drifts; turns expose both to the same
+//! drift), best of the turns. The rays are those a wavefront stream holds: row by row,
+//! each pixel's samples side by side. Checks that both give the same hits.
+//! A profiling harness; renders of record are timed by `canopy render` and
+//! `bench/mitsuba_render.sh`.
+//!
+//! `cargo run --release -p canopy-render --example packet_speed -- [scene ...]
+//!  [--size 480x480] [--samples 8] [--turns 5]`
+use canopy_bvh::{BuildParams, BvhWidth, Hit, Ray, RayQuery, ALL_MASKS};
+use canopy_render::accel::{Accel, AccelKind};
+use canopy_render::camera::Camera;
+use canopy_render::load_scene;
+use canopy_render::rng::Rng;
+use std::time::{Duration, Instant};
+
+fn main() {
+    let mut args = std::env::args().skip(1);
+    let (mut scenes, mut size, mut samples, mut turns) = (Vec::new(), (480, 480), 8u32, 5);
+    while let Some(arg) = args.next() {
+        let mut value = || args.next().expect("a value after each option");
+        match arg.as_str() {
+            "--size" => {
+                let v = value();
+                let (w, h) = v.split_once('x').expect("WIDTHxHEIGHT");
+                size = (w.parse().expect("width"), h.parse().expect("height"));
+            }
+            "--samples" => samples = value().parse().expect("samples"),
+            "--turns" => turns = value().parse().expect("turns"),
+            _ => scenes.push(arg),
+        }
+    }
+    if scenes.is_empty() {
+        scenes = ["paper-1", "paper-3", "paper-5"].map(String::from).to_vec();
+    }
+    for name in &scenes {
+        let scene = load_scene(name).expect("a scene");
+        let accel = Accel::for_scene(
+            &scene,
+            AccelKind::default(),
+            BvhWidth::Eight,
+            &BuildParams::default(),
+            None,
+        );
+        let camera = Camera::new(&scene.camera, size.0, size.1);
+        let mut rays = Vec::with_capacity((size.0 * size.1 * samples) as usize);
+        for y in 0..size.1 {
+            for x in 0..size.0 {
+                for k in 0..samples {
+                    let index = (y * size.0 + x) as u64;
+                    let mut rng = Rng::for_sample(1, index, k as u64);
+                    let s = (x as f32 + rng.next_f32()) / size.0 as f32;
+                    let t = (y as f32 + rng.next_f32()) / size.1 as f32;
+                    rays.push(camera.ray(s, t, &mut rng));
+                }
+            }
+        }
+        let mut single = vec![None; rays.len()];
+        let mut packets = vec![None; rays.len()];
+        let (mut best_single, mut best_packets) = (Duration::MAX, Duration::MAX);
+        for _ in 0..turns {
+            if std::env::var_os("PACKETS_ONLY").is_none() {
+                best_single = best_single.min(time(&rays, &mut single, |r, h| {
+                    accel.intersect_each(r.len(), ALL_MASKS, |i| r[i], |i, x| h[i] = x)
+                }));
+            }
+            best_packets = best_packets.min(time(&rays, &mut packets, |r, h| {
+                accel.intersect_coherent(r.len(), ALL_MASKS, |i| r[i], |i, x| h[i] = x)
+            }));
+        }
+        let mut work = canopy_bvh::TraversalStats::default();
+        for ray in &rays {
+            let w = accel.traversal_cost(ray);
+            work.nodes_visited += w.nodes_visited;
+            work.primitives_tested += w.primitives_tested;
+        }
+        println!(
+            "  per ray: {:.2} node visits, {:.2} primitive tests",
+            work.nodes_visited as f64 / rays.len() as f64,
+            work.primitives_tested as f64 / rays.len() as f64
+        );
+        let same = single == packets;
+        let rate = |d: Duration| rays.len() as f64 / d.as_secs_f64() / 1e6;
+        println!(
+            "{name}: {} camera rays; one by one {:.2} Mrays/s, packets {:.2} Mrays/s ({:.2}x); same hits: {same}",
+            rays.len(),
+            rate(best_single),
+            rate(best_packets),
+            best_single.as_secs_f64() / best_packets.as_secs_f64(),
+        );
+        assert!(
+            same || std::env::var_os("PACKETS_ONLY").is_some(),
+            "packets must give the same hits"
+        );
+    }
+}
+
+/// Traces `rays` in the stream's chunks (one image row at a time), as the renderer does.
+fn time(
+    rays: &[Ray],
+    hits: &mut [Option<Hit>],
+    trace: impl Fn(&[Ray], &mut [Option<Hit>]),
+) -> Duration {
+    let start = Instant::now();
+    for (rays, hits) in rays.chunks(4096).zip(hits.chunks_mut(4096)) {
+        trace(rays, hits);
+    }
+    start.elapsed()
+}
