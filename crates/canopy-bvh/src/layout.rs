@@ -96,8 +96,8 @@ impl Tree {
         }
     }
 
-    /// Keeps the leaves' spheres beside them for the wide kernels to test (wide layouts
-    /// without triangle packs; see [`BvhN::store_spheres`]).
+    /// Keeps the leaves' spheres beside them for the wide kernels to test (wide layouts;
+    /// see [`BvhN::store_spheres`]).
     pub fn store_spheres(&mut self, sphere: impl Fn(u32) -> Option<(Vec3, f32)> + Sync) {
         match self {
             Tree::Binary(_) | Tree::Gpu(_) => {}

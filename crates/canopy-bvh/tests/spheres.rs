@@ -6,23 +6,40 @@
 mod common;
 
 use canopy_bvh::{
-    intersect_sphere, Aabb, Blas, BlasParams, Builder, BvhWidth, Geometry, Hit, Isa, PrimHit, Ray,
-    RayQuery, ShearedRay, ALL_MASKS, PACKET,
+    intersect_sphere, intersect_triangle, Aabb, Blas, BlasParams, Builder, BvhWidth, Geometry, Hit,
+    Isa, PrimHit, Ray, RayQuery, ShearedRay, ALL_MASKS, PACKET,
 };
 use common::uniform;
 use glam::Vec3;
 
-/// Spheres, and some boxes among them (primitives the tree leaves to the closure).
+/// Spheres, and some boxes (primitives the tree leaves to the closure) and triangles
+/// (which wide trees pack) among them.
 #[derive(Clone)]
 struct Balls {
     spheres: Vec<(Vec3, f32)>,
     /// Every `box_every`-th primitive is its sphere's box instead.
     box_every: usize,
+    /// Every `triangle_every`-th primitive (counted from the second) is a triangle across
+    /// its sphere instead.
+    triangle_every: usize,
 }
 
 impl Balls {
     fn is_box(&self, prim: u32) -> bool {
         self.box_every > 0 && prim as usize % self.box_every == self.box_every - 1
+    }
+
+    fn triangle_of(&self, prim: u32) -> Option<[Vec3; 3]> {
+        let every = self.triangle_every;
+        if every == 0 || prim as usize % every != 1 % every || self.is_box(prim) {
+            return None;
+        }
+        let (c, r) = self.spheres[prim as usize];
+        Some([
+            c + Vec3::new(r, 0.0, 0.0),
+            c + Vec3::new(0.0, r, 0.3 * r),
+            c + Vec3::new(-r, -0.5 * r, 0.0),
+        ])
     }
 
     fn sphere_box(&self, prim: u32) -> Aabb {
@@ -37,18 +54,29 @@ impl Geometry for Balls {
     }
 
     fn bounds(&self, prim: u32) -> Aabb {
-        self.sphere_box(prim)
+        match self.triangle_of(prim) {
+            Some(v) => v.iter().fold(Aabb::EMPTY, |b, &p| b.union(Aabb::new(p, p))),
+            None => self.sphere_box(prim),
+        }
+    }
+
+    fn triangle(&self, prim: u32) -> Option<[Vec3; 3]> {
+        self.triangle_of(prim)
     }
 
     fn sphere(&self, prim: u32) -> Option<(Vec3, f32)> {
-        (!self.is_box(prim)).then(|| self.spheres[prim as usize])
+        let other = self.is_box(prim) || self.triangle_of(prim).is_some();
+        (!other).then(|| self.spheres[prim as usize])
     }
 
     fn has_triangles(&self) -> bool {
-        false
+        self.triangle_every > 0
     }
 
-    fn intersect(&self, prim: u32, ray: &Ray, _: &ShearedRay) -> Option<PrimHit> {
+    fn intersect(&self, prim: u32, ray: &Ray, sheared: &ShearedRay) -> Option<PrimHit> {
+        if let Some(v) = self.triangle_of(prim) {
+            return intersect_triangle(&v, ray, sheared);
+        }
         let t = match self.is_box(prim) {
             true => self.sphere_box(prim).ray_entry(ray),
             false => {
@@ -62,7 +90,7 @@ impl Geometry for Balls {
 
 /// `count` spheres in a slab above a huge ground sphere (the report's scenes), some
 /// duplicated (ties go to the lower index) and some nested.
-fn balls(count: usize, box_every: usize, seed: u32) -> Balls {
+fn balls(count: usize, box_every: usize, triangle_every: usize, seed: u32) -> Balls {
     let mut u = uniform(seed);
     let mut spheres = vec![(Vec3::new(0.0, -1000.0, 0.0), 1000.0)];
     while spheres.len() < count {
@@ -76,7 +104,11 @@ fn balls(count: usize, box_every: usize, seed: u32) -> Balls {
         }
     }
     spheres.truncate(count);
-    Balls { spheres, box_every }
+    Balls {
+        spheres,
+        box_every,
+        triangle_every,
+    }
 }
 
 /// Camera rays as a wavefront stream holds them (each pixel's samples side by side, a
@@ -180,21 +212,27 @@ fn check_against_brute_force(geometry: &Balls, rays: &[Ray], what: &str) {
 #[test]
 fn kept_spheres_give_brute_force_answers_alone_and_in_packets() {
     for (count, seed) in [(1, 3), (7, 5), (PACKET + 1, 7), (300, 11)] {
-        let geometry = balls(count, 0, seed);
+        let geometry = balls(count, 0, 0, seed);
         check_against_brute_force(&geometry, &rays(seed + 1), &format!("{count} spheres"));
     }
 }
 
 #[test]
 fn boxes_among_the_spheres_go_to_the_closure() {
-    let geometry = balls(200, 4, 13);
+    let geometry = balls(200, 4, 0, 13);
     check_against_brute_force(&geometry, &rays(17), "spheres and boxes");
+}
+
+#[test]
+fn spheres_beside_triangle_packs_are_tested_there() {
+    let geometry = balls(300, 7, 3, 29);
+    check_against_brute_force(&geometry, &rays(31), "spheres, boxes and triangles");
 }
 
 #[test]
 fn moved_spheres_are_tested_where_they_are_now() {
     let params = BlasParams::new(Some(Builder::BinnedSah), BvhWidth::Eight);
-    let mut blas = Blas::build(balls(150, 0, 19), &params);
+    let mut blas = Blas::build(balls(150, 0, 0, 19), &params);
     let rays = rays(23);
     let before = closest_in_packets(&blas, &rays);
     blas.update(|g| {

@@ -309,22 +309,19 @@ impl<const N: usize> BvhN<N> {
         self.prim_indices = order;
     }
 
-    /// Keeps the leaves' spheres beside them, in leaf order, so that traversal tests them
-    /// itself: a sphere test is then a load of its centre and radius, not a call of the
-    /// caller's closure and a lookup of the primitive. `sphere(prim)` gives a
-    /// primitive's centre and radius if it is a sphere whose hit is
-    /// [`crate::intersect_sphere`]'s; other primitives stay with the closure. Trees with
-    /// triangle packs, and trees without spheres, are left as they are. Call it again
-    /// after the spheres move.
+    /// Keeps the leaves' spheres beside them, in leaf order (beside the triangle packs'
+    /// lanes where there are packs), so that traversal tests them itself: a sphere test
+    /// is then a load of its centre and radius, not a call of the caller's closure and a
+    /// lookup of the primitive. `sphere(prim)` gives a primitive's centre and radius if
+    /// it is a sphere whose hit is [`crate::intersect_sphere`]'s; other primitives stay
+    /// with the closure. A tree without spheres is left as it is. Call it after
+    /// [`BvhN::pack_triangles`], and again after the spheres move.
     pub fn store_spheres(&mut self, sphere: impl Fn(u32) -> Option<(Vec3, f32)> + Sync) {
         self.spheres = Vec::new();
-        if !self.packs.is_empty() {
-            return;
-        }
         let records: Vec<SphereRecord> = self
             .prim_indices
             .par_iter()
-            .map(|&p| match sphere(p) {
+            .map(|&p| match (p != NO_PRIM).then(|| sphere(p)).flatten() {
                 Some((center, radius)) => SphereRecord::new(center, radius),
                 None => SphereRecord::OTHER,
             })
@@ -337,6 +334,12 @@ impl<const N: usize> BvhN<N> {
     /// Whether traversal tests spheres itself ([`BvhN::store_spheres`]).
     pub fn has_spheres(&self) -> bool {
         !self.spheres.is_empty()
+    }
+
+    /// Whether the leaves are tested as [`SphereLeaves`]: spheres kept, no triangle packs.
+    #[inline(always)]
+    fn has_sphere_leaves(&self) -> bool {
+        !self.spheres.is_empty() && self.packs.is_empty()
     }
 
     /// Checks every primitive is in exactly one leaf, every slot box is the tight box of
@@ -503,7 +506,7 @@ where
         F: FnMut(u32, &Ray) -> Option<P>,
         P: IntoHit,
     {
-        if self.spheres.is_empty() {
+        if !self.has_sphere_leaves() {
             return self.intersect_each(count, ray, answer, hit_prim);
         }
         let each = PacketEach {
@@ -678,7 +681,7 @@ where
             counter,
         } = self;
         // SAFETY (all calls): the caller guarantees the instruction sets.
-        if !bvh.spheres.is_empty() {
+        if bvh.has_sphere_leaves() {
             let mut leaves = SphereLeaves {
                 prims: &bvh.prim_indices,
                 spheres: &bvh.spheres,
@@ -698,6 +701,7 @@ where
         } else {
             let mut leaves = PackedLeaves::<T, F> {
                 packs: &bvh.packs,
+                spheres: &bvh.spheres,
                 ray: None,
                 hits: PackHits::default(),
                 test,
@@ -723,7 +727,7 @@ impl<const N: usize, F: FnMut(u32, &Ray) -> bool> Query<N> for AnyQuery<'_, N, F
     unsafe fn run<K: kernels::NodeKernel<N>, T: crate::triangle::PackKernel>(self) -> bool {
         let Self { bvh, ray, test } = self;
         // SAFETY (all calls): the caller guarantees the instruction sets.
-        if !bvh.spheres.is_empty() {
+        if bvh.has_sphere_leaves() {
             let mut leaves = SphereLeaves {
                 prims: &bvh.prim_indices,
                 spheres: &bvh.spheres,
@@ -739,6 +743,7 @@ impl<const N: usize, F: FnMut(u32, &Ray) -> bool> Query<N> for AnyQuery<'_, N, F
         } else {
             let mut leaves = PackedLeaves::<T, F> {
                 packs: &bvh.packs,
+                spheres: &bvh.spheres,
                 ray: None,
                 hits: PackHits::default(),
                 test,

@@ -281,6 +281,8 @@ impl<F: FnMut(u32, &Ray) -> bool> AnyLeaves for SphereLeaves<'_, F> {
 /// by the caller's closure.
 pub(crate) struct PackedLeaves<'a, T, F> {
     pub packs: &'a [TrianglePack],
+    /// Empty, or the sphere at each lane of `packs` (four a pack), tested here.
+    pub spheres: &'a [SphereRecord],
     /// The ray prepared for pack tests, made at the first leaf: a ray that misses every
     /// leaf (most rays past a mesh's silhouette) never pays for it.
     pub ray: Option<PackRay>,
@@ -364,6 +366,7 @@ where
     fn closest_packs<C: TraversalCounter, const PACKS: usize>(
         &mut self,
         packs: &[TrianglePack; PACKS],
+        first_pack: usize,
         pack_ray: &PackRay,
         s: &mut Closest,
         c: &mut C,
@@ -383,12 +386,18 @@ where
                 s.offer(Hit::new(prim, hits.lane(lane)));
             }
         }
-        for pack in packs {
+        for (k, pack) in packs.iter().enumerate() {
             for lane in lanes(pack.others) {
                 c.test_primitive();
                 let prim = pack.prim[lane];
-                if let Some(hit) = (self.test)(prim, &s.ray) {
-                    s.offer(hit.into_hit(prim));
+                let hit = match self.spheres.get((first_pack + k) * PACK_LANES + lane) {
+                    Some(sphere) if sphere.is_sphere() => {
+                        sphere.intersect(&s.ray).map(|t| t.into_hit(prim))
+                    }
+                    _ => (self.test)(prim, &s.ray).map(|hit| hit.into_hit(prim)),
+                };
+                if let Some(hit) = hit {
+                    s.offer(hit);
                 }
             }
         }
@@ -410,11 +419,14 @@ where
     fn closest<C: TraversalCounter>(&mut self, first: u32, count: u32, s: &mut Closest, c: &mut C) {
         let pack_ray = self.pack_ray(&s.ray);
         let (pairs, rest) = pairs_and_rest::<T>(leaf_packs(self.packs, first, count));
+        let mut at = first as usize / PACK_LANES;
         for pair in pairs {
-            self.closest_packs(pair, &pack_ray, s, c);
+            self.closest_packs(pair, at, &pack_ray, s, c);
+            at += 2;
         }
         for pack in rest {
-            self.closest_packs(std::array::from_ref(pack), &pack_ray, s, c);
+            self.closest_packs(std::array::from_ref(pack), at, &pack_ray, s, c);
+            at += 1;
         }
     }
 }
@@ -425,6 +437,7 @@ impl<T: PackKernel, F: FnMut(u32, &Ray) -> bool> PackedLeaves<'_, T, F> {
     fn any_packs<const PACKS: usize>(
         &mut self,
         packs: &[TrianglePack; PACKS],
+        first_pack: usize,
         pack_ray: &PackRay,
         ray: &Ray,
         scratch: &mut PackHits,
@@ -437,9 +450,15 @@ impl<T: PackKernel, F: FnMut(u32, &Ray) -> bool> PackedLeaves<'_, T, F> {
         {
             return true;
         }
-        for pack in packs {
-            if lanes(pack.others).any(|lane| (self.test)(pack.prim[lane], ray)) {
-                return true;
+        for (k, pack) in packs.iter().enumerate() {
+            for lane in lanes(pack.others) {
+                let blocked = match self.spheres.get((first_pack + k) * PACK_LANES + lane) {
+                    Some(sphere) if sphere.is_sphere() => sphere.intersect(ray).is_some(),
+                    _ => (self.test)(pack.prim[lane], ray),
+                };
+                if blocked {
+                    return true;
+                }
             }
         }
         false
@@ -454,15 +473,18 @@ impl<T: PackKernel, F: FnMut(u32, &Ray) -> bool> AnyLeaves for PackedLeaves<'_, 
         let (pairs, rest) = pairs_and_rest::<T>(leaf_packs(self.packs, first, count));
         // Loops, not closures: a closure that holds an 8-lane test and is not inlined
         // would be compiled without AVX and call every intrinsic.
+        let mut at = first as usize / PACK_LANES;
         for pair in pairs {
-            if self.any_packs(pair, &pack_ray, ray, &mut scratch) {
+            if self.any_packs(pair, at, &pack_ray, ray, &mut scratch) {
                 return true;
             }
+            at += 2;
         }
         for pack in rest {
-            if self.any_packs(std::array::from_ref(pack), &pack_ray, ray, &mut scratch) {
+            if self.any_packs(std::array::from_ref(pack), at, &pack_ray, ray, &mut scratch) {
                 return true;
             }
+            at += 1;
         }
         false
     }
