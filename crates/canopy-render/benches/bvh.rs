@@ -1,5 +1,6 @@
-//! BVH benchmarks: build time of every builder on meshes and a reference scene, and
-//! closest-hit throughput of the resulting trees at every width.
+//! BVH benchmarks: build time of every builder on meshes and a reference scene,
+//! closest-hit throughput of the resulting trees at every width, and camera rays one by
+//! one against packets (`packets/`).
 //!
 //! `cargo bench -p canopy-render --bench bvh` (add a filter such as `build/dragon-202k`).
 //! The dragons are read from `$CANOPY_MESHES`, else `../shared/assets/meshes` next to
@@ -7,10 +8,10 @@
 
 mod common;
 
-use canopy_bvh::RayQuery;
 use canopy_bvh::{build, Aabb, BuildParams, Builder, Bvh4, Bvh8, OptimizeBudget, Ray};
+use canopy_bvh::{RayQuery, ALL_MASKS};
 use canopy_render::{load_scene, Accel, AccelKind, BvhWidth, Scene};
-use common::{camera_rays, incoherent_rays, mesh_dir};
+use common::{camera_rays, incoherent_rays, mesh_dir, stream_camera_rays};
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use std::time::Duration;
 
@@ -101,6 +102,42 @@ fn closest_hit(c: &mut Criterion) {
     }
 }
 
+/// Camera rays of sphere scenes as the wavefront traces them (a row's pixels, 8 samples
+/// each side by side): one by one (`intersect_each`) and in packets of 16
+/// (`intersect_coherent`), through the renderer's structure.
+fn camera_packets(c: &mut Criterion) {
+    for name in ["paper-1", "paper-2"] {
+        let scene = load_scene(name).expect("a built-in scene");
+        let accel = Accel::for_scene(
+            &scene,
+            AccelKind::default(),
+            BvhWidth::Eight,
+            &BuildParams::default(),
+            None,
+        );
+        let rays = stream_camera_rays(&scene, 128, 8);
+        let mut hits = vec![None; rays.len()];
+        let mut group = c.benchmark_group(format!("packets/{name}"));
+        group
+            .sample_size(10)
+            .warm_up_time(Duration::from_millis(500));
+        group.throughput(Throughput::Elements(rays.len() as u64));
+        group.bench_function("one-by-one", |b| {
+            b.iter(|| {
+                let h = &mut hits;
+                accel.intersect_each(rays.len(), ALL_MASKS, |i| rays[i], |i, x| h[i] = x)
+            })
+        });
+        group.bench_function("packets", |b| {
+            b.iter(|| {
+                let h = &mut hits;
+                accel.intersect_coherent(rays.len(), ALL_MASKS, |i| rays[i], |i, x| h[i] = x)
+            })
+        });
+        group.finish();
+    }
+}
+
 /// The trees issue 13 compares: how long each takes to build, its SAH and EPO (printed
 /// once), and incoherent closest hits through it as the renderer lays it out (8-wide,
 /// triangles packed). Rays come from one reference tree, so every tree traces the same.
@@ -153,5 +190,11 @@ fn tree_quality(c: &mut Criterion) {
     }
 }
 
-criterion_group!(benches, build_times, closest_hit, tree_quality);
+criterion_group!(
+    benches,
+    build_times,
+    closest_hit,
+    camera_packets,
+    tree_quality
+);
 criterion_main!(benches);

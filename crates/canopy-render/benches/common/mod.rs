@@ -35,6 +35,24 @@ pub fn camera_rays(scene: &Scene, side: u32) -> Vec<Ray> {
         .collect()
 }
 
+/// Camera rays as a wavefront stream holds them: a `side` x `side` image row by row,
+/// `samples` jittered rays through each pixel side by side (each from its own random
+/// stream, through the lens of a defocused camera).
+pub fn stream_camera_rays(scene: &Scene, side: u32, samples: u32) -> Vec<Ray> {
+    let camera = Camera::new(&scene.camera, side, side);
+    let mut rays = Vec::with_capacity((side * side * samples) as usize);
+    for pixel in 0..side * side {
+        let (x, y) = (pixel % side, pixel / side);
+        for sample in 0..samples {
+            let mut rng = Rng::for_sample(0, pixel as u64, sample as u64);
+            let s = (x as f32 + rng.next_f32()) / side as f32;
+            let t = (y as f32 + rng.next_f32()) / side as f32;
+            rays.push(camera.ray(s, t, &mut rng));
+        }
+    }
+    rays
+}
+
 /// Incoherent rays: from the surface points that camera rays through a `side` x `side`
 /// grid hit (backed off a little along the camera ray), in uniform random directions.
 pub fn incoherent_rays(scene: &Scene, accel: &canopy_render::Accel, side: u32) -> Vec<Ray> {
