@@ -14,7 +14,7 @@
 //! The lane loops are plain arrays: compiled inside the dispatch's AVX2 or AVX-512
 //! function they become vector instructions, and elsewhere they are the scalar twin.
 
-use super::traverse::{Closest, ClosestLeaves, PacketLeaves};
+use super::traverse::{lanes, Closest, ClosestLeaves, PacketLeaves};
 use super::{WideNode, EMPTY_SLOT};
 use crate::aabb::{fast_max, fast_min, FAR_SLACK};
 use crate::traverse::TraversalStack;
@@ -172,17 +172,6 @@ struct Entry {
     count: u32,
     lanes: u32,
     entry: [f32; PACKET],
-}
-
-#[inline(always)]
-pub(crate) fn lanes(mut mask: u32) -> impl Iterator<Item = usize> {
-    std::iter::from_fn(move || {
-        (mask != 0).then(|| {
-            let lane = mask.trailing_zeros() as usize;
-            mask &= mask - 1;
-            lane
-        })
-    })
 }
 
 /// The closest hit of each of `rays` (at most [`PACKET`]), as [`super::traverse::closest`]

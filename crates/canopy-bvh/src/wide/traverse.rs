@@ -4,7 +4,7 @@
 //! instruction set and runs the query inside a function compiled for it.
 
 use super::kernels::{NodeKernel, OctRay, ScalarNode};
-use super::packet::{lane_mask, lanes as packet_lanes, Lanes, PacketRays, PACKET};
+use super::packet::{lane_mask, Lanes, PacketRays, PACKET};
 use super::WideNode;
 use crate::sphere::SphereRecord;
 use crate::traverse::{TraversalCounter, TraversalStack};
@@ -207,7 +207,7 @@ where
             for (hit, t) in hit.iter_mut().zip(&t) {
                 *hit = !t.is_nan();
             }
-            for lane in packet_lanes(lane_mask(&hit) & lanes.active) {
+            for lane in self::lanes(lane_mask(&hit) & lanes.active) {
                 let hit = t[lane].into_hit(prim);
                 if best[lane].is_none_or(|b| hit.is_before(&b)) {
                     (t_max[lane], best[lane]) = (hit.t, Some(hit));
@@ -307,8 +307,9 @@ fn leaf_packs(packs: &[TrianglePack], first: u32, count: u32) -> &[TrianglePack]
     &packs[start..start + (count as usize).div_ceil(PACK_LANES)]
 }
 
+/// The set bits of `mask`, lowest first.
 #[inline(always)]
-fn lanes(mut mask: u32) -> impl Iterator<Item = usize> {
+pub(crate) fn lanes(mut mask: u32) -> impl Iterator<Item = usize> {
     std::iter::from_fn(move || {
         (mask != 0).then(|| {
             let lane = mask.trailing_zeros() as usize;
