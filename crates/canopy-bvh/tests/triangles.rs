@@ -9,7 +9,7 @@ use common::uniform;
 use canopy_bvh::{
     build, build_with_clipper, intersect_triangle, split_box, split_triangle, Aabb, Blas,
     BlasParams, BuildParams, Builder, Bvh2, Bvh4, Bvh8, BvhN, BvhWidth, Geometry, GpuBvh, Hit, Isa,
-    PrimHit, Ray, RayQuery, ShearedRay, Tree, TreeView, ALL_MASKS, PREFETCH_ABOVE_BYTES,
+    PrimHit, Ray, RayQuery, ShearedRay, Tree, TreeView, ALL_MASKS, PACKET, PREFETCH_ABOVE_BYTES,
 };
 use glam::Vec3;
 use proptest::prelude::*;
@@ -114,8 +114,14 @@ where
     assert_eq!(wide.has_triangle_packs(), has_triangles, "{name}");
     for isa in Isa::supported() {
         wide.set_isa(isa).unwrap();
-        for ray in rays {
+        let packets = wide.closest_coherent(prims, rays);
+        for (ray, packet) in rays.iter().zip(packets) {
             let expected = brute_force(prims, ray);
+            assert_eq!(
+                bits(packet),
+                bits(expected),
+                "{name} {isa}: closest hit in a packet for {ray:?}"
+            );
             assert_eq!(
                 bits(wide.closest(prims, ray)),
                 bits(expected),
@@ -130,10 +136,12 @@ where
     }
 }
 
-/// Closest and any hit with the boxes tested by the closure.
+/// Closest and any hit with the boxes tested by the closure, and closest hits of a
+/// batch traced in packets.
 trait Queries {
     fn closest(&self, prims: &[Prim], ray: &Ray) -> Option<Hit>;
     fn any(&self, prims: &[Prim], ray: &Ray) -> bool;
+    fn closest_coherent(&self, prims: &[Prim], rays: &[Ray]) -> Vec<Option<Hit>>;
 }
 
 macro_rules! queries {
@@ -147,6 +155,14 @@ macro_rules! queries {
             }
             fn any(&self, prims: &[Prim], ray: &Ray) -> bool {
                 self.occluded(ray, |p, r| prims[p as usize].hit(r).is_some())
+            }
+            fn closest_coherent(&self, prims: &[Prim], rays: &[Ray]) -> Vec<Option<Hit>> {
+                let mut hits = vec![None; rays.len()];
+                self.intersect_coherent(rays.len(), |i| rays[i], |i, h| hits[i] = h, |p, r| {
+                    assert!(matches!(prims[p as usize], Prim::Box(_)), "triangle {p} sent to the closure");
+                    prims[p as usize].hit(r)
+                });
+                hits
             }
         }
     )*};
@@ -222,6 +238,23 @@ fn rays_at_features(prims: &[Prim], origins: &[Vec3]) -> Vec<Ray> {
         .collect()
 }
 
+/// Packets' worth of coherent rays: from each origin, [`PACKET`] rays spread a little
+/// about a vertex, edge midpoint or centroid (the first aimed at it exactly), as camera
+/// rays of neighbouring pixels are; some with a short range.
+fn bundles_at_features(prims: &[Prim], origins: &[Vec3]) -> Vec<Ray> {
+    let exact = rays_at_features(prims, origins);
+    let mut bundles = Vec::new();
+    for (k, ray) in exact.iter().enumerate() {
+        for lane in 0..PACKET {
+            let spread = 0.002 * lane as f32;
+            let dir = ray.dir + Vec3::new(spread, -0.5 * spread, 0.3 * spread);
+            let t_max = if k % 3 == 0 { 5.0 } else { f32::INFINITY };
+            bundles.push(Ray::new(ray.origin, dir, 0.0, t_max));
+        }
+    }
+    bundles
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(24))]
 
@@ -236,6 +269,7 @@ proptest! {
         let params = BuildParams { max_leaf_size, max_duplication, ..BuildParams::default() };
         let mut all = rays;
         all.extend(rays_at_features(&prims, &origins));
+        all.extend(bundles_at_features(&prims, &origins));
         check(&prims, &all, &params);
     }
 }
@@ -268,6 +302,90 @@ fn grid_rays_through_shared_vertices_hit_in_every_kernel() {
         );
     }
     check(&prims, &rays, &BuildParams::default());
+}
+
+/// Packets whose rays tie on duplicated triangles, pass exactly through shared vertices
+/// and edges, run most steeply along different axes within one packet (so the packet
+/// tests its leaves ray by ray), or cannot be traced: every layout and instruction set
+/// answers each ray as brute force does, bit for bit.
+#[test]
+fn packets_of_awkward_rays_match_brute_force_in_every_layout() {
+    let n = 8;
+    let at = |i: usize, j: usize| Vec3::new(i as f32 / n as f32, 0.0, j as f32 / n as f32);
+    let mut prims = Vec::new();
+    for i in 0..n {
+        for j in 0..n {
+            prims.push(Prim::Triangle([at(i, j), at(i + 1, j), at(i + 1, j + 1)]));
+            prims.push(Prim::Triangle([at(i, j), at(i + 1, j + 1), at(i, j + 1)]));
+            if (i + j) % 5 == 0 {
+                // The same triangle again, later: ties go to the lower index.
+                prims.push(prims[prims.len() - 2].clone());
+            }
+        }
+    }
+    for k in 0..12 {
+        let a = Vec3::new(0.1 * k as f32, 0.3, 0.5);
+        prims.push(Prim::Box(Aabb::new(a, a + 0.05)));
+        prims.push(Prim::Triangle([
+            a,
+            a + Vec3::X,
+            a + Vec3::new(0.0, 0.4, 0.9),
+        ]));
+    }
+    let mut rays = Vec::new();
+    let eye = Vec3::new(0.5, 2.0, 0.5);
+    for i in 0..=2 * n {
+        for j in 0..=2 * n {
+            let p = Vec3::new(i as f32 / (2 * n) as f32, 0.0, j as f32 / (2 * n) as f32);
+            // Straight down through vertices and edge midpoints, and from one eye.
+            rays.push(Ray::new(p + Vec3::Y, -Vec3::Y, 0.0, f32::INFINITY));
+            rays.push(Ray::new(eye, p - eye, 0.0, f32::INFINITY));
+            // Alternately steepest along x and y: packets that mix shears.
+            let sideways = Vec3::new(if (i + j) % 2 == 0 { 3.0 } else { 0.2 }, -1.0, 0.1);
+            rays.push(Ray::new(p - sideways, sideways, 0.0, 2.0));
+        }
+    }
+    rays.insert(37, Ray::new(Vec3::NAN, -Vec3::Y, 0.0, f32::INFINITY));
+    rays.insert(70, Ray::new(eye, Vec3::ZERO, 0.0, f32::INFINITY));
+    rays.insert(90, Ray::new(eye, -Vec3::Y, 0.0, f32::NAN));
+    // Rays that cannot be traced miss everything (see `Ray`).
+    let expected: Vec<Option<Hit>> = rays
+        .iter()
+        .map(|r| brute_force(&prims, r).filter(|_| r.is_traceable()))
+        .collect();
+    assert!(expected.iter().filter(|h| h.is_some()).count() > rays.len() / 2);
+    assert!(
+        expected
+            .iter()
+            .flatten()
+            .any(|h| matches!(prims[h.prim as usize], Prim::Box(_))),
+        "some rays stop on boxes"
+    );
+    let boxes: Vec<Aabb> = prims.iter().map(Prim::bounds).collect();
+    let test = |p: u32, r: &Ray| prims[p as usize].hit(r);
+    for leaf in [1, 4, 8] {
+        let params = BuildParams {
+            max_leaf_size: leaf,
+            ..BuildParams::default()
+        };
+        let bvh = build(Builder::BinnedSah, &boxes, &params);
+        for (layout, mut tree) in every_layout(&bvh, &prims) {
+            for isa in Isa::supported() {
+                if tree.set_isa(isa).is_err() {
+                    continue;
+                }
+                let mut hits = vec![None; rays.len()];
+                tree.intersect_coherent(rays.len(), |i| rays[i], |i, h| hits[i] = h, test);
+                for (i, ray) in rays.iter().enumerate() {
+                    assert_eq!(
+                        bits(hits[i]),
+                        bits(expected[i]),
+                        "{layout}, leaves of {leaf}, {isa}: ray {i} {ray:?}"
+                    );
+                }
+            }
+        }
+    }
 }
 
 /// Long slivers in every direction, where spatial splits pay: `sbvh` cuts many of them

@@ -102,11 +102,12 @@ fn closest_hit(c: &mut Criterion) {
     }
 }
 
-/// Camera rays of sphere scenes as the wavefront traces them (a row's pixels, 8 samples
-/// each side by side): one by one (`intersect_each`) and in packets of 16
-/// (`intersect_coherent`), through the renderer's structure.
+/// Camera rays as the wavefront traces them (a row's pixels, 8 samples each side by
+/// side): one by one (`intersect_each`) and in packets of 16 (`intersect_coherent`),
+/// through the renderer's structure, over spheres (paper-1) and a mesh with spheres
+/// (paper-3, paper-5).
 fn camera_packets(c: &mut Criterion) {
-    for name in ["paper-1", "paper-2"] {
+    for name in ["paper-1", "paper-3", "paper-5"] {
         let scene = load_scene(name).expect("a built-in scene");
         let accel = Accel::for_scene(
             &scene,

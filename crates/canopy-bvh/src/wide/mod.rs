@@ -10,6 +10,7 @@
 
 mod kernels;
 mod packet;
+mod packet_packs;
 mod refit;
 mod traverse;
 
@@ -21,6 +22,7 @@ use crate::{Aabb, Bvh2, BvhError, Hit, IntoHit, Isa, IsaError, Ray, SahCosts, Tr
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
 use packet::closest_packet;
+use packet_packs::PackedPacketLeaves;
 use rayon::prelude::*;
 use std::marker::PhantomData;
 use traverse::{closest, ClosureLeaves, PackedLeaves, Query, SphereLeaves};
@@ -495,10 +497,10 @@ where
 
     /// [`BvhN::intersect_each`] for coherent rays: rays that start near each other and
     /// run in similar directions (camera rays of neighbouring pixels). Trees that keep
-    /// their spheres ([`BvhN::store_spheres`]) trace them as packets of [`PACKET`]
-    /// consecutive rays, each sphere tested against the packet's rays at once; others
-    /// trace them one by one (packets that test triangles ray by ray measured slower).
-    /// The answers are the same.
+    /// their spheres ([`BvhN::store_spheres`]) or pack their triangles trace them as
+    /// packets of [`PACKET`] consecutive rays, each sphere and each triangle tested
+    /// against the packet's rays at once; others (whose leaves the closure tests) trace
+    /// them one by one. The answers are the same.
     pub fn intersect_coherent<R, A, F, P>(&self, count: usize, ray: R, answer: A, hit_prim: F)
     where
         R: FnMut(usize) -> Ray,
@@ -506,7 +508,7 @@ where
         F: FnMut(u32, &Ray) -> Option<P>,
         P: IntoHit,
     {
-        if !self.has_sphere_leaves() {
+        if !self.has_sphere_leaves() && self.packs.is_empty() {
             return self.intersect_each(count, ray, answer, hit_prim);
         }
         let each = PacketEach {
@@ -604,15 +606,21 @@ where
             for (lane, ray) in rays.iter_mut().enumerate() {
                 *ray = (self.ray)(start + lane);
             }
-            // `intersect_coherent` makes packets only of trees that keep their spheres.
-            let mut leaves = SphereLeaves {
-                prims: &bvh.prim_indices,
-                spheres: &bvh.spheres,
-                test: &mut self.test,
-            };
-            let hits = match bvh.nodes.is_empty() {
-                true => [None; PACKET],
-                false => closest_packet(&bvh.nodes, rays, &mut leaves),
+            // `intersect_coherent` makes packets only of trees that keep their spheres
+            // or pack their triangles.
+            let hits = if bvh.nodes.is_empty() {
+                [None; PACKET]
+            } else if bvh.packs.is_empty() {
+                let mut leaves = SphereLeaves {
+                    prims: &bvh.prim_indices,
+                    spheres: &bvh.spheres,
+                    test: &mut self.test,
+                };
+                closest_packet(&bvh.nodes, rays, &mut leaves)
+            } else {
+                let mut leaves =
+                    PackedPacketLeaves::<T, _>::new(&bvh.packs, &bvh.spheres, &mut self.test);
+                closest_packet(&bvh.nodes, rays, &mut leaves)
             };
             for (lane, hit) in hits.into_iter().take(rays.len()).enumerate() {
                 (self.answer)(start + lane, hit);

@@ -221,7 +221,7 @@ where
 /// ray's range): [`crate::intersect_sphere`] lane by lane, the same operations in the same
 /// order, so the same distances.
 #[inline(always)]
-fn sphere_lanes(
+pub(crate) fn sphere_lanes(
     sphere: &SphereRecord,
     packet: &PacketRays,
     t_max: &[f32; PACKET],
@@ -302,7 +302,7 @@ impl<T, F> PackedLeaves<'_, T, F> {
 
 /// The packs holding `count` leaf entries from position `first` (leaves start on a pack).
 #[inline(always)]
-fn leaf_packs(packs: &[TrianglePack], first: u32, count: u32) -> &[TrianglePack] {
+pub(crate) fn leaf_packs(packs: &[TrianglePack], first: u32, count: u32) -> &[TrianglePack] {
     let start = first as usize / PACK_LANES;
     &packs[start..start + (count as usize).div_ceil(PACK_LANES)]
 }

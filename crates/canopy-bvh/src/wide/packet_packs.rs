@@ -1,0 +1,241 @@
+//! Leaves of triangle packs tested for a packet's rays: each triangle against all the
+//! packet's rays at once (one lane per ray) rather than each ray against a pack's
+//! triangles, so a leaf costs one test per triangle for the whole packet.
+//!
+//! The test is the watertight one ([`crate::triangle`]), operation for operation: the
+//! rays of a packet are sheared as the single-ray test shears them, and where they all
+//! run most steeply along the same axis, the same way (camera rays of neighbouring
+//! pixels nearly always do), a triangle's permuted vertices are shared by every lane.
+//! Each ray then gets the distance and barycentrics the pack kernels give it, bit for
+//! bit. A packet whose rays are sheared differently tests its leaves ray by ray.
+
+use super::packet::{lane_mask, Lanes, PACKET};
+use super::traverse::{lanes, leaf_packs, sphere_lanes, PackedLeaves, PacketLeaves};
+use crate::sphere::SphereRecord;
+use crate::triangle::{PackHits, PackKernel, ShearedRay, TrianglePack, PACK_LANES};
+use crate::{Hit, IntoHit, PrimHit, Ray};
+use std::marker::PhantomData;
+
+/// A packet's rays prepared for watertight triangle tests, all sheared along the same
+/// axes.
+pub(crate) struct PacketShear {
+    /// The axes (kx, ky, kz) every lane is sheared along.
+    k: [usize; 3],
+    /// Each lane's origin, axes in that order.
+    o: [[f32; PACKET]; 3],
+    /// Each lane's shear ([`ShearedRay::shear`]), x, y and z.
+    shear: [[f32; PACKET]; 3],
+}
+
+impl PacketShear {
+    /// The shears of the traceable rays among `rays`; `None` where they are not all
+    /// sheared along the same axes. Other lanes hold zeros and are never tested.
+    fn new(rays: &[Ray]) -> Option<Self> {
+        let mut axes = None;
+        let mut packet = Self {
+            k: [0, 1, 2],
+            o: [[0.0; PACKET]; 3],
+            shear: [[0.0; PACKET]; 3],
+        };
+        for (lane, ray) in rays.iter().enumerate().filter(|(_, r)| r.is_traceable()) {
+            let s = ShearedRay::new(ray);
+            let k = [s.kx, s.ky, s.kz];
+            if *axes.get_or_insert(k) != k {
+                return None;
+            }
+            for (axis, &k) in k.iter().enumerate() {
+                packet.o[axis][lane] = ray.origin[k];
+            }
+            for (axis, shear) in s.shear.to_array().into_iter().enumerate() {
+                packet.shear[axis][lane] = shear;
+            }
+        }
+        packet.k = axes?;
+        Some(packet)
+    }
+
+    /// The lanes of `active` whose rays hit the triangle `v` (vertex, then axis) within
+    /// `[t_min, t_max]`, each lane's hit written to `hits`: `EdgeInput::hit` of the
+    /// single-ray test, lane by lane.
+    #[inline(always)]
+    fn hit_lanes(
+        &self,
+        v: [[f32; 3]; 3],
+        active: u32,
+        t_min: &[f32; PACKET],
+        t_max: &[f32; PACKET],
+        hits: &mut LaneHits,
+    ) -> u32 {
+        let [kx, ky, kz] = self.k;
+        let permuted = v.map(|p| [p[kx], p[ky], p[kz]]);
+        // The sheared 2D vertices of `lane`, and each vertex's distance along z.
+        let sheared = |lane: usize| {
+            let [sx, sy] = [self.shear[0][lane], self.shear[1][lane]];
+            permuted.map(|p| {
+                let rel = [
+                    p[0] - self.o[0][lane],
+                    p[1] - self.o[1][lane],
+                    p[2] - self.o[2][lane],
+                ];
+                [rel[0] - sx * rel[2], rel[1] - sy * rel[2], rel[2]]
+            })
+        };
+        let mut edges = [[0.0f32; PACKET]; 3];
+        let mut zero = [false; PACKET];
+        for lane in 0..PACKET {
+            let [a, b, c] = sheared(lane);
+            let u = c[0] * b[1] - c[1] * b[0];
+            let v = a[0] * c[1] - a[1] * c[0];
+            let w = b[0] * a[1] - b[1] * a[0];
+            (edges[0][lane], edges[1][lane], edges[2][lane]) = (u, v, w);
+            zero[lane] = u == 0.0 || v == 0.0 || w == 0.0;
+        }
+        // Edge functions exactly zero in single precision, again in double (rare).
+        for lane in lanes(lane_mask(&zero) & active) {
+            let [a, b, c] = sheared(lane);
+            let d =
+                |p: f32, q: f32, r: f32, s: f32| (p as f64 * q as f64 - r as f64 * s as f64) as f32;
+            edges[0][lane] = d(c[0], b[1], c[1], b[0]);
+            edges[1][lane] = d(a[0], c[1], a[1], c[0]);
+            edges[2][lane] = d(b[0], a[1], b[1], a[0]);
+        }
+        let mut hit = [false; PACKET];
+        let mut det = [0.0f32; PACKET];
+        for lane in 0..PACKET {
+            let [u, v, w] = [edges[0][lane], edges[1][lane], edges[2][lane]];
+            let outside = (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0);
+            let d = u + v + w;
+            let sz = self.shear[2][lane];
+            let z = permuted.map(|p| sz * (p[2] - self.o[2][lane]));
+            let t = (u * z[0] + v * z[1] + w * z[2]) / d;
+            hit[lane] =
+                !outside && d != 0.0 && d.is_finite() && t >= t_min[lane] && t <= t_max[lane];
+            (det[lane], hits.t[lane]) = (d, t);
+        }
+        let mask = lane_mask(&hit) & active;
+        for lane in lanes(mask) {
+            hits.u[lane] = edges[1][lane] / det[lane];
+            hits.v[lane] = edges[2][lane] / det[lane];
+        }
+        mask
+    }
+}
+
+/// Each lane's hit of the last triangle tested, valid in the lanes it returned.
+struct LaneHits {
+    t: [f32; PACKET],
+    u: [f32; PACKET],
+    v: [f32; PACKET],
+}
+
+/// Keeps `hit` as `lane`'s closest if it comes before the best so far (ties to the lower
+/// index), shrinking the lane's range to it.
+#[inline(always)]
+fn offer(lane: usize, hit: Hit, t_max: &mut [f32; PACKET], best: &mut [Option<Hit>; PACKET]) {
+    if best[lane].is_none_or(|b| hit.is_before(&b)) {
+        (t_max[lane], best[lane]) = (hit.t, Some(hit));
+    }
+}
+
+/// Leaves stored as triangle packs ([`PackedLeaves`]), tested for a packet's rays.
+pub(crate) struct PackedPacketLeaves<'a, T, F> {
+    pub packs: &'a [TrianglePack],
+    /// Empty, or the sphere at each lane of `packs` (four a pack).
+    pub spheres: &'a [SphereRecord],
+    pub test: F,
+    /// The packet's shears, made at its first leaf: `Some(None)` where they differ.
+    shear: Option<Option<PacketShear>>,
+    kernel: PhantomData<T>,
+}
+
+impl<'a, T, F> PackedPacketLeaves<'a, T, F> {
+    pub fn new(packs: &'a [TrianglePack], spheres: &'a [SphereRecord], test: F) -> Self {
+        Self {
+            packs,
+            spheres,
+            test,
+            shear: None,
+            kernel: PhantomData,
+        }
+    }
+}
+
+impl<T, F, P> PacketLeaves for PackedPacketLeaves<'_, T, F>
+where
+    T: PackKernel,
+    F: FnMut(u32, &Ray) -> Option<P>,
+    P: IntoHit,
+{
+    #[inline(always)]
+    fn closest_lanes(
+        &mut self,
+        first: u32,
+        count: u32,
+        group: Lanes,
+        t_max: &mut [f32; PACKET],
+        best: &mut [Option<Hit>; PACKET],
+    ) {
+        let Some(shear) = self
+            .shear
+            .get_or_insert_with(|| PacketShear::new(group.rays))
+        else {
+            // Rays sheared differently: the single-ray pack test, one lane at a time.
+            let mut single = PackedLeaves::<T, _> {
+                packs: self.packs,
+                spheres: self.spheres,
+                ray: None,
+                hits: PackHits::default(),
+                test: &mut self.test,
+                kernel: PhantomData,
+            };
+            group.each(&mut single, first, count, t_max, best);
+            return;
+        };
+        let first_pack = first as usize / PACK_LANES;
+        let mut hits = LaneHits {
+            t: [0.0; PACKET],
+            u: [0.0; PACKET],
+            v: [0.0; PACKET],
+        };
+        for (k, pack) in leaf_packs(self.packs, first, count).iter().enumerate() {
+            for lane in lanes(pack.triangles) {
+                let v = [0, 1, 2].map(|vertex| pack.v[vertex].map(|axis| axis[lane]));
+                let hit = shear.hit_lanes(v, group.active, &group.packet.t_min, t_max, &mut hits);
+                for ray in lanes(hit) {
+                    let prim_hit = PrimHit {
+                        t: hits.t[ray],
+                        u: hits.u[ray],
+                        v: hits.v[ray],
+                    };
+                    offer(ray, Hit::new(pack.prim[lane], prim_hit), t_max, best);
+                }
+            }
+            for lane in lanes(pack.others) {
+                let prim = pack.prim[lane];
+                match self.spheres.get((first_pack + k) * PACK_LANES + lane) {
+                    Some(sphere) if sphere.is_sphere() => {
+                        let t = sphere_lanes(sphere, group.packet, t_max);
+                        let mut hit = [false; PACKET];
+                        for (hit, t) in hit.iter_mut().zip(&t) {
+                            *hit = !t.is_nan();
+                        }
+                        for ray in lanes(lane_mask(&hit) & group.active) {
+                            offer(ray, t[ray].into_hit(prim), t_max, best);
+                        }
+                    }
+                    _ => {
+                        for ray in lanes(group.active) {
+                            let single = Ray {
+                                t_max: t_max[ray],
+                                ..group.rays[ray]
+                            };
+                            if let Some(hit) = (self.test)(prim, &single) {
+                                offer(ray, hit.into_hit(prim), t_max, best);
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
