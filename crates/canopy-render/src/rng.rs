@@ -53,14 +53,72 @@ pub fn pcg4d(mut v: [u32; 4]) -> [u32; 4] {
     v
 }
 
+/// [`pcg4d`] of many inputs at once, `v[word][lane]`: the same operations lane by lane,
+/// written as loops over lanes so that they compile to vector instructions.
+#[inline(always)]
+pub fn pcg4d_lanes<const L: usize>(v: &mut [[u32; L]; 4]) {
+    for word in v.iter_mut() {
+        for x in word.iter_mut() {
+            *x = x.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+        }
+    }
+    let mix = |v: &mut [[u32; L]; 4]| {
+        let [a, b, c, d] = v;
+        let lanes = a
+            .iter_mut()
+            .zip(b.iter_mut())
+            .zip(c.iter_mut())
+            .zip(d.iter_mut());
+        for (((a, b), c), d) in lanes {
+            *a = a.wrapping_add(b.wrapping_mul(*d));
+            *b = b.wrapping_add(c.wrapping_mul(*a));
+            *c = c.wrapping_add(a.wrapping_mul(*b));
+            *d = d.wrapping_add(b.wrapping_mul(*c));
+        }
+    };
+    mix(v);
+    for word in v.iter_mut() {
+        for x in word.iter_mut() {
+            *x ^= *x >> 16;
+        }
+    }
+    mix(v);
+}
+
+/// The float [`Rng::next_f32`] makes of `word`.
+#[inline(always)]
+pub fn unit_f32(word: u32) -> f32 {
+    (word >> 8) as f32 * (1.0 / (1u32 << 24) as f32)
+}
+
 impl Rng {
     /// The generator of one sample of one pixel.
     pub fn for_sample(seed: u64, pixel: u64, sample: u64) -> Self {
         Self {
-            key: [fold64(pixel), fold64(sample), fold64(seed)],
+            key: Self::key(seed, pixel, sample),
             counter: 0,
             words: [0; 4],
             next: 4,
+        }
+    }
+
+    /// The key of [`Rng::for_sample`]'s stream: its first four words are
+    /// `pcg4d([key[0], key[1], key[2], 0])`.
+    #[inline(always)]
+    pub fn key(seed: u64, pixel: u64, sample: u64) -> [u32; 3] {
+        [fold64(pixel), fold64(sample), fold64(seed)]
+    }
+
+    /// The generator of `key` ([`Rng::key`]) that has drawn `drawn` (at most 4) of its
+    /// first four words, `words`, computed by the caller.
+    #[inline(always)]
+    pub fn after_first_words(key: [u32; 3], words: [u32; 4], drawn: usize) -> Self {
+        debug_assert!(drawn <= 4);
+        Self {
+            key,
+            counter: 1,
+            words,
+            next: drawn,
         }
     }
 
@@ -80,7 +138,7 @@ impl Rng {
     /// Uniform in `[0, 1)`.
     #[inline]
     pub fn next_f32(&mut self) -> f32 {
-        (self.next_u32() >> 8) as f32 * (1.0 / (1u32 << 24) as f32)
+        unit_f32(self.next_u32())
     }
 
     /// Uniform on the unit sphere.
@@ -106,6 +164,28 @@ impl Rng {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn hashing_in_lanes_is_hashing_each_lane() {
+        let mut words = [[0u32; 5]; 4];
+        let inputs: [[u32; 4]; 5] = [
+            [0, 0, 0, 0],
+            [1, 2, 3, 4],
+            [u32::MAX, 7, 0x8000_0000, 1],
+            [fold64(123_456_789_012), 77, 5, 0],
+            [0xdead_beef, 0x1234_5678, 9, 0xffff],
+        ];
+        for (lane, input) in inputs.iter().enumerate() {
+            for (word, &x) in input.iter().enumerate() {
+                words[word][lane] = x;
+            }
+        }
+        pcg4d_lanes(&mut words);
+        for (lane, input) in inputs.iter().enumerate() {
+            let expected = pcg4d(*input);
+            assert_eq!([0, 1, 2, 3].map(|w| words[w][lane]), expected, "lane {lane}");
+        }
+    }
 
     #[test]
     fn same_key_gives_same_stream() {

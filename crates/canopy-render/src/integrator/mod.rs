@@ -1,6 +1,7 @@
 //! Unidirectional path tracing over image rows, in parallel with rayon. The estimators
 //! of one sample are in [`path`].
 
+mod camera_rays;
 mod path;
 mod wavefront;
 
@@ -275,12 +276,7 @@ fn accumulate<P: Probe>(
     }
     let camera = Camera::new(&scene.camera, settings.width, settings.height);
     let lights = Lights::new(scene);
-    let tracer = Tracer {
-        scene,
-        accel,
-        lights: &lights,
-        see_through: scene.has_see_through(),
-    };
+    let tracer = Tracer::new(scene, accel, &lights);
     let first_sample = accumulator.samples;
     let totals = Totals::default();
     let start = Instant::now();

@@ -34,6 +34,21 @@ pub(super) struct Tracer<'a> {
     pub lights: &'a Lights,
     /// Whether some surfaces let rays through (alpha modes), so that hits must be tested.
     pub see_through: bool,
+    /// Whether light sampling has anything to sample: emitters, or a background that is
+    /// sampled. Without, vertices make no shadow tests (and draw no random numbers for them).
+    pub samples_light: bool,
+}
+
+impl<'a> Tracer<'a> {
+    pub fn new(scene: &'a Scene, accel: &'a Accel, lights: &'a Lights) -> Self {
+        Self {
+            scene,
+            accel,
+            lights,
+            see_through: scene.has_see_through(),
+            samples_light: !lights.is_empty() || scene.background.is_sampled(),
+        }
+    }
 }
 
 /// Rays traced by one worker, and its probe.
@@ -213,7 +228,7 @@ impl Tracer<'_> {
         if !material.scatters() || path.segments == settings.max_depth {
             return end;
         }
-        let direct = (!material.is_delta()).then(|| DirectLight {
+        let direct = (!material.is_delta() && self.samples_light).then(|| DirectLight {
             tests: self.light_tests(material, &path.ray, &surface, rng),
             throughput: path.throughput,
         });

@@ -9,7 +9,8 @@
 //! The arithmetic is the depth-first schedule's ([`super::path`]) and each path draws
 //! from its own random stream in the same order, so the image is the same bit for bit.
 
-use super::path::{PathState, Tracer, Vertex, Work};
+use super::camera_rays::{camera_rays, PassSamples};
+use super::path::{DirectLight, PathState, Tracer, Work};
 use super::Probe;
 use crate::camera::Camera;
 use crate::rng::Rng;
@@ -78,22 +79,25 @@ fn render_passes<P: Probe>(
     while start < samples.end {
         let samples = per_pass.min(samples.end - start);
         stream.clear_results(pixels * samples as usize);
-        for (i, _) in block.sums.iter().enumerate() {
-            let x = block.x as usize + i;
-            let index = block.y as u64 * settings.width as u64 + x as u64;
-            for k in 0..samples {
-                let sample = start + k;
-                let mut rng = Rng::for_sample(settings.seed, index, sample as u64);
-                let s = (x as f32 + rng.next_f32()) / settings.width as f32;
-                let t = (block.y as f32 + rng.next_f32()) / settings.height as f32;
-                let ray = camera.ray(s, t, &mut rng);
-                stream.paths.push(StreamPath {
-                    path: PathState::new(ray),
-                    rng,
-                    slot: (i * samples as usize + k as usize) as u32,
-                });
-            }
-        }
+        let pass = PassSamples {
+            width: settings.width,
+            height: settings.height,
+            seed: settings.seed,
+            first_x: block.x,
+            y: block.y,
+            pixels,
+            samples: start..start + samples,
+        };
+        // Slots are pixel-major, as the rays come.
+        let mut slot = 0;
+        camera_rays(camera, &pass, |ray, rng| {
+            stream.paths.push(StreamPath {
+                path: PathState::new(ray),
+                rng,
+                slot,
+            });
+            slot += 1;
+        });
         stream.trace(tracer, work);
         for (i, sum) in block.sums.iter_mut().enumerate() {
             for l in &stream.results[i * samples as usize..(i + 1) * samples as usize] {
@@ -114,7 +118,10 @@ fn render_passes<P: Probe>(
 struct Stream {
     paths: Vec<StreamPath>,
     hits: Vec<Option<Hit>>,
-    vertices: Vec<Vertex>,
+    /// Whether each path goes on after the stage's vertex.
+    goes_on: Vec<bool>,
+    /// The light sampling of the stage's vertices that sampled light: path and tests.
+    directs: Vec<(u32, DirectLight)>,
     /// Shadow rays of the stage, in path order, and whether each is blocked.
     shadows: Vec<Ray>,
     blocked: Vec<bool>,
@@ -135,25 +142,30 @@ impl Stream {
         while !self.paths.is_empty() {
             self.closest_hits(tracer, coherent, work);
             coherent = false;
-            self.vertices.clear();
-            for (p, hit) in self.paths.iter_mut().zip(&self.hits) {
-                self.vertices
-                    .push(tracer.vertex(&mut p.path, *hit, &mut p.rng));
+            self.goes_on.clear();
+            self.directs.clear();
+            for (i, (p, hit)) in self.paths.iter_mut().zip(&self.hits).enumerate() {
+                let vertex = tracer.vertex(&mut p.path, *hit, &mut p.rng);
+                if let Some(direct) = vertex.direct {
+                    self.directs.push((i as u32, direct));
+                }
+                self.goes_on.push(vertex.goes_on);
             }
             self.shadow_rays(tracer, work);
             // Light that arrives, in path order, then the paths that ended leave.
             let mut answers = self.blocked.iter();
-            for (p, vertex) in self.paths.iter_mut().zip(&self.vertices) {
-                if let Some(direct) = &vertex.direct {
-                    p.path.radiance += direct.arriving(|_| *answers.next().expect("answered"));
-                }
-                if !vertex.goes_on {
+            for (i, direct) in &self.directs {
+                let arriving = direct.arriving(|_| *answers.next().expect("answered"));
+                self.paths[*i as usize].path.radiance += arriving;
+            }
+            for (p, goes_on) in self.paths.iter().zip(&self.goes_on) {
+                if !goes_on {
                     self.results[p.slot as usize] = p.path.radiance;
                 }
             }
             // Backwards, so that each path swapped in has been looked at already.
-            for (i, vertex) in self.vertices.iter().enumerate().rev() {
-                if !vertex.goes_on {
+            for (i, goes_on) in self.goes_on.iter().enumerate().rev() {
+                if !goes_on {
                     self.paths.swap_remove(i);
                 }
             }
@@ -188,10 +200,8 @@ impl Stream {
     fn shadow_rays<P: Probe>(&mut self, tracer: &Tracer, work: &mut Work<P>) {
         self.blocked.clear();
         if tracer.see_through || P::MEASURES {
-            for (p, vertex) in self.paths.iter_mut().zip(&self.vertices) {
-                let Some(direct) = &vertex.direct else {
-                    continue;
-                };
+            for (i, direct) in &self.directs {
+                let p = &mut self.paths[*i as usize];
                 for test in direct.tests.iter().flatten() {
                     let blocked = tracer.occluded(&test.ray, &mut p.rng, work);
                     self.blocked.push(blocked);
@@ -200,11 +210,9 @@ impl Stream {
             return;
         }
         self.shadows.clear();
-        for vertex in &self.vertices {
-            if let Some(direct) = &vertex.direct {
-                self.shadows
-                    .extend(direct.tests.iter().flatten().map(|t| t.ray));
-            }
+        for (_, direct) in &self.directs {
+            self.shadows
+                .extend(direct.tests.iter().flatten().map(|t| t.ray));
         }
         let n = self.shadows.len();
         work.rays += n as u64;
@@ -238,12 +246,7 @@ mod tests {
             None,
         );
         let lights = Lights::new(&scene);
-        let tracer = Tracer {
-            scene: &scene,
-            accel: &accel,
-            lights: &lights,
-            see_through: false,
-        };
+        let tracer = Tracer::new(&scene, &accel, &lights);
         let camera = Camera::new(&scene.camera, 24, 16);
         let row = |stream_paths: usize| {
             let mut sums = vec![Vec3::ZERO; 20];
