@@ -42,7 +42,16 @@ def sky_bitmap(width: int = 64, height: int = 256) -> np.ndarray:
 
 
 def cuboid_triangles(lo, hi, rotation, translation) -> np.ndarray:
-    """The 12 triangles of a box (local corners, turned and moved), outward wound."""
+    """The 12 triangles of a box (local corners, turned and moved), outward wound.
+
+    A flat box (a quad light) is seen from both sides in canopy; Mitsuba's area lights
+    emit on their front only, and its two coincident faces would shadow each other, so
+    each flat side is moved out by a hair (1e-5 of the box's size): a ray from either
+    side then meets the face that looks its way."""
+    lo, hi = np.array(lo, np.float64), np.array(hi, np.float64)
+    hair = 1e-5 * max(float(np.max(hi - lo)), 1.0)
+    flat = hi - lo <= 0
+    lo, hi = np.where(flat, lo - hair, lo), np.where(flat, hi + hair, hi)
     x0, y0, z0 = lo
     x1, y1, z1 = hi
     c = np.array([[x0, y0, z0], [x1, y0, z0], [x1, y1, z0], [x0, y1, z0],

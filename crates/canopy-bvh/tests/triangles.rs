@@ -274,20 +274,32 @@ proptest! {
     }
 }
 
+/// The unit square at y = 0 as an `n` x `n` grid of cells, two triangles each; with
+/// `repeat_every` > 0, every cell whose `i + j` it divides has its first triangle once
+/// more after its second (ties go to the lower index).
+fn unit_grid(n: usize, repeat_every: usize) -> Vec<Prim> {
+    let at = |i: usize, j: usize| Vec3::new(i as f32 / n as f32, 0.0, j as f32 / n as f32);
+    let mut prims = Vec::new();
+    for i in 0..n {
+        for j in 0..n {
+            let first = Prim::Triangle([at(i, j), at(i + 1, j), at(i + 1, j + 1)]);
+            prims.push(first.clone());
+            prims.push(Prim::Triangle([at(i, j), at(i + 1, j + 1), at(i, j + 1)]));
+            if repeat_every > 0 && (i + j) % repeat_every == 0 {
+                prims.push(first);
+            }
+        }
+    }
+    prims
+}
+
 /// A closed, finely tessellated grid with rays straight down through its vertices and edge
 /// midpoints, from inside the bounding boxes: every ray must hit, with identical answers
 /// from every kernel.
 #[test]
 fn grid_rays_through_shared_vertices_hit_in_every_kernel() {
     let n = 12;
-    let at = |i: usize, j: usize| Vec3::new(i as f32 / n as f32, 0.0, j as f32 / n as f32);
-    let mut prims = Vec::new();
-    for i in 0..n {
-        for j in 0..n {
-            prims.push(Prim::Triangle([at(i, j), at(i + 1, j), at(i + 1, j + 1)]));
-            prims.push(Prim::Triangle([at(i, j), at(i + 1, j + 1), at(i, j + 1)]));
-        }
-    }
+    let prims = unit_grid(n, 0);
     let mut rays = Vec::new();
     for i in 0..=2 * n {
         for j in 0..=2 * n {
@@ -311,18 +323,7 @@ fn grid_rays_through_shared_vertices_hit_in_every_kernel() {
 #[test]
 fn packets_of_awkward_rays_match_brute_force_in_every_layout() {
     let n = 8;
-    let at = |i: usize, j: usize| Vec3::new(i as f32 / n as f32, 0.0, j as f32 / n as f32);
-    let mut prims = Vec::new();
-    for i in 0..n {
-        for j in 0..n {
-            prims.push(Prim::Triangle([at(i, j), at(i + 1, j), at(i + 1, j + 1)]));
-            prims.push(Prim::Triangle([at(i, j), at(i + 1, j + 1), at(i, j + 1)]));
-            if (i + j) % 5 == 0 {
-                // The same triangle again, later: ties go to the lower index.
-                prims.push(prims[prims.len() - 2].clone());
-            }
-        }
-    }
+    let mut prims = unit_grid(n, 5);
     for k in 0..12 {
         let a = Vec3::new(0.1 * k as f32, 0.3, 0.5);
         prims.push(Prim::Box(Aabb::new(a, a + 0.05)));

@@ -183,7 +183,11 @@ mod tests {
         pcg4d_lanes(&mut words);
         for (lane, input) in inputs.iter().enumerate() {
             let expected = pcg4d(*input);
-            assert_eq!([0, 1, 2, 3].map(|w| words[w][lane]), expected, "lane {lane}");
+            assert_eq!(
+                [0, 1, 2, 3].map(|w| words[w][lane]),
+                expected,
+                "lane {lane}"
+            );
         }
     }
 

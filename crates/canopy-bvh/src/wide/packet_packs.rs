@@ -10,7 +10,7 @@
 //! bit. A packet whose rays are sheared differently tests its leaves ray by ray.
 
 use super::packet::{lane_mask, Lanes, PACKET};
-use super::traverse::{lanes, leaf_packs, sphere_lanes, PackedLeaves, PacketLeaves};
+use super::traverse::{lanes, leaf_packs, offer_lane, sphere_packet, PackedLeaves, PacketLeaves};
 use crate::sphere::SphereRecord;
 use crate::triangle::{PackHits, PackKernel, ShearedRay, TrianglePack, PACK_LANES};
 use crate::{Hit, IntoHit, PrimHit, Ray};
@@ -128,15 +128,6 @@ struct LaneHits {
     v: [f32; PACKET],
 }
 
-/// Keeps `hit` as `lane`'s closest if it comes before the best so far (ties to the lower
-/// index), shrinking the lane's range to it.
-#[inline(always)]
-fn offer(lane: usize, hit: Hit, t_max: &mut [f32; PACKET], best: &mut [Option<Hit>; PACKET]) {
-    if best[lane].is_none_or(|b| hit.is_before(&b)) {
-        (t_max[lane], best[lane]) = (hit.t, Some(hit));
-    }
-}
-
 /// Leaves stored as triangle packs ([`PackedLeaves`]), tested for a packet's rays.
 pub(crate) struct PackedPacketLeaves<'a, T, F> {
     pub packs: &'a [TrianglePack],
@@ -207,21 +198,14 @@ where
                         u: hits.u[ray],
                         v: hits.v[ray],
                     };
-                    offer(ray, Hit::new(pack.prim[lane], prim_hit), t_max, best);
+                    offer_lane(ray, Hit::new(pack.prim[lane], prim_hit), t_max, best);
                 }
             }
             for lane in lanes(pack.others) {
                 let prim = pack.prim[lane];
                 match self.spheres.get((first_pack + k) * PACK_LANES + lane) {
                     Some(sphere) if sphere.is_sphere() => {
-                        let t = sphere_lanes(sphere, group.packet, t_max);
-                        let mut hit = [false; PACKET];
-                        for (hit, t) in hit.iter_mut().zip(&t) {
-                            *hit = !t.is_nan();
-                        }
-                        for ray in lanes(lane_mask(&hit) & group.active) {
-                            offer(ray, t[ray].into_hit(prim), t_max, best);
-                        }
+                        sphere_packet(sphere, prim, &group, t_max, best);
                     }
                     _ => {
                         for ray in lanes(group.active) {
@@ -230,7 +214,7 @@ where
                                 ..group.rays[ray]
                             };
                             if let Some(hit) = (self.test)(prim, &single) {
-                                offer(ray, hit.into_hit(prim), t_max, best);
+                                offer_lane(ray, hit.into_hit(prim), t_max, best);
                             }
                         }
                     }

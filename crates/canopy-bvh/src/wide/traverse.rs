@@ -202,18 +202,42 @@ where
                 lanes.each(&mut single, position as u32, 1, t_max, best);
                 continue;
             }
-            let t = sphere_lanes(sphere, lanes.packet, t_max);
-            let mut hit = [false; PACKET];
-            for (hit, t) in hit.iter_mut().zip(&t) {
-                *hit = !t.is_nan();
-            }
-            for lane in self::lanes(lane_mask(&hit) & lanes.active) {
-                let hit = t[lane].into_hit(prim);
-                if best[lane].is_none_or(|b| hit.is_before(&b)) {
-                    (t_max[lane], best[lane]) = (hit.t, Some(hit));
-                }
-            }
+            sphere_packet(sphere, prim, &lanes, t_max, best);
         }
+    }
+}
+
+/// Keeps `hit` as `lane`'s closest if it comes before the best so far (ties to the lower
+/// index), shrinking the lane's range to it.
+#[inline(always)]
+pub(crate) fn offer_lane(
+    lane: usize,
+    hit: Hit,
+    t_max: &mut [f32; PACKET],
+    best: &mut [Option<Hit>; PACKET],
+) {
+    if best[lane].is_none_or(|b| hit.is_before(&b)) {
+        (t_max[lane], best[lane]) = (hit.t, Some(hit));
+    }
+}
+
+/// Tests the sphere of leaf entry `prim` against the rays in `lanes` at once, keeping
+/// each ray's closest hit.
+#[inline(always)]
+pub(crate) fn sphere_packet(
+    sphere: &SphereRecord,
+    prim: u32,
+    lanes: &Lanes,
+    t_max: &mut [f32; PACKET],
+    best: &mut [Option<Hit>; PACKET],
+) {
+    let t = sphere_lanes(sphere, lanes.packet, t_max);
+    let mut hit = [false; PACKET];
+    for (hit, t) in hit.iter_mut().zip(&t) {
+        *hit = !t.is_nan();
+    }
+    for lane in self::lanes(lane_mask(&hit) & lanes.active) {
+        offer_lane(lane, t[lane].into_hit(prim), t_max, best);
     }
 }
 
@@ -221,7 +245,7 @@ where
 /// ray's range): [`crate::intersect_sphere`] lane by lane, the same operations in the same
 /// order, so the same distances.
 #[inline(always)]
-pub(crate) fn sphere_lanes(
+fn sphere_lanes(
     sphere: &SphereRecord,
     packet: &PacketRays,
     t_max: &[f32; PACKET],
