@@ -16,7 +16,7 @@ mod traverse;
 
 use crate::sphere::SphereRecord;
 use crate::traverse::TraversalCounter;
-use crate::triangle::{PackHits, TrianglePack, NO_PRIM, PACK_LANES};
+use crate::triangle::{TrianglePack, NO_PRIM, PACK_LANES};
 use crate::view::{Child, ChildKind, TreeView};
 use crate::{Aabb, Bvh2, BvhError, Hit, IntoHit, Isa, IsaError, Ray, SahCosts, TreeStats};
 use bytemuck::{Pod, Zeroable};
@@ -24,7 +24,6 @@ use glam::Vec3;
 use packet::closest_packet;
 use packet_packs::PackedPacketLeaves;
 use rayon::prelude::*;
-use std::marker::PhantomData;
 use traverse::{closest, ClosureLeaves, PackedLeaves, Query, SphereLeaves};
 
 pub use packet::PACKET;
@@ -707,14 +706,7 @@ where
                 closest::<N, K, _, _>(&bvh.nodes, ray, &mut leaves, counter, bvh.prefetches())
             }
         } else {
-            let mut leaves = PackedLeaves::<T, F> {
-                packs: &bvh.packs,
-                spheres: &bvh.spheres,
-                ray: None,
-                hits: PackHits::default(),
-                test,
-                kernel: PhantomData,
-            };
+            let mut leaves = PackedLeaves::<T, F>::new(&bvh.packs, &bvh.spheres, test);
             unsafe {
                 closest::<N, K, _, _>(&bvh.nodes, ray, &mut leaves, counter, bvh.prefetches())
             }
@@ -749,14 +741,7 @@ impl<const N: usize, F: FnMut(u32, &Ray) -> bool> Query<N> for AnyQuery<'_, N, F
             };
             unsafe { traverse::any::<N, K, _>(&bvh.nodes, ray, &mut leaves, bvh.prefetches()) }
         } else {
-            let mut leaves = PackedLeaves::<T, F> {
-                packs: &bvh.packs,
-                spheres: &bvh.spheres,
-                ray: None,
-                hits: PackHits::default(),
-                test,
-                kernel: PhantomData,
-            };
+            let mut leaves = PackedLeaves::<T, F>::new(&bvh.packs, &bvh.spheres, test);
             unsafe { traverse::any::<N, K, _>(&bvh.nodes, ray, &mut leaves, bvh.prefetches()) }
         }
     }

@@ -12,7 +12,7 @@
 use super::packet::{lane_mask, Lanes, PACKET};
 use super::traverse::{lanes, leaf_packs, offer_lane, sphere_packet, PackedLeaves, PacketLeaves};
 use crate::sphere::SphereRecord;
-use crate::triangle::{PackHits, PackKernel, ShearedRay, TrianglePack, PACK_LANES};
+use crate::triangle::{PackKernel, ShearedRay, TrianglePack, PACK_LANES};
 use crate::{Hit, IntoHit, PrimHit, Ray};
 use std::marker::PhantomData;
 
@@ -171,14 +171,7 @@ where
             .get_or_insert_with(|| PacketShear::new(group.rays))
         else {
             // Rays sheared differently: the single-ray pack test, one lane at a time.
-            let mut single = PackedLeaves::<T, _> {
-                packs: self.packs,
-                spheres: self.spheres,
-                ray: None,
-                hits: PackHits::default(),
-                test: &mut self.test,
-                kernel: PhantomData,
-            };
+            let mut single = PackedLeaves::<T, _>::new(self.packs, self.spheres, &mut self.test);
             group.each(&mut single, first, count, t_max, best);
             return;
         };

@@ -317,7 +317,20 @@ pub(crate) struct PackedLeaves<'a, T, F> {
     pub kernel: PhantomData<T>,
 }
 
-impl<T, F> PackedLeaves<'_, T, F> {
+impl<'a, T, F> PackedLeaves<'a, T, F> {
+    /// Leaves of `packs` (and `spheres` beside them, or none), nothing prepared yet.
+    #[inline(always)]
+    pub fn new(packs: &'a [TrianglePack], spheres: &'a [SphereRecord], test: F) -> Self {
+        Self {
+            packs,
+            spheres,
+            ray: None,
+            hits: PackHits::default(),
+            test,
+            kernel: PhantomData,
+        }
+    }
+
     #[inline(always)]
     fn pack_ray(&mut self, ray: &Ray) -> PackRay {
         *self.ray.get_or_insert_with(|| PackRay::new(ray))

@@ -26,19 +26,34 @@ pub(super) struct PassSamples {
     pub samples: Range<u32>,
 }
 
+/// The camera ray of sample `sample` of pixel (`x`, `y`) of an image `width` x `height`
+/// under `seed`, one sample alone, and its generator after the ray's draws: what every
+/// schedule traces.
+pub(super) fn camera_sample(
+    camera: &Camera,
+    (width, height): (u32, u32),
+    seed: u64,
+    (x, y): (u32, u32),
+    sample: u32,
+) -> (Ray, Rng) {
+    let index = y as u64 * width as u64 + x as u64;
+    let mut rng = Rng::for_sample(seed, index, sample as u64);
+    let s = (x as f32 + rng.next_f32()) / width as f32;
+    let t = (y as f32 + rng.next_f32()) / height as f32;
+    (camera.ray(s, t, &mut rng), rng)
+}
+
 /// Calls `emit` with the camera ray of every sample of `pass`, pixel by pixel and each
 /// pixel's samples in order, and the sample's generator after the ray's draws.
 pub(super) fn camera_rays(camera: &Camera, pass: &PassSamples, mut emit: impl FnMut(Ray, Rng)) {
     let basis = camera.basis();
     if basis.lens_radius > 0.0 || basis.orthographic {
         for i in 0..pass.pixels {
-            let x = pass.first_x + i as u32;
-            let index = pass.y as u64 * pass.width as u64 + x as u64;
+            let pixel = (pass.first_x + i as u32, pass.y);
             for sample in pass.samples.clone() {
-                let mut rng = Rng::for_sample(pass.seed, index, sample as u64);
-                let s = (x as f32 + rng.next_f32()) / pass.width as f32;
-                let t = (pass.y as f32 + rng.next_f32()) / pass.height as f32;
-                emit(camera.ray(s, t, &mut rng), rng);
+                let size = (pass.width, pass.height);
+                let (ray, rng) = camera_sample(camera, size, pass.seed, pixel, sample);
+                emit(ray, rng);
             }
         }
         return;
@@ -70,26 +85,32 @@ fn pinhole_rays(basis: &CameraBasis, pass: &PassSamples, mut emit: impl FnMut(Ra
     let [ux, uy, uz] = basis.upper_left.to_array();
     let [hx, hy, hz] = basis.horizontal.to_array();
     let [vx, vy, vz] = basis.vertical.to_array();
-    let (mut pixel, mut sample) = (0usize, 0usize);
+    // The (pixel, sample) after `at`, pixel-major.
+    let after = |(pixel, sample): (usize, usize)| match sample + 1 == per_pixel {
+        true => (pixel + 1, 0),
+        false => (pixel, sample + 1),
+    };
+    // Where the next group of lanes starts.
+    let mut next = (0, 0);
     for start in (0..total).step_by(LANES) {
         let count = LANES.min(total - start);
         // Each lane's key (lanes past the end repeat the last sample's) and pixel column.
         let mut words = [[0u32; LANES]; 4];
         let mut column = [0f32; LANES];
+        let mut at = next;
         for lane in 0..LANES {
+            let (pixel, sample) = at;
             let x = pass.first_x + pixel as u32;
             let index = pass.y as u64 * pass.width as u64 + x as u64;
             words[0][lane] = fold64(index);
             words[1][lane] = fold64((pass.samples.start as usize + sample) as u64);
             words[2][lane] = seed_key;
             column[lane] = x as f32;
-            if lane < count - 1 {
-                sample += 1;
-                if sample == per_pixel {
-                    (pixel, sample) = (pixel + 1, 0);
-                }
+            if lane + 1 < count {
+                at = after(at);
             }
         }
+        next = after(at);
         let keys = [words[0], words[1], words[2]];
         pcg4d_lanes(&mut words);
         let mut dir = [[0f32; LANES]; 3];
@@ -119,12 +140,6 @@ fn pinhole_rays(basis: &CameraBasis, pass: &PassSamples, mut emit: impl FnMut(Ra
             let key = [keys[0][lane], keys[1][lane], keys[2][lane]];
             let first = [0, 1, 2, 3].map(|w| words[w][lane]);
             emit(ray, Rng::after_first_words(key, first, 2));
-        }
-        if count == LANES {
-            sample += 1;
-            if sample == per_pixel {
-                (pixel, sample) = (pixel + 1, 0);
-            }
         }
     }
 }
@@ -164,11 +179,8 @@ mod tests {
                 for i in 0..pixels {
                     let x = pass.first_x + i as u32;
                     for sample in samples.clone() {
-                        let index = pass.y as u64 * 37 + x as u64;
-                        let mut rng = Rng::for_sample(pass.seed, index, sample as u64);
-                        let s = (x as f32 + rng.next_f32()) / 37.0;
-                        let t = (pass.y as f32 + rng.next_f32()) / 23.0;
-                        let ray = camera.ray(s, t, &mut rng);
+                        let (ray, mut rng) =
+                            camera_sample(&camera, (37, 23), pass.seed, (x, pass.y), sample);
                         let (made_ray, mut made_rng) = made.next().unwrap();
                         let bits = |r: &Ray| {
                             [r.origin, r.dir, r.inv_dir]

@@ -12,8 +12,8 @@ use crate::camera::Camera;
 use crate::film::Film;
 use crate::lights::Lights;
 use crate::region::Region;
-use crate::rng::Rng;
 use crate::scene::Scene;
+use camera_rays::camera_sample;
 use canopy_bvh::{TraversalCounter, TraversalStats};
 use glam::Vec3;
 use path::{Tracer, Work};
@@ -280,7 +280,6 @@ fn accumulate<P: Probe>(
     let first_sample = accumulator.samples;
     let totals = Totals::default();
     let start = Instant::now();
-    let width = settings.width as usize;
     accumulator
         .sums
         .par_chunks_mut(region.width as usize)
@@ -293,13 +292,11 @@ fn accumulate<P: Probe>(
                 Schedule::Depth => {
                     let mut invalid = 0;
                     for (x_in_region, sum) in row.iter_mut().enumerate() {
-                        let x = region.x as usize + x_in_region;
-                        let index = (y * width + x) as u64;
+                        let pixel = (region.x + x_in_region as u32, y as u32);
                         for sample in first_sample..first_sample + count {
-                            let mut rng = Rng::for_sample(settings.seed, index, sample as u64);
-                            let s = (x as f32 + rng.next_f32()) / settings.width as f32;
-                            let t = (y as f32 + rng.next_f32()) / settings.height as f32;
-                            let ray = camera.ray(s, t, &mut rng);
+                            let size = (settings.width, settings.height);
+                            let (ray, mut rng) =
+                                camera_sample(&camera, size, settings.seed, pixel, sample);
                             let l = tracer.radiance(ray, &mut rng, &mut work);
                             if l.is_finite() {
                                 *sum += l;
