@@ -44,7 +44,7 @@ pub mod view;
 mod wide;
 
 pub use aabb::Aabb;
-pub use blas::{packed_params, Blas, BlasParams, PACKED_LEAF_PACKS};
+pub use blas::{packed_params, Blas, BlasParams, PACKED_LEAF_PACKS, PACKED_SHARE};
 pub use build::{
     build, build_with_clipper, split_box, split_triangle, try_build, BuildParams, Builder, Clipper,
     ParamsError, Preset, SahCosts, SplitBoxes, UnknownBuilder,

@@ -780,3 +780,69 @@ fn degenerate_rays_miss_everywhere_and_no_hit_is_at_infinity() {
         }
     }
 }
+
+/// A mesh under a floor and beside a few boxes (a renderer's scene: mostly triangles) is
+/// built for its packs, leaves of up to two, as a mesh alone is; a scene where other
+/// primitives are more than a tenth keeps the caller's leaf size. Both answer as brute
+/// force does.
+#[test]
+fn mostly_triangles_are_built_for_packs() {
+    let grid = unit_grid(16, 0);
+    let boxes_beside = |n: usize| -> Vec<Prim> {
+        let floor = Prim::Box(Aabb::new(
+            Vec3::new(-2.0, -0.2, -2.0),
+            Vec3::new(3.0, -0.1, 3.0),
+        ));
+        let beside = (1..n).map(|k| {
+            let a = Vec3::new(0.05 * k as f32, 0.3, 0.5);
+            Prim::Box(Aabb::new(a, a + 0.03))
+        });
+        std::iter::once(floor).chain(beside).collect()
+    };
+    let mut u = uniform(41);
+    let rays: Vec<Ray> = (0..2000)
+        .map(|_| {
+            let o = Vec3::new(u() * 1.4 - 0.2, 0.5 + u(), u() * 1.4 - 0.2);
+            let d = Vec3::new(u() - 0.5, -1.0, u() - 0.5);
+            Ray::new(o, d.normalize(), 0.0, f32::INFINITY)
+        })
+        .collect();
+    // 512 triangles with 3 boxes (99% triangles), then with 80 (86%).
+    for (others, packed) in [(3, true), (80, false)] {
+        let prims: Vec<Prim> = grid.iter().cloned().chain(boxes_beside(others)).collect();
+        let params = BlasParams::new(Some(Builder::BinnedSah), BvhWidth::Eight);
+        let blas = Blas::build(Prims(prims.clone()), &params);
+        let tree = blas.tree().expect("a tree");
+        let stats = tree.stats(&BuildParams::default().sah);
+        let context = format!("{others} boxes beside 512 triangles");
+        assert_eq!(stats.max_leaf_size > 4, packed, "{context}: {stats:?}");
+        assert!(stats.max_leaf_size <= 8, "{context}: {stats:?}");
+        let expected: Vec<Option<Hit>> = rays.iter().map(|r| brute_force(&prims, r)).collect();
+        assert!(
+            expected
+                .iter()
+                .filter(|h| h.is_some_and(|h| h.prim >= 512))
+                .count()
+                > 100
+        );
+        assert!(
+            expected
+                .iter()
+                .filter(|h| h.is_some_and(|h| h.prim < 512))
+                .count()
+                > 100
+        );
+        for (i, ray) in rays.iter().enumerate() {
+            assert_eq!(
+                bits(blas.intersect(ray)),
+                bits(expected[i]),
+                "{context}: ray {i}"
+            );
+            assert_eq!(
+                blas.occluded(ray),
+                expected[i].is_some(),
+                "{context}: ray {i}"
+            );
+        }
+    }
+}

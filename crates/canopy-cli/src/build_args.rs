@@ -7,7 +7,7 @@ use clap::Args;
 #[derive(Args, Clone, Debug)]
 pub struct BuildArgs {
     /// Most primitives in a BVH leaf (1 to 256). Left at 4, a 4- or 8-wide tree over
-    /// triangles only takes leaves of up to two packs of four (8).
+    /// mostly triangles (90% or more) takes leaves of up to two packs of four (8).
     #[arg(long, default_value_t = BuildParams::default().max_leaf_size, value_parser = limits::leaf_size())]
     pub max_leaf_size: u32,
     /// SAH cost of visiting a node, relative to testing a primitive (0 < cost <= 1e6).

@@ -198,7 +198,7 @@ pub fn clipper(primitives: &[Primitive]) -> impl Clipper + '_ {
 }
 
 impl Accel {
-    /// Builds the structure for `primitives` alone. A wide tree over triangles only is
+    /// Builds the structure for `primitives` alone. A wide tree over mostly triangles is
     /// built for its triangle packs ([`packed_params`]); the image does not change:
     /// every tree gives the same closest hits.
     pub fn build(
