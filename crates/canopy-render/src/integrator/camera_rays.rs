@@ -48,10 +48,10 @@ pub(super) fn camera_sample(
 pub(super) fn camera_rays(camera: &Camera, pass: &PassSamples, mut emit: impl FnMut(Ray, Rng)) {
     let basis = camera.basis();
     if basis.lens_radius > 0.0 || basis.orthographic {
+        let size = (pass.width, pass.height);
         for i in 0..pass.pixels {
             let pixel = (pass.first_x + i as u32, pass.y);
             for sample in pass.samples.clone() {
-                let size = (pass.width, pass.height);
                 let (ray, rng) = camera_sample(camera, size, pass.seed, pixel, sample);
                 emit(ray, rng);
             }

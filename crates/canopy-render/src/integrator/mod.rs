@@ -280,6 +280,7 @@ fn accumulate<P: Probe>(
     let first_sample = accumulator.samples;
     let totals = Totals::default();
     let start = Instant::now();
+    let size = (settings.width, settings.height);
     accumulator
         .sums
         .par_chunks_mut(region.width as usize)
@@ -294,7 +295,6 @@ fn accumulate<P: Probe>(
                     for (x_in_region, sum) in row.iter_mut().enumerate() {
                         let pixel = (region.x + x_in_region as u32, y as u32);
                         for sample in first_sample..first_sample + count {
-                            let size = (settings.width, settings.height);
                             let (ray, mut rng) =
                                 camera_sample(&camera, size, settings.seed, pixel, sample);
                             let l = tracer.radiance(ray, &mut rng, &mut work);
