@@ -17,6 +17,7 @@ import canopy_rt as canopy
 
 VARIANTS = [
     ("path", {}),
+    ("path, independent", {"sampler": "independent"}),
     ("path, no roulette", {"russian_roulette": False}),
     ("bsdf", {"integrator": "bsdf"}),
 ]

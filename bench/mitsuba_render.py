@@ -7,6 +7,10 @@ depth and thread count in turns (best of N each), and the script prints
     ratio <scene> <threads>: X.XX            canopy's speed over Mitsuba's at equal spp
     ratio-equal-error <scene> <threads>: X.XX  the same at equal noise
 
+Each renderer draws its random numbers with its own default unless told: canopy's
+scrambled Sobol points (`--sampler`), Mitsuba's independent sampler (`--mitsuba-sampler`;
+`ldsampler` is its low-discrepancy counterpart to canopy's).
+
 Noise is measured, not guessed: each renderer renders twice with two seeds, and a pixel's
 standard deviation is |a - b| / sqrt(2) (RMS over the image). At equal noise a renderer
 needs spp proportional to its variance, so the equal-error ratio is the equal-spp ratio
@@ -105,7 +109,8 @@ def bsdf(material: dict) -> dict:
     raise ValueError(f"no Mitsuba BSDF for a {kind} material")
 
 
-def mitsuba_scene(mi, info, width: int, height: int, depth: int, workdir: str) -> dict:
+def mitsuba_scene(mi, info, width: int, height: int, depth: int, workdir: str,
+                  sampler: str = "independent") -> dict:
     """The Mitsuba scene dict of a canopy scene."""
     contents = info.contents()
     if contents["punctual_lights"] or contents["textured_materials"]:
@@ -119,7 +124,7 @@ def mitsuba_scene(mi, info, width: int, height: int, depth: int, workdir: str) -
                                                    up=cam["up"]),
         "film": {"type": "hdrfilm", "width": width, "height": height, "rfilter": {"type": "box"},
                  "pixel_format": "rgb"},
-        "sampler": {"type": "independent"},
+        "sampler": {"type": sampler},
     }
     if cam["aperture"] > 0:
         sensor["type"] = "thinlens"
@@ -205,6 +210,9 @@ def main() -> int:
     parser.add_argument("--variant", default="llvm_ad_rgb")
     parser.add_argument("--schedule", default=None, help="canopy's schedule: wavefront or depth")
     parser.add_argument("--images", help="write both mean images here as EXR")
+    parser.add_argument("--sampler", default=None, help="canopy's sampler: sobol or independent")
+    parser.add_argument("--mitsuba-sampler", default="independent",
+                        help="Mitsuba's sampler: independent, ldsampler, multijitter, ...")
     args = parser.parse_args()
     width, height = (int(v) for v in args.size.lower().split("x"))
 
@@ -213,12 +221,14 @@ def main() -> int:
     mi.set_variant(args.variant)
     dr.set_thread_count(args.threads)
     print(f"mitsuba {mi.__version__} ({args.variant}), canopy {canopy.__version__}; "
-          f"{width}x{height}, {args.spp} spp, depth {args.depth}, {args.threads} threads")
+          f"{width}x{height}, {args.spp} spp, depth {args.depth}, {args.threads} threads; "
+          f"samplers: canopy {args.sampler or 'the scene default'}, mitsuba {args.mitsuba_sampler}")
 
     for name in args.scenes:
         info = canopy.load_scene(name)
         with tempfile.TemporaryDirectory() as workdir:
-            scene = mi.load_dict(mitsuba_scene(mi, info, width, height, args.depth, workdir))
+            scene = mi.load_dict(mitsuba_scene(mi, info, width, height, args.depth, workdir,
+                                               args.mitsuba_sampler))
 
             def run_mitsuba(seed: int) -> np.ndarray:
                 image = mi.render(scene, spp=args.spp, seed=seed)
@@ -229,6 +239,8 @@ def main() -> int:
                                seed=seed, threads=args.threads)
                 if args.schedule:
                     options["schedule"] = args.schedule
+                if args.sampler:
+                    options["sampler"] = args.sampler
                 return canopy.render(name, **options)
 
             times = {"canopy": [], "mitsuba": []}

@@ -15,7 +15,8 @@ use canopy_job::{CheckpointPolicy, Device, Observer, RenderJob, Schedule, Struct
 use canopy_render::camera::Camera;
 use canopy_render::visualize::{draw_bvh, render_heatmap, LevelRange};
 use canopy_render::{
-    output::image_format, write_image, AccelKind, Accumulator, BvhWidth, Integrator, Region, Scene,
+    output::image_format, write_image, AccelKind, Accumulator, BvhWidth, Integrator, Region,
+    Sampler, Scene,
 };
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -52,6 +53,11 @@ pub struct RenderArgs {
     /// after three bounces; the image's expected value is the same).
     #[arg(long)]
     no_roulette: bool,
+    /// How each sample's random numbers are drawn: `sobol` (each pixel's samples spread
+    /// evenly by scrambled Sobol points over the camera's and the first bounces'
+    /// dimensions: less noise) or `independent` [default: from the scene, else sobol].
+    #[arg(long)]
+    sampler: Option<Sampler>,
     /// Where to render: `cpu` (all cores) or `gpu` (the first adapter wgpu finds; see
     /// `canopy devices`), with either integrator, from the binary tree of the chosen
     /// builder: the same image up to rounding.
@@ -101,7 +107,7 @@ pub struct RenderArgs {
     #[arg(long, default_value = "60s", value_parser = limits::duration, requires = "checkpoint")]
     every: Duration,
     /// Continue the render saved in a checkpoint (scene and settings come from it).
-    #[arg(long, value_name = "FILE", conflicts_with_all = ["scene", "size", "spp", "depth", "seed", "integrator", "no_roulette", "heatmap"])]
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["scene", "size", "spp", "depth", "seed", "integrator", "no_roulette", "sampler", "heatmap"])]
     resume: Option<PathBuf>,
     /// Print the summary as one JSON object (warnings also go to stderr).
     #[arg(long)]
@@ -537,6 +543,7 @@ fn apply_overrides(scene: &mut Scene, args: &RenderArgs) -> anyhow::Result<()> {
     s.seed = args.seed.unwrap_or(s.seed);
     s.integrator = args.integrator.unwrap_or(s.integrator);
     s.russian_roulette &= !args.no_roulette;
+    s.sampler = args.sampler.unwrap_or(s.sampler);
     s.check().map_err(anyhow::Error::msg)?;
     Ok(())
 }

@@ -16,6 +16,8 @@ pub struct SceneFacts {
     /// `path` or `bsdf`.
     pub integrator: String,
     pub russian_roulette: bool,
+    /// `sobol` or `independent`.
+    pub sampler: String,
     pub primitives: usize,
     pub spheres: usize,
     pub triangles: usize,
@@ -40,6 +42,7 @@ impl SceneFacts {
             seed: s.seed,
             integrator: s.integrator.to_string(),
             russian_roulette: s.russian_roulette,
+            sampler: s.sampler.to_string(),
             primitives: scene.primitives.len(),
             spheres: counts.spheres,
             triangles: counts.triangles,
@@ -50,14 +53,18 @@ impl SceneFacts {
         }
     }
 
-    /// `WxH, N spp, depth D, seed S, I integrator`
+    /// `WxH, N spp, depth D, seed S, I integrator`, and the sampler when not Sobol
     pub fn settings_text(&self) -> String {
         let roulette = match (self.integrator.as_str(), self.russian_roulette) {
             ("path", false) => " without Russian roulette",
             _ => "",
         };
+        let sampler = match self.sampler.as_str() {
+            "sobol" => String::new(),
+            other => format!(", {other} sampler"),
+        };
         format!(
-            "{}x{}, {} spp, depth {}, seed {}, {} integrator{roulette}",
+            "{}x{}, {} spp, depth {}, seed {}, {} integrator{roulette}{sampler}",
             self.width, self.height, self.spp, self.max_depth, self.seed, self.integrator
         )
     }

@@ -158,6 +158,12 @@ fn integrator_options_choose_the_estimator_and_are_reported() {
     assert_eq!(bsdf["shadow_rays"], 0);
     let no_rr = run(&["-o", "no_rr.png", "--no-roulette"]);
     assert_eq!(no_rr["russian_roulette"], false);
+    // The sampler: Sobol points unless told, and a different image when told.
+    assert_eq!(path["sampler"], "sobol");
+    let independent = run(&["-o", "independent.png", "--sampler", "independent"]);
+    assert_eq!(independent["sampler"], "independent");
+    let image = |name: &str| std::fs::read(dir.join(name)).unwrap();
+    assert_ne!(image("path.png"), image("independent.png"));
     let out = canopy(
         &[
             "render",

@@ -81,6 +81,8 @@ struct Frame {
     /// xyz: the viewing direction; w: 1 for an orthographic camera (rays start on the
     /// view's rectangle and travel along it).
     forward: [f32; 4],
+    /// x: the Sobol dimensions of each sample's stream (0: independent numbers only).
+    sampling: [u32; 4],
 }
 
 /// An environment map as the GPU reads it: pixels, and per pixel the end of its slice of
@@ -294,6 +296,7 @@ impl<'g> Renderer<'g> {
                 scene.is_textured() as u32,
             ],
             forward: vec4(camera.forward, camera.orthographic as u32 as f32),
+            sampling: [scene.settings.sampler.sobol_dimensions(), 0, 0, 0],
         };
         let frame_buffer = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("frame"),

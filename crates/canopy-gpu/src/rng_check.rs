@@ -2,12 +2,14 @@
 //! numbers compares.
 
 use crate::{Gpu, GpuError};
+use canopy_render::Sampler;
 use wgpu::util::DeviceExt;
 
-/// The first `count` words of the streams of `(seed, pixel, sample)` keys, as the GPU
-/// draws them (pixel and sample below 2^32).
+/// The first `count` words of the streams of `(seed, pixel, sample)` keys under
+/// `sampler`, as the GPU draws them (pixel and sample below 2^32).
 pub fn first_words(
     gpu: &Gpu,
+    sampler: Sampler,
     keys: &[(u64, u32, u32)],
     count: u32,
 ) -> Result<Vec<Vec<u32>>, GpuError> {
@@ -17,7 +19,10 @@ pub fn first_words(
     let device = &gpu.device;
     let streams: Vec<[u32; 4]> = keys
         .iter()
-        .map(|&(seed, pixel, sample)| [canopy_render::rng::fold64(seed), pixel, sample, 0])
+        .map(|&(seed, pixel, sample)| {
+            let seed = canopy_render::rng::fold64(seed);
+            [seed, pixel, sample, sampler.sobol_dimensions()]
+        })
         .collect();
     let buffer = |label, contents: &[u8], usage| {
         device.create_buffer_init(&wgpu::util::BufferInitDescriptor {

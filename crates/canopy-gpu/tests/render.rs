@@ -10,6 +10,7 @@ use canopy_bvh::{BuildParams, Builder};
 use canopy_gpu::{Gpu, GpuError, GpuPrimitive, Renderer, CHUNKS};
 use canopy_render::rng::Rng;
 use canopy_render::texture::Image;
+use canopy_render::Sampler;
 use canopy_render::{
     render, Accel, AccelKind, Accumulator, BvhWidth, Film, Integrator, MeshInstance, Region, Scene,
     SceneMesh,
@@ -36,11 +37,16 @@ fn cpu_and_gpu_draw_the_same_random_numbers() {
         (42, 1 << 27, 1 << 23),
         (7, 65_535, 0),
     ];
-    let words = canopy_gpu::first_words(&gpu, &keys, 64).unwrap();
-    for (&(seed, pixel, sample), gpu_words) in keys.iter().zip(&words) {
-        let mut rng = Rng::for_sample(seed, pixel as u64, sample as u64);
-        let cpu_words: Vec<u32> = (0..64).map(|_| rng.next_u32()).collect();
-        assert_eq!(&cpu_words, gpu_words, "stream ({seed}, {pixel}, {sample})");
+    for sampler in Sampler::ALL {
+        let words = canopy_gpu::first_words(&gpu, sampler, &keys, 64).unwrap();
+        for (&(seed, pixel, sample), gpu_words) in keys.iter().zip(&words) {
+            let mut rng = Rng::for_sample_with(sampler, seed, pixel as u64, sample as u64);
+            let cpu_words: Vec<u32> = (0..64).map(|_| rng.next_u32()).collect();
+            assert_eq!(
+                &cpu_words, gpu_words,
+                "{sampler} stream ({seed}, {pixel}, {sample})"
+            );
+        }
     }
 }
 

@@ -47,7 +47,7 @@ impl SceneInfo {
     }
 
     /// The render settings: width, height, spp, max_depth, seed, integrator,
-    /// russian_roulette.
+    /// russian_roulette, sampler.
     #[getter]
     fn settings<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let s = self.scene.settings;
@@ -59,6 +59,7 @@ impl SceneInfo {
         d.set_item("seed", s.seed)?;
         d.set_item("integrator", s.integrator.name())?;
         d.set_item("russian_roulette", s.russian_roulette)?;
+        d.set_item("sampler", s.sampler.name())?;
         Ok(d)
     }
 
@@ -150,7 +151,7 @@ pub fn load_scene(py: Python<'_>, scene: &str) -> PyResult<SceneInfo> {
 /// "depth": the image is the same.
 #[pyfunction]
 #[pyo3(signature = (scene=None, spp=None, size=None, seed=None, max_depth=None, integrator=None,
-    russian_roulette=None, device="cpu", bvh="binned-sah", width=8, threads=None, progress=None,
+    russian_roulette=None, sampler=None, device="cpu", bvh="binned-sah", width=8, threads=None, progress=None,
     region=None, checkpoint=None, checkpoint_every=60.0, resume=None, schedule="wavefront",
     samples=None, camera=None, instances=None))]
 #[allow(clippy::too_many_arguments)]
@@ -163,6 +164,7 @@ pub fn render<'py>(
     max_depth: Option<u32>,
     integrator: Option<&str>,
     russian_roulette: Option<bool>,
+    sampler: Option<&str>,
     device: &str,
     bvh: &str,
     width: u32,
@@ -194,12 +196,13 @@ pub fn render<'py>(
         || max_depth.is_some()
         || integrator.is_some()
         || russian_roulette.is_some()
+        || sampler.is_some()
         || region.is_some()
         || camera.is_some()
         || instances.is_some();
     if resume.is_some() && overrides {
         return Err(PyValueError::new_err(
-            "a resumed render keeps its checkpoint's settings: drop spp, size, seed, max_depth, integrator, russian_roulette, region, camera and instances",
+            "a resumed render keeps its checkpoint's settings: drop spp, size, seed, max_depth, integrator, russian_roulette, sampler, region, camera and instances",
         ));
     }
     if let Some((first, count)) = samples {
@@ -261,6 +264,9 @@ pub fn render<'py>(
             s.integrator = name.parse().map_err(PyValueError::new_err)?;
         }
         s.russian_roulette = russian_roulette.unwrap_or(s.russian_roulette);
+        if let Some(name) = sampler {
+            s.sampler = name.parse().map_err(PyValueError::new_err)?;
+        }
         s.check().map_err(PyValueError::new_err)?;
         if let Some(changes) = &camera {
             let moved = moved_camera(scene.camera, changes)?;

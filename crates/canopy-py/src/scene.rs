@@ -151,6 +151,7 @@ impl PyScene {
         }
     }
 
+    #[pyo3(signature = (width, height, spp, max_depth, seed, integrator, russian_roulette, sampler="sobol"))]
     #[allow(clippy::too_many_arguments)]
     fn set_settings(
         &mut self,
@@ -161,6 +162,7 @@ impl PyScene {
         seed: u64,
         integrator: &str,
         russian_roulette: bool,
+        sampler: &str,
     ) -> PyResult<()> {
         let settings = canopy_render::RenderSettings {
             width,
@@ -170,6 +172,7 @@ impl PyScene {
             seed,
             integrator: integrator.parse().map_err(PyValueError::new_err)?,
             russian_roulette,
+            sampler: sampler.parse().map_err(PyValueError::new_err)?,
         };
         settings.check().map_err(refused("settings"))?;
         self.scene.settings = settings;

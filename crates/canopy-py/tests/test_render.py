@@ -66,6 +66,7 @@ def test_a_failing_progress_callback_stops_the_render():
         ({"scene": "cornell", "size": (0, 5)}, ValueError, "empty"),
         ({"scene": "cornell", "bvh": "octree"}, ValueError, "unknown"),
         ({"scene": "cornell", "schedule": "sideways"}, ValueError, "unknown schedule `sideways`"),
+        ({"scene": "cornell", "sampler": "halton"}, ValueError, "unknown sampler `halton`"),
     ],
 )
 def test_bad_render_arguments_raise(kwargs, error, words):
@@ -75,10 +76,22 @@ def test_bad_render_arguments_raise(kwargs, error, words):
 
 
 def test_both_schedules_render_the_same_pixels():
-    wavefront = canopy.render("paper-5", size=(24, 18), spp=3)
-    depth = canopy.render("paper-5", size=(24, 18), spp=3, schedule="depth")
-    assert wavefront.max() > 0
-    np.testing.assert_array_equal(wavefront, depth)
+    for sampler in ("sobol", "independent"):
+        wavefront = canopy.render("paper-5", size=(24, 18), spp=3, sampler=sampler)
+        depth = canopy.render("paper-5", size=(24, 18), spp=3, schedule="depth", sampler=sampler)
+        assert wavefront.max() > 0
+        np.testing.assert_array_equal(wavefront, depth)
+
+
+def test_the_sampler_is_a_setting():
+    assert canopy.load_scene("cornell").settings["sampler"] == "sobol"
+    sobol = canopy.render("cornell", size=(16, 16), spp=4)
+    independent = canopy.render("cornell", size=(16, 16), spp=4, sampler="independent")
+    assert not np.array_equal(sobol, independent)
+    scene = canopy.Scene(size=(8, 8), spp=2, sampler="independent")
+    scene.camera(look_from=(0, 0, 4), look_at=(0, 0, 0))
+    scene.add_sphere((0, 0, 0), 1.0, material=canopy.lambertian((0.5, 0.5, 0.5)))
+    np.testing.assert_array_equal(canopy.render(scene), canopy.render(scene, sampler="independent"))
 
 
 def test_sample_ranges_make_the_whole_render():

@@ -62,7 +62,7 @@ impl Background {
     /// A direction to draw light from: uniform over the sphere for the sky and constant
     /// colours, by luminance for an environment map. `None` for a black background.
     pub fn sample(&self, rng: &mut Rng) -> Option<BackgroundSample> {
-        let u = Vec2::new(rng.next_f32(), rng.next_f32());
+        let u = rng.next_2d();
         let (direction, pdf) = match self {
             Background::Environment(map) => map.sample(u)?,
             _ if self.is_black() => return None,

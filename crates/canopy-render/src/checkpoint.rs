@@ -8,6 +8,7 @@
 //! b"CANOPYCK" | version u32 | fingerprint u64 | owner u64 | scene: u32 length + UTF-8 |
 //! width u32 | height u32 | spp u32 | max_depth u32 | seed u64 |
 //! integrator u32 (0 path, 1 bsdf) | russian_roulette u32 (0 or 1) |
+//! sampler u32 (0 sobol, 1 independent; from version 7 on, before it independent) |
 //! region: x u32 | y u32 | width u32 | height u32 |
 //! samples u32 | rays u64 | invalid u64 | sums: region pixels * 3 f32 | checksum u64
 //! ```
@@ -26,6 +27,7 @@ use crate::geometry::Shape;
 use crate::integrator::Accumulator;
 use crate::output::write_atomically;
 use crate::region::Region;
+use crate::rng::Sampler;
 use crate::scene::{Integrator, RenderSettings, Scene};
 use glam::Vec3;
 use std::io::Write;
@@ -41,7 +43,7 @@ const MAGIC: &[u8; 8] = b"CANOPYCK";
 /// whole image).
 /// Version 6: the owner, the identity of the render that wrote the file (files of
 /// versions 4 and 5, still read, have owner 0: no render's).
-const VERSION: u32 = 6;
+const VERSION: u32 = 7;
 /// The oldest version whose samples this canopy can continue.
 const OLDEST_READ: u32 = 4;
 
@@ -195,6 +197,11 @@ impl Checkpoint {
             .expect("every integrator is listed") as u32;
         out.extend(integrator.to_le_bytes());
         out.extend((s.russian_roulette as u32).to_le_bytes());
+        let sampler = Sampler::ALL
+            .iter()
+            .position(|&i| i == s.sampler)
+            .expect("every sampler is listed") as u32;
+        out.extend(sampler.to_le_bytes());
         let r = a.region;
         for v in [r.x, r.y, r.width, r.height] {
             out.extend(v.to_le_bytes());
@@ -270,6 +277,13 @@ impl Checkpoint {
                 0 => false,
                 1 => true,
                 _ => return Err("bad Russian roulette flag".into()),
+            },
+            // Renders before version 7 drew independent numbers only.
+            sampler: match version {
+                ..7 => Sampler::Independent,
+                _ => *Sampler::ALL
+                    .get(r.u32()? as usize)
+                    .ok_or("unknown sampler")?,
             },
         };
         settings.check()?;
@@ -413,8 +427,10 @@ fn describe_header(path: &Path) -> Option<(String, u32)> {
     }
     let scene_len = r.u32().ok()? as usize;
     let scene = String::from_utf8_lossy(r.take(scene_len).ok()?).into_owned();
-    // Settings (4 u32, seed u64, 2 u32), then the region (4 u32) from version 5 on.
-    r.take(4 * 4 + 8 + 2 * 4 + if version >= 5 { 16 } else { 0 })
+    // Settings (4 u32, seed u64, 2 u32, and the sampler's u32 from version 7 on), then
+    // the region (4 u32) from version 5 on.
+    let sampler = if version >= 7 { 4 } else { 0 };
+    r.take(4 * 4 + 8 + 2 * 4 + sampler + if version >= 5 { 16 } else { 0 })
         .ok()?;
     Some((scene, r.u32().ok()?))
 }
@@ -488,13 +504,14 @@ mod tests {
         assert!(back.matches(&scene, Path::new("x")).is_err());
     }
 
-    /// The bytes of `checkpoint` as version 4 wrote them: no region (the whole image).
+    /// The bytes of `checkpoint` as version 4 wrote them: no region (the whole image),
+    /// no sampler (independent numbers).
     fn version_4_bytes(checkpoint: &Checkpoint) -> Vec<u8> {
         let mut bytes = checkpoint.to_bytes();
         bytes.truncate(bytes.len() - 8);
         bytes[8..12].copy_from_slice(&4u32.to_le_bytes());
-        let region_at = 8 + 4 + 8 + 8 + 4 + checkpoint.scene.len() + 4 * 4 + 8 + 4 + 4;
-        bytes.drain(region_at..region_at + 16);
+        let sampler_at = 8 + 4 + 8 + 8 + 4 + checkpoint.scene.len() + 4 * 4 + 8 + 4 + 4;
+        bytes.drain(sampler_at..sampler_at + 4 + 16);
         bytes.drain(20..28); // no owner before version 6
         let checksum = fnv1a(&bytes, FNV_OFFSET);
         bytes.extend(checksum.to_le_bytes());
@@ -503,9 +520,14 @@ mod tests {
 
     #[test]
     fn a_region_round_trips_and_version_4_files_hold_the_whole_image() {
-        let (scene, whole) = sample();
+        let (scene, mut whole) = sample();
         let v4 = version_4_bytes(&whole);
+        // Renders before version 7 drew independent numbers.
+        assert_eq!(whole.settings.sampler, Sampler::Sobol);
+        whole.settings.sampler = Sampler::Independent;
         assert_eq!(Checkpoint::from_bytes(&v4).unwrap(), whole);
+        let back = Checkpoint::from_bytes(&whole.to_bytes()).unwrap();
+        assert_eq!(back.settings.sampler, Sampler::Independent);
 
         let region = Region {
             x: 1,

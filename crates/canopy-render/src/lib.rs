@@ -39,6 +39,7 @@ pub use integrator::{
 };
 pub use output::write_image;
 pub use region::Region;
+pub use rng::Sampler;
 pub use scene::{Integrator, MeshInstance, RenderSettings, Scene, SceneMesh};
 
 use scene_file::{parse_scene, DirAssets};

@@ -7,7 +7,7 @@ use crate::rng::Rng;
 use crate::sampling::{luminance, uniform_triangle, Distribution1D};
 use crate::scene::{Scene, PRIMITIVES_INSTANCE};
 use canopy_bvh::Hit;
-use glam::{Vec2, Vec3};
+use glam::Vec3;
 use std::borrow::Cow;
 
 /// A light without area (glTF's `KHR_lights_punctual`), placed in the world. Its
@@ -283,7 +283,7 @@ impl Lights {
     pub fn sample(&self, scene: &Scene, reference: Vec3, rng: &mut Rng) -> Option<LightSample> {
         let choice = self.choice.as_ref()?;
         let (light, _) = choice.sample(rng.next_f32());
-        let u = Vec2::new(rng.next_f32(), rng.next_f32());
+        let u = rng.next_2d();
         if let Some(punctual) = self.punctual.get(light.wrapping_sub(self.emitters.len())) {
             let (p, irradiance) = punctual.toward(reference, self.radius)?;
             return Some(LightSample {

@@ -5,6 +5,7 @@ use crate::camera::CameraSpec;
 use crate::geometry::{Shape, Surface, Triangle};
 use crate::lights::PunctualLight;
 use crate::material::Material;
+use crate::rng::Sampler;
 use crate::texture::{Image, MaterialMaps, NormalMap};
 use canopy_bvh::{Aabb, Hit, Ray, TriangleMesh};
 use glam::{Affine3A, Vec2, Vec3, Vec4};
@@ -65,6 +66,8 @@ pub struct RenderSettings {
     /// Let the path integrator end paths at random after a few bounces, weighting the
     /// survivors up (unbiased; saves time on long, dim paths).
     pub russian_roulette: bool,
+    /// How each sample's random numbers are made (see [`Sampler`]).
+    pub sampler: Sampler,
 }
 
 impl RenderSettings {
@@ -122,6 +125,7 @@ impl Default for RenderSettings {
             seed: 0,
             integrator: Integrator::Path,
             russian_roulette: true,
+            sampler: Sampler::Sobol,
         }
     }
 }

@@ -164,6 +164,7 @@ struct RenderDoc {
     seed: Option<u64>,
     integrator: Option<Spanned<String>>,
     russian_roulette: Option<bool>,
+    sampler: Option<Spanned<String>>,
 }
 
 #[derive(Deserialize)]
@@ -407,6 +408,15 @@ impl SceneBuilder<'_> {
                 },
             },
             russian_roulette: r.russian_roulette.unwrap_or(d.russian_roulette),
+            sampler: match &r.sampler {
+                None => d.sampler,
+                Some(name) => match name.get_ref().parse() {
+                    Ok(sampler) => sampler,
+                    Err(problem) => {
+                        return self.cx.invalid(name.span(), format!("render: {problem}"))
+                    }
+                },
+            },
         };
         if let Err(problem) = settings.check() {
             return self.cx.invalid(doc.span(), format!("render: {problem}"));

@@ -99,6 +99,7 @@ fn scene(integrator: Integrator) -> Scene {
             seed: 3,
             integrator,
             russian_roulette: false,
+            ..RenderSettings::default()
         },
         background: Background::Constant(Vec3::splat(0.1)),
         materials,

@@ -383,7 +383,7 @@ fn light_tests(m: Material, dir: vec3<f32>, s: Surface, rng: ptr<function, Rng>)
     let light_count = frame.options.x;
     if (light_count > 0u) {
         let pick = next_f32(rng);
-        let u = vec2<f32>(next_f32(rng), next_f32(rng));
+        let u = next_2d(rng);
         // The first light whose slice ends beyond `pick`.
         var lo = 0u;
         var hi = light_count - 1u;
@@ -439,7 +439,7 @@ fn light_tests(m: Material, dir: vec3<f32>, s: Surface, rng: ptr<function, Rng>)
     if (frame.options.y == 1u) {
         return tests;
     }
-    let u = vec2<f32>(next_f32(rng), next_f32(rng));
+    let u = next_2d(rng);
     let sky = sample_background(u);
     if (sky.w > 0.0) {
         let direction = sky.xyz;

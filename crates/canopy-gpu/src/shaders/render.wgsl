@@ -42,6 +42,8 @@ struct Frame {
     top: vec4<u32>,
     // The viewing direction; w: 1 for an orthographic camera.
     forward: vec4<f32>,
+    // x: the Sobol dimensions of each sample's stream (0: independent numbers only).
+    sampling: vec4<u32>,
 }
 
 // The estimator, fixed when the pipeline is made (the `path` integrator, or the
@@ -285,7 +287,7 @@ fn scatter(m: Material, dir: vec3<f32>, s: Surface, rng: ptr<function, Rng>) -> 
             let f = frame_from_z(shading);
             let wo = to_local(f, -dir);
             let choice = next_f32(rng);
-            let u = vec2<f32>(next_f32(rng), next_f32(rng));
+            let u = next_2d(rng);
             let wi = pbr_sample(pbr, wo, choice, u);
             if (wi.z > 0.0) {
                 let pdf = pbr_pdf(pbr, wo, wi);
@@ -371,9 +373,10 @@ fn render(@builtin(global_invocation_id) id: vec3<u32>) {
     var sum = accum[local];
     var rays = vec2<u32>(0u);
     for (var sample = frame.samples.x; sample < frame.samples.x + frame.samples.y; sample++) {
-        var rng = rng_for_sample(frame.size.z, pixel, sample);
-        let s = (f32(x) + next_f32(&rng)) / f32(width);
-        let t = (f32(y) + next_f32(&rng)) / f32(height);
+        var rng = rng_for_sample(frame.size.z, pixel, sample, frame.sampling.x);
+        let jitter = next_2d(&rng);
+        let s = (f32(x) + jitter.x) / f32(width);
+        let t = (f32(y) + jitter.y) / f32(height);
         var origin = frame.origin.xyz;
         if (frame.origin.w > 0.0) {
             let disk = frame.origin.w * in_unit_disk(&rng);

@@ -281,6 +281,7 @@ def render(
     max_depth: Optional[int] = None,
     integrator: Optional[str] = None,
     russian_roulette: Optional[bool] = None,
+    sampler: Optional[str] = None,
     device: str = "cpu",
     bvh: str = "binned-sah",
     width: int = 8,
@@ -319,6 +320,10 @@ def render(
     ``look_at``, ``up``, ``vfov``, ``aperture``, ``focus_distance``, ``ortho_height``) and ``instances``
     moves mesh instances (``{index: 4x4 or 3x4 matrix}``): a frame of an animation.
 
+    ``sampler`` is how each sample's random numbers are drawn: ``"sobol"`` (each
+    pixel's samples spread evenly over the camera's and the first bounces' dimensions by
+    scrambled Sobol points: less noise) or ``"independent"``.
+
     ``schedule`` is the order the CPU traces paths in: ``"wavefront"`` (many at a time,
     stage by stage) or ``"depth"`` (one at a time); the image is the same bit for bit.
     """
@@ -336,6 +341,7 @@ def render(
         max_depth=max_depth,
         integrator=integrator,
         russian_roulette=russian_roulette,
+        sampler=sampler,
         device=device,
         bvh=bvh,
         width=int(width),

@@ -273,6 +273,7 @@ def render(
     max_depth: Optional[int] = None,
     integrator: Optional[str] = None,
     russian_roulette: Optional[bool] = None,
+    sampler: Optional[str] = None,
     bvh: str = "binned-sah",
     width: int = 8,
     device: str = "cpu",
@@ -312,7 +313,7 @@ def render(
     if device not in ("cpu", "gpu"):
         raise ValueError(f'device must be "cpu" or "gpu", not {device!r}')
     options = dict(spp=spp, size=(image_width, image_height), seed=seed, max_depth=max_depth,
-                   integrator=integrator, russian_roulette=russian_roulette, bvh=bvh,
+                   integrator=integrator, russian_roulette=russian_roulette, sampler=sampler, bvh=bvh,
                    width=width, threads=int(threads_per_task))
     if device == "gpu":
         options["device"] = "gpu"
@@ -425,6 +426,7 @@ def render_frames(
     max_depth: Optional[int] = None,
     integrator: Optional[str] = None,
     russian_roulette: Optional[bool] = None,
+    sampler: Optional[str] = None,
     bvh: str = "binned-sah",
     width: int = 8,
     device: str = "cpu",
@@ -457,7 +459,7 @@ def render_frames(
         raise ValueError(f'device must be "cpu" or "gpu", not {device!r}')
     bundle = _bundle(scene, info)
     options = dict(spp=spp, size=size, seed=seed, max_depth=max_depth, integrator=integrator,
-                   russian_roulette=russian_roulette, bvh=bvh, width=width,
+                   russian_roulette=russian_roulette, sampler=sampler, bvh=bvh, width=width,
                    threads=int(threads_per_task))
     if device == "gpu":
         options["device"] = "gpu"

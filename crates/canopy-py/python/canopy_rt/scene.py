@@ -153,6 +153,7 @@ class Scene:
         seed: int = 0,
         integrator: str = "path",
         russian_roulette: bool = True,
+        sampler: str = "sobol",
         name: str = "",
     ):
         self._native = _Recorder(str(name))
@@ -164,6 +165,7 @@ class Scene:
             seed=seed,
             integrator=integrator,
             russian_roulette=russian_roulette,
+            sampler=sampler,
         )
 
     def settings(
@@ -175,11 +177,13 @@ class Scene:
         seed: int = 0,
         integrator: str = "path",
         russian_roulette: bool = True,
+        sampler: str = "sobol",
     ) -> None:
         """Sets every render setting (``canopy.render`` may still override them)."""
         width, height = (int(size[0]), int(size[1]))
         self._native.set_settings(
-            width, height, int(spp), int(max_depth), int(seed), str(integrator), bool(russian_roulette)
+            width, height, int(spp), int(max_depth), int(seed), str(integrator), bool(russian_roulette),
+            str(sampler),
         )
 
     def camera(

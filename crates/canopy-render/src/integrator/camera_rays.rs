@@ -6,7 +6,7 @@
 //! sample needs `sin_cos`) make theirs one at a time.
 
 use crate::camera::{Camera, CameraBasis};
-use crate::rng::{fold64, pcg4d_lanes, unit_f32, Rng};
+use crate::rng::{first_sobol_pairs, fold64, pcg4d_lanes, unit_f32, Rng, Sampler};
 use canopy_bvh::Ray;
 use glam::Vec3;
 use std::ops::Range;
@@ -14,12 +14,19 @@ use std::ops::Range;
 /// Samples whose rays are made together.
 const LANES: usize = 16;
 
+/// What keys the samples' random streams: the seed and how numbers are drawn.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Streams {
+    pub sampler: Sampler,
+    pub seed: u64,
+}
+
 /// Where a pass's samples are: pixels `first_x..first_x + pixels` of row `y` of an image
-/// `width` x `height`, samples `samples` of each, under `seed`.
+/// `width` x `height`, samples `samples` of each, drawing from `streams`.
 pub(super) struct PassSamples {
     pub width: u32,
     pub height: u32,
-    pub seed: u64,
+    pub streams: Streams,
     pub first_x: u32,
     pub y: u32,
     pub pixels: usize,
@@ -27,19 +34,20 @@ pub(super) struct PassSamples {
 }
 
 /// The camera ray of sample `sample` of pixel (`x`, `y`) of an image `width` x `height`
-/// under `seed`, one sample alone, and its generator after the ray's draws: what every
-/// schedule traces.
+/// drawing from `streams`, one sample alone, and its generator after the ray's draws:
+/// what every schedule traces.
 pub(super) fn camera_sample(
     camera: &Camera,
     (width, height): (u32, u32),
-    seed: u64,
+    streams: Streams,
     (x, y): (u32, u32),
     sample: u32,
 ) -> (Ray, Rng) {
     let index = y as u64 * width as u64 + x as u64;
-    let mut rng = Rng::for_sample(seed, index, sample as u64);
-    let s = (x as f32 + rng.next_f32()) / width as f32;
-    let t = (y as f32 + rng.next_f32()) / height as f32;
+    let mut rng = Rng::for_sample_with(streams.sampler, streams.seed, index, sample as u64);
+    let jitter = rng.next_2d();
+    let s = (x as f32 + jitter.x) / width as f32;
+    let t = (y as f32 + jitter.y) / height as f32;
     (camera.ray(s, t, &mut rng), rng)
 }
 
@@ -52,7 +60,7 @@ pub(super) fn camera_rays(camera: &Camera, pass: &PassSamples, mut emit: impl Fn
         for i in 0..pass.pixels {
             let pixel = (pass.first_x + i as u32, pass.y);
             for sample in pass.samples.clone() {
-                let (ray, rng) = camera_sample(camera, size, pass.seed, pixel, sample);
+                let (ray, rng) = camera_sample(camera, size, pass.streams, pixel, sample);
                 emit(ray, rng);
             }
         }
@@ -78,7 +86,8 @@ unsafe fn pinhole_rays_avx2(basis: &CameraBasis, pass: &PassSamples, emit: impl 
 fn pinhole_rays(basis: &CameraBasis, pass: &PassSamples, mut emit: impl FnMut(Ray, Rng)) {
     let per_pixel = pass.samples.len();
     let total = pass.pixels * per_pixel;
-    let seed_key = fold64(pass.seed);
+    let seed_key = fold64(pass.streams.seed);
+    let sobol = pass.streams.sampler == Sampler::Sobol;
     let (width, height) = (pass.width as f32, pass.height as f32);
     let row = pass.y as f32;
     let [ox, oy, oz] = basis.origin.to_array();
@@ -112,12 +121,19 @@ fn pinhole_rays(basis: &CameraBasis, pass: &PassSamples, mut emit: impl FnMut(Ra
         }
         next = after(at);
         let keys = [words[0], words[1], words[2]];
-        pcg4d_lanes(&mut words);
+        // The pixel jitter: the first Sobol pair, or the first two independent words.
+        let jitter = match sobol {
+            true => first_sobol_pairs(&keys),
+            false => {
+                pcg4d_lanes(&mut words);
+                [words[0], words[1]]
+            }
+        };
         let mut dir = [[0f32; LANES]; 3];
         let mut inv = [[0f32; LANES]; 3];
         for lane in 0..LANES {
-            let s = (column[lane] + unit_f32(words[0][lane])) / width;
-            let t = (row + unit_f32(words[1][lane])) / height;
+            let s = (column[lane] + unit_f32(jitter[0][lane])) / width;
+            let t = (row + unit_f32(jitter[1][lane])) / height;
             // target - origin, then normalised: glam's `Vec3` arithmetic, componentwise.
             let dx = ((ux + s * hx) - t * vx) - ox;
             let dy = ((uy + s * hy) - t * vy) - oy;
@@ -138,8 +154,11 @@ fn pinhole_rays(basis: &CameraBasis, pass: &PassSamples, mut emit: impl FnMut(Ra
                 t_max: f32::MAX,
             };
             let key = [keys[0][lane], keys[1][lane], keys[2][lane]];
-            let first = [0, 1, 2, 3].map(|w| words[w][lane]);
-            emit(ray, Rng::after_first_words(key, first, 2));
+            let rng = match sobol {
+                true => Rng::after_first_sobol_pair(key),
+                false => Rng::after_first_words(key, [0, 1, 2, 3].map(|w| words[w][lane]), 2),
+            };
+            emit(ray, rng);
         }
     }
 }
@@ -148,9 +167,11 @@ fn pinhole_rays(basis: &CameraBasis, pass: &PassSamples, mut emit: impl FnMut(Ra
 mod tests {
     use super::*;
     use crate::camera::CameraSpec;
+    use crate::rng::SOBOL_DIMENSIONS;
 
     /// Every ray and generator is the one a sample made alone has, bit for bit, for pixel
-    /// runs and sample ranges that do and do not fill the lanes.
+    /// runs and sample ranges that do and do not fill the lanes, with either sampler (the
+    /// generators are compared past their Sobol dimensions).
     #[test]
     fn rays_in_lanes_are_those_made_one_at_a_time() {
         let spec = CameraSpec {
@@ -160,13 +181,18 @@ mod tests {
         };
         let mut lens = spec;
         lens.aperture = 0.2;
-        for spec in [spec, lens] {
+        let cameras = [spec, lens].into_iter();
+        for (spec, sampler) in cameras.flat_map(|c| Sampler::ALL.map(|s| (c, s))) {
+            let streams = Streams {
+                sampler,
+                seed: 0x1234_5678_9abc,
+            };
             let camera = Camera::new(&spec, 37, 23);
             for (pixels, samples) in [(1, 0..1), (5, 3..6), (16, 0..1), (7, 2..18), (37, 9..10)] {
                 let pass = PassSamples {
                     width: 37,
                     height: 23,
-                    seed: 0x1234_5678_9abc,
+                    streams,
                     first_x: 37 - pixels as u32,
                     y: 11,
                     pixels,
@@ -180,7 +206,7 @@ mod tests {
                     let x = pass.first_x + i as u32;
                     for sample in samples.clone() {
                         let (ray, mut rng) =
-                            camera_sample(&camera, (37, 23), pass.seed, (x, pass.y), sample);
+                            camera_sample(&camera, (37, 23), streams, (x, pass.y), sample);
                         let (made_ray, mut made_rng) = made.next().unwrap();
                         let bits = |r: &Ray| {
                             [r.origin, r.dir, r.inv_dir]
@@ -189,7 +215,7 @@ mod tests {
                         };
                         assert_eq!(bits(&made_ray), bits(&ray), "pixel {x}, sample {sample}");
                         assert_eq!((made_ray.t_min, made_ray.t_max), (ray.t_min, ray.t_max));
-                        for _ in 0..9 {
+                        for _ in 0..SOBOL_DIMENSIONS + 9 {
                             assert_eq!(made_rng.next_u32(), rng.next_u32(), "pixel {x}");
                         }
                     }

@@ -13,7 +13,7 @@ use crate::film::Film;
 use crate::lights::Lights;
 use crate::region::Region;
 use crate::scene::Scene;
-use camera_rays::camera_sample;
+use camera_rays::{camera_sample, Streams};
 use canopy_bvh::{TraversalCounter, TraversalStats};
 use glam::Vec3;
 use path::{Tracer, Work};
@@ -281,6 +281,10 @@ fn accumulate<P: Probe>(
     let totals = Totals::default();
     let start = Instant::now();
     let size = (settings.width, settings.height);
+    let streams = Streams {
+        sampler: settings.sampler,
+        seed: settings.seed,
+    };
     accumulator
         .sums
         .par_chunks_mut(region.width as usize)
@@ -296,7 +300,7 @@ fn accumulate<P: Probe>(
                         let pixel = (region.x + x_in_region as u32, y as u32);
                         for sample in first_sample..first_sample + count {
                             let (ray, mut rng) =
-                                camera_sample(&camera, size, settings.seed, pixel, sample);
+                                camera_sample(&camera, size, streams, pixel, sample);
                             let l = tracer.radiance(ray, &mut rng, &mut work);
                             if l.is_finite() {
                                 *sum += l;

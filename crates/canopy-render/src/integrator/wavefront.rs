@@ -9,7 +9,7 @@
 //! The arithmetic is the depth-first schedule's ([`super::path`]) and each path draws
 //! from its own random stream in the same order, so the image is the same bit for bit.
 
-use super::camera_rays::{camera_rays, PassSamples};
+use super::camera_rays::{camera_rays, PassSamples, Streams};
 use super::path::{DirectLight, PathState, Tracer, Work};
 use super::Probe;
 use crate::camera::Camera;
@@ -82,7 +82,10 @@ fn render_passes<P: Probe>(
         let pass = PassSamples {
             width: settings.width,
             height: settings.height,
-            seed: settings.seed,
+            streams: Streams {
+                sampler: settings.sampler,
+                seed: settings.seed,
+            },
             first_x: block.x,
             y: block.y,
             pixels,

@@ -9,7 +9,7 @@ pub use pbr::Pbr;
 use crate::geometry::Surface;
 use crate::rng::Rng;
 use crate::sampling::Frame;
-use glam::{Vec2, Vec3};
+use glam::Vec3;
 use std::f32::consts::FRAC_1_PI;
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -163,7 +163,7 @@ impl Material {
                 let frame = Frame::from_z(facing.shading);
                 let wo = frame.to_local(-dir);
                 let choice = rng.next_f32();
-                let u = Vec2::new(rng.next_f32(), rng.next_f32());
+                let u = rng.next_2d();
                 let wi = pbr.sample(wo, choice, u)?;
                 let pdf = pbr.pdf(wo, wi);
                 let direction = frame.to_world(wi);
@@ -241,6 +241,7 @@ fn schlick(cos_theta: f32, eta: f32) -> f32 {
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
+    use glam::Vec2;
 
     /// Stratified directions over the whole sphere, equal-area cells of `4π / n²` sr,
     /// with the grid's poles on ±x so that lobes about +z fall where its cells are fine.
