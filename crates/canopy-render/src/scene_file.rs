@@ -385,6 +385,22 @@ impl SceneBuilder<'_> {
             .or_else(|problem| self.cx.invalid(doc.span(), format!("camera: {problem}")))
     }
 
+    /// The choice `name` gives (an integrator, a sampler), or `default` without one; an
+    /// unknown name is an error at its line.
+    fn named<T: std::str::FromStr<Err = String>>(
+        &self,
+        name: &Option<Spanned<String>>,
+        default: T,
+    ) -> Result<T, SceneError> {
+        match name {
+            None => Ok(default),
+            Some(name) => name
+                .get_ref()
+                .parse()
+                .or_else(|problem| self.cx.invalid(name.span(), format!("render: {problem}"))),
+        }
+    }
+
     fn settings(&mut self, doc: Option<&Spanned<RenderDoc>>) -> Result<(), SceneError> {
         let d = RenderSettings::default();
         let Some(doc) = doc else {
@@ -398,25 +414,9 @@ impl SceneBuilder<'_> {
             spp: r.spp.unwrap_or(d.spp),
             max_depth: r.max_depth.unwrap_or(d.max_depth),
             seed: r.seed.unwrap_or(d.seed),
-            integrator: match &r.integrator {
-                None => d.integrator,
-                Some(name) => match name.get_ref().parse() {
-                    Ok(integrator) => integrator,
-                    Err(problem) => {
-                        return self.cx.invalid(name.span(), format!("render: {problem}"))
-                    }
-                },
-            },
+            integrator: self.named(&r.integrator, d.integrator)?,
             russian_roulette: r.russian_roulette.unwrap_or(d.russian_roulette),
-            sampler: match &r.sampler {
-                None => d.sampler,
-                Some(name) => match name.get_ref().parse() {
-                    Ok(sampler) => sampler,
-                    Err(problem) => {
-                        return self.cx.invalid(name.span(), format!("render: {problem}"))
-                    }
-                },
-            },
+            sampler: self.named(&r.sampler, d.sampler)?,
         };
         if let Err(problem) = settings.check() {
             return self.cx.invalid(doc.span(), format!("render: {problem}"));
@@ -956,6 +956,19 @@ mod tests {
         let e = error("[render]\nintegrator = \"photon\"\n");
         assert!(
             e.contains("test.toml:5") && e.contains("unknown integrator `photon`"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn the_sampler_is_read_and_checked() {
+        use crate::rng::Sampler;
+        let scene = parse("[render]\nsampler = \"independent\"\n").unwrap();
+        assert_eq!(scene.settings.sampler, Sampler::Independent);
+        assert_eq!(parse("").unwrap().settings.sampler, Sampler::Sobol);
+        let e = error("[render]\nspp = 4\nsampler = \"halton\"\n");
+        assert!(
+            e.contains("test.toml:6") && e.contains("unknown sampler `halton`"),
             "{e}"
         );
     }

@@ -1,7 +1,8 @@
 //! The camera rays of a wavefront pass, made many at a time: each sample's random stream
 //! is hashed and its ray computed lane by lane (loops over [`LANES`] samples, compiled
 //! for AVX2 where the CPU has it), with the operations [`Camera::ray`] and
-//! [`Rng::for_sample`] perform, in the same order, so every ray and every generator is
+//! [`Rng::for_sample_with`] perform (its first Sobol pair or its first independent
+//! words), in the same order, so every ray and every generator is
 //! the one a sample made alone would have, bit for bit. Cameras with a lens (whose disk
 //! sample needs `sin_cos`) make theirs one at a time.
 
