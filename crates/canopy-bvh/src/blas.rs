@@ -359,6 +359,18 @@ impl<G: Geometry> RayQuery for Blas<G> {
         }
     }
 
+    fn occluded_coherent<R, A>(&self, count: usize, mask: u32, mut ray: R, mut answer: A)
+    where
+        R: FnMut(usize) -> Ray,
+        A: FnMut(usize, bool),
+    {
+        let g = &self.geometry;
+        match self.tree_for_each() {
+            Some(tree) => tree.occluded_coherent(count, ray, answer, |p, r| g.occludes_other(p, r)),
+            None => (0..count).for_each(|i| answer(i, self.occluded_masked(&ray(i), mask))),
+        }
+    }
+
     fn orders_batches(&self) -> bool {
         self.tree.as_ref().is_some_and(Tree::orders_batches)
     }

@@ -249,6 +249,22 @@ impl Tree {
         }
     }
 
+    /// [`Tree::occluded_each`] for coherent rays (shadow rays from neighbouring points
+    /// towards one light): wide layouts trace them in packets
+    /// ([`crate::BvhN::occluded_coherent`]); the answers are the same.
+    pub fn occluded_coherent<R, A, F>(&self, count: usize, ray: R, answer: A, hit_prim: F)
+    where
+        R: FnMut(usize) -> Ray,
+        A: FnMut(usize, bool),
+        F: FnMut(u32, &Ray) -> bool,
+    {
+        match self {
+            Tree::Four(t) => t.occluded_coherent(count, ray, answer, hit_prim),
+            Tree::Eight(t) => t.occluded_coherent(count, ray, answer, hit_prim),
+            Tree::Binary(_) | Tree::Gpu(_) => self.occluded_each(count, ray, answer, hit_prim),
+        }
+    }
+
     /// Occlusion of rays `0..count` on this thread, as [`Tree::intersect_each`].
     pub fn occluded_each<R, A, F>(&self, count: usize, mut ray: R, mut answer: A, mut hit_prim: F)
     where

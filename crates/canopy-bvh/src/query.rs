@@ -95,6 +95,17 @@ pub trait RayQuery: Sync {
         }
     }
 
+    /// [`RayQuery::occluded_each`] for coherent rays (shadow rays from neighbouring
+    /// points towards one light): structures may trace them as packets; the answers are
+    /// the same.
+    fn occluded_coherent<R, A>(&self, count: usize, mask: u32, ray: R, answer: A)
+    where
+        R: FnMut(usize) -> Ray,
+        A: FnMut(usize, bool),
+    {
+        self.occluded_each(count, mask, ray, answer)
+    }
+
     /// Whether large batches are best traced in the order of their rays' origins
     /// ([`RayOrder`]): structures larger than a core's cache.
     fn orders_batches(&self) -> bool {
@@ -168,6 +179,13 @@ impl<B: RayQuery + Send> RayQuery for std::sync::Arc<B> {
         A: FnMut(usize, bool),
     {
         (**self).occluded_each(count, mask, ray, answer)
+    }
+    fn occluded_coherent<R, A>(&self, count: usize, mask: u32, ray: R, answer: A)
+    where
+        R: FnMut(usize) -> Ray,
+        A: FnMut(usize, bool),
+    {
+        (**self).occluded_coherent(count, mask, ray, answer)
     }
     fn orders_batches(&self) -> bool {
         (**self).orders_batches()

@@ -325,6 +325,20 @@ impl<B: RayQuery> RayQuery for Tlas<B> {
         }
     }
 
+    fn occluded_coherent<R, A>(&self, count: usize, mask: u32, ray: R, answer: A)
+    where
+        R: FnMut(usize) -> Ray,
+        A: FnMut(usize, bool),
+    {
+        match self.alone() {
+            // One structure placed as itself: its packets, as for closest hits.
+            Some((blas, _, only)) if only & mask != 0 => {
+                blas.occluded_coherent(count, mask, ray, answer)
+            }
+            _ => self.occluded_each(count, mask, ray, answer),
+        }
+    }
+
     fn orders_batches(&self) -> bool {
         self.tree.as_ref().is_some_and(Tree::orders_batches)
             || self.blases.iter().any(RayQuery::orders_batches)

@@ -112,7 +112,7 @@ fn balls(count: usize, box_every: usize, triangle_every: usize, seed: u32) -> Ba
 }
 
 /// Camera rays as a wavefront stream holds them (each pixel's samples side by side, a
-/// defocused lens), then scattered rays from points in the scene, some with a finite
+/// defocused lens), shadow rays towards a point light, then scattered rays from points in the scene, some with a finite
 /// range, and a few rays that are not traceable. The count is not a multiple of a packet.
 fn rays(seed: u32) -> Vec<Ray> {
     let mut u = uniform(seed);
@@ -129,6 +129,15 @@ fn rays(seed: u32) -> Vec<Ray> {
                 let origin = eye + 0.1 * Vec3::new(u() - 0.5, u() - 0.5, 0.0);
                 rays.push(Ray::new(origin, target - origin, 0.0, f32::INFINITY));
             }
+        }
+    }
+    // Shadow rays from neighbouring ground points to a point light, each ending short
+    // of it: packets where some rays are blocked and some reach the light.
+    let light = Vec3::new(1.0, 8.0, -2.0);
+    for z in 0..20 {
+        for x in 0..40 {
+            let p = Vec3::new(x as f32 / 2.0 - 10.0 + 0.1 * u(), 0.0, z as f32 - 10.0);
+            rays.push(Ray::new(p, light - p, 1e-3, 0.999));
         }
     }
     for i in 0..1500 {
@@ -162,12 +171,19 @@ fn occluded_each(blas: &impl RayQuery, rays: &[Ray]) -> Vec<bool> {
     blocked
 }
 
+fn occluded_in_packets(blas: &impl RayQuery, rays: &[Ray]) -> Vec<bool> {
+    let mut blocked = vec![false; rays.len()];
+    blas.occluded_coherent(rays.len(), ALL_MASKS, |i| rays[i], |i, b| blocked[i] = b);
+    blocked
+}
+
 /// Every layout, leaf size and instruction set against brute force, for `geometry`.
 fn check_against_brute_force(geometry: &Balls, rays: &[Ray], what: &str) {
     let brute = Blas::build(geometry.clone(), &BlasParams::new(None, BvhWidth::Eight));
     let expected = closest_each(&brute, rays);
     let expected_blocked: Vec<bool> = rays.iter().map(|r| brute.occluded(r)).collect();
-    assert!(expected.iter().filter(|h| h.is_some()).count() > rays.len() / 2);
+    // Most camera and scattered rays hit; most shadow rays reach the light.
+    assert!(expected.iter().filter(|h| h.is_some()).count() > rays.len() / 3);
     let small_ones_hit = expected.iter().flatten().any(|h| h.prim != 0);
     assert_eq!(
         small_ones_hit,
@@ -204,6 +220,11 @@ fn check_against_brute_force(geometry: &Balls, rays: &[Ray], what: &str) {
                     );
                 }
                 assert_eq!(occluded_each(&blas, rays), expected_blocked, "{context}");
+                assert_eq!(
+                    occluded_in_packets(&blas, rays),
+                    expected_blocked,
+                    "{context}: in packets"
+                );
             }
         }
     }

@@ -115,8 +115,14 @@ where
     for isa in Isa::supported() {
         wide.set_isa(isa).unwrap();
         let packets = wide.closest_coherent(prims, rays);
-        for (ray, packet) in rays.iter().zip(packets) {
+        let blocked = wide.any_coherent(prims, rays);
+        for ((ray, packet), blocked) in rays.iter().zip(packets).zip(blocked) {
             let expected = brute_force(prims, ray);
+            assert_eq!(
+                blocked,
+                expected.is_some(),
+                "{name} {isa}: any hit in a packet for {ray:?}"
+            );
             assert_eq!(
                 bits(packet),
                 bits(expected),
@@ -142,6 +148,7 @@ trait Queries {
     fn closest(&self, prims: &[Prim], ray: &Ray) -> Option<Hit>;
     fn any(&self, prims: &[Prim], ray: &Ray) -> bool;
     fn closest_coherent(&self, prims: &[Prim], rays: &[Ray]) -> Vec<Option<Hit>>;
+    fn any_coherent(&self, prims: &[Prim], rays: &[Ray]) -> Vec<bool>;
 }
 
 macro_rules! queries {
@@ -163,6 +170,14 @@ macro_rules! queries {
                     prims[p as usize].hit(r)
                 });
                 hits
+            }
+            fn any_coherent(&self, prims: &[Prim], rays: &[Ray]) -> Vec<bool> {
+                let mut blocked = vec![false; rays.len()];
+                self.occluded_coherent(rays.len(), |i| rays[i], |i, b| blocked[i] = b, |p, r| {
+                    assert!(matches!(prims[p as usize], Prim::Box(_)), "triangle {p} sent to the closure");
+                    prims[p as usize].hit(r).is_some()
+                });
+                blocked
             }
         }
     )*};
@@ -377,7 +392,15 @@ fn packets_of_awkward_rays_match_brute_force_in_every_layout() {
                 }
                 let mut hits = vec![None; rays.len()];
                 tree.intersect_coherent(rays.len(), |i| rays[i], |i, h| hits[i] = h, test);
+                let mut blocked = vec![false; rays.len()];
+                let blocks = |p: u32, r: &Ray| test(p, r).is_some();
+                tree.occluded_coherent(rays.len(), |i| rays[i], |i, b| blocked[i] = b, blocks);
                 for (i, ray) in rays.iter().enumerate() {
+                    assert_eq!(
+                        blocked[i],
+                        expected[i].is_some(),
+                        "{layout}, leaves of {leaf}, {isa}: ray {i} {ray:?} blocked"
+                    );
                     assert_eq!(
                         bits(hits[i]),
                         bits(expected[i]),

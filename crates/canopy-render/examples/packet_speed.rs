@@ -5,18 +5,27 @@
 //! A profiling harness; renders of record are timed by `canopy render` and
 //! `bench/mitsuba_render.sh`.
 //!
+//! With `--shadows`, the rays are instead shadow rays from where those camera rays hit
+//! towards random points on the scene's first light (occlusion: one by one against
+//! [`RayQuery::occluded_coherent`]; `bench/scenes/spheres-lit.toml`, and
+//! `dragon-lit.toml` run from `bench/scenes`).
+//!
 //! `cargo run --release -p canopy-render --example packet_speed -- [scene ...]
-//!  [--size 480x480] [--samples 8] [--turns 5]`
+//!  [--size 480x480] [--samples 8] [--turns 5] [--shadows]`
 use canopy_bvh::{BuildParams, BvhWidth, Hit, Ray, RayQuery, ALL_MASKS};
 use canopy_render::accel::{Accel, AccelKind};
 use canopy_render::camera::Camera;
+use canopy_render::lights::Lights;
 use canopy_render::load_scene;
 use canopy_render::rng::Rng;
+use canopy_render::scene::Scene;
+use glam::Vec3;
 use std::time::{Duration, Instant};
 
 fn main() {
     let mut args = std::env::args().skip(1);
     let (mut scenes, mut size, mut samples, mut turns) = (Vec::new(), (480, 480), 8u32, 5);
+    let mut shadows = false;
     while let Some(arg) = args.next() {
         let mut value = || args.next().expect("a value after each option");
         match arg.as_str() {
@@ -27,6 +36,7 @@ fn main() {
             }
             "--samples" => samples = value().parse().expect("samples"),
             "--turns" => turns = value().parse().expect("turns"),
+            "--shadows" => shadows = true,
             _ => scenes.push(arg),
         }
     }
@@ -54,6 +64,10 @@ fn main() {
                     rays.push(camera.ray(s, t, &mut rng));
                 }
             }
+        }
+        if shadows {
+            time_shadows(name, &scene, &accel, &rays, turns);
+            continue;
         }
         let mut single = vec![None; rays.len()];
         let mut packets = vec![None; rays.len()];
@@ -106,4 +120,54 @@ fn time(
         trace(rays, hits);
     }
     start.elapsed()
+}
+
+/// Shadow rays from the hits of `camera_rays` towards the scene's first light, one by
+/// one against packets, best of `turns`.
+fn time_shadows(name: &str, scene: &Scene, accel: &Accel, camera_rays: &[Ray], turns: u32) {
+    let lights = Lights::new(scene);
+    let &(_, light) = lights.emitters().first().expect("a scene with a light");
+    let bounds = scene.primitives[light as usize].shape.bounds();
+    let mut hits = vec![None; camera_rays.len()];
+    accel.intersect_each(
+        camera_rays.len(),
+        ALL_MASKS,
+        |i| camera_rays[i],
+        |i, h| hits[i] = h,
+    );
+    let mut rays = Vec::new();
+    for (i, (ray, hit)) in camera_rays.iter().zip(&hits).enumerate() {
+        let Some(hit) = hit else { continue };
+        let mut rng = Rng::for_sample(7, i as u64, 0);
+        let target = bounds.min
+            + (bounds.max - bounds.min) * Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
+        let origin = ray.at(hit.t * 0.9999);
+        rays.push(Ray::new(origin, target - origin, 1e-4, 0.999));
+    }
+    let (mut single, mut packets) = (vec![false; rays.len()], vec![false; rays.len()]);
+    let (mut best_single, mut best_packets) = (Duration::MAX, Duration::MAX);
+    for _ in 0..turns {
+        let start = Instant::now();
+        for (r, b) in rays.chunks(4096).zip(single.chunks_mut(4096)) {
+            accel.occluded_each(r.len(), ALL_MASKS, |i| r[i], |i, x| b[i] = x);
+        }
+        best_single = best_single.min(start.elapsed());
+        let start = Instant::now();
+        for (r, b) in rays.chunks(4096).zip(packets.chunks_mut(4096)) {
+            accel.occluded_coherent(r.len(), ALL_MASKS, |i| r[i], |i, x| b[i] = x);
+        }
+        best_packets = best_packets.min(start.elapsed());
+    }
+    let blocked = single.iter().filter(|&&b| b).count();
+    let rate = |d: Duration| rays.len() as f64 / d.as_secs_f64() / 1e6;
+    println!(
+        "{name}: {} shadow rays, {:.0}% blocked; one by one {:.2} Mrays/s, packets {:.2} Mrays/s ({:.2}x); same answers: {}",
+        rays.len(),
+        100.0 * blocked as f64 / rays.len().max(1) as f64,
+        rate(best_single),
+        rate(best_packets),
+        best_single.as_secs_f64() / best_packets.as_secs_f64(),
+        single == packets,
+    );
+    assert_eq!(single, packets, "packets must give the same answers");
 }

@@ -169,6 +169,14 @@ impl RayQuery for SceneBlas {
         each_blas!(self, b => b.occluded_each(count, mask, ray, answer))
     }
 
+    fn occluded_coherent<R, A>(&self, count: usize, mask: u32, ray: R, answer: A)
+    where
+        R: FnMut(usize) -> Ray,
+        A: FnMut(usize, bool),
+    {
+        each_blas!(self, b => b.occluded_coherent(count, mask, ray, answer))
+    }
+
     fn orders_batches(&self) -> bool {
         each_blas!(self, b => b.orders_batches())
     }
@@ -359,6 +367,14 @@ impl RayQuery for Accel {
         A: FnMut(usize, bool),
     {
         self.world.occluded_each(count, mask, ray, answer)
+    }
+
+    fn occluded_coherent<R, A>(&self, count: usize, mask: u32, ray: R, answer: A)
+    where
+        R: FnMut(usize) -> Ray,
+        A: FnMut(usize, bool),
+    {
+        self.world.occluded_coherent(count, mask, ray, answer)
     }
 
     fn orders_batches(&self) -> bool {

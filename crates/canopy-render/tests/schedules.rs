@@ -1,6 +1,7 @@
 //! The wavefront schedule renders the depth-first schedule's image bit for bit: on every
 //! built-in scene with both estimators, with see-through (alpha) surfaces, textures and
-//! punctual lights, for any thread count, region and split of the samples.
+//! punctual lights (whose shadow rays the wavefront traces in packets), for any thread
+//! count, region and split of the samples.
 
 use canopy_bvh::{BuildParams, BvhWidth};
 use canopy_render::accel::{Accel, AccelKind};
@@ -98,6 +99,15 @@ fn see_through_textured_and_punctually_lit_scenes_are_the_same_in_both_schedules
         intensity: Vec3::splat(3.0),
     });
     same_in_both_schedules(&lit, "cornell with a point light");
+    // Shadow rays in packets: over kept spheres, and over triangle packs beside them.
+    for name in ["paper-1", "paper-5"] {
+        let mut lit = shrunk(BuiltinScene::find(name).unwrap().load().unwrap());
+        lit.lights.push(PunctualLight::Point {
+            position: Vec3::new(2.0, 6.0, 1.0),
+            intensity: Vec3::splat(40.0),
+        });
+        same_in_both_schedules(&lit, &format!("{name} with a point light"));
+    }
 }
 
 #[test]

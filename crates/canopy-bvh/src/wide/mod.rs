@@ -21,7 +21,7 @@ use crate::view::{Child, ChildKind, TreeView};
 use crate::{Aabb, Bvh2, BvhError, Hit, IntoHit, Isa, IsaError, Ray, SahCosts, TreeStats};
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
-use packet::closest_packet;
+use packet::{closest_packet, occluded_packet};
 use packet_packs::PackedPacketLeaves;
 use rayon::prelude::*;
 use traverse::{closest, ClosureLeaves, PackedLeaves, Query, SphereLeaves};
@@ -536,6 +536,29 @@ where
         };
         WideNode::<N>::dispatch(self.isa, each)
     }
+
+    /// [`BvhN::occluded_each`] for coherent rays (shadow rays from neighbouring points
+    /// towards one light): packets of [`PACKET`] consecutive rays, as
+    /// [`BvhN::intersect_coherent`] makes them, each ray leaving its packet at its first
+    /// hit. The answers are the same.
+    pub fn occluded_coherent<R, A, F>(&self, count: usize, ray: R, answer: A, hit_prim: F)
+    where
+        R: FnMut(usize) -> Ray,
+        A: FnMut(usize, bool),
+        F: FnMut(u32, &Ray) -> bool,
+    {
+        if !self.has_sphere_leaves() && self.packs.is_empty() {
+            return self.occluded_each(count, ray, answer, hit_prim);
+        }
+        let each = PacketAnyEach {
+            bvh: self,
+            count,
+            ray,
+            answer,
+            test: hit_prim,
+        };
+        WideNode::<N>::dispatch(self.isa, each)
+    }
 }
 
 /// Closest hits of `count` rays in one dispatch ([`BvhN::intersect_each`]).
@@ -660,6 +683,59 @@ where
                     .run::<K, T>()
                 };
             (self.answer)(i, blocked);
+        }
+    }
+}
+
+/// Occlusion of `count` rays in packets, in one dispatch ([`BvhN::occluded_coherent`]).
+struct PacketAnyEach<'a, const N: usize, R, A, F> {
+    bvh: &'a BvhN<N>,
+    count: usize,
+    ray: R,
+    answer: A,
+    test: F,
+}
+
+impl<const N: usize, R, A, F> Query<N> for PacketAnyEach<'_, N, R, A, F>
+where
+    R: FnMut(usize) -> Ray,
+    A: FnMut(usize, bool),
+    F: FnMut(u32, &Ray) -> bool,
+{
+    type Out = ();
+
+    #[inline(always)]
+    unsafe fn run<K: kernels::NodeKernel<N>, T: crate::triangle::PackKernel>(mut self) {
+        let bvh = self.bvh;
+        // The packet leaves offer hits: a blocker is one at the end of the ray's range,
+        // and the lane stops there.
+        let test = &mut self.test;
+        let mut blocker = |prim: u32, ray: &Ray| test(prim, ray).then_some(ray.t_max);
+        let mut rays = [Ray::new(Vec3::ZERO, Vec3::X, 0.0, 0.0); PACKET];
+        for start in (0..self.count).step_by(PACKET) {
+            let rays = &mut rays[..PACKET.min(self.count - start)];
+            for (lane, ray) in rays.iter_mut().enumerate() {
+                *ray = (self.ray)(start + lane);
+            }
+            // `occluded_coherent` makes packets only of trees that keep their spheres
+            // or pack their triangles.
+            let blocked = if bvh.nodes.is_empty() {
+                0
+            } else if bvh.packs.is_empty() {
+                let mut leaves = SphereLeaves {
+                    prims: &bvh.prim_indices,
+                    spheres: &bvh.spheres,
+                    test: &mut blocker,
+                };
+                occluded_packet(&bvh.nodes, rays, &mut leaves)
+            } else {
+                let mut leaves =
+                    PackedPacketLeaves::<T, _>::new(&bvh.packs, &bvh.spheres, &mut blocker);
+                occluded_packet(&bvh.nodes, rays, &mut leaves)
+            };
+            for lane in 0..rays.len() {
+                (self.answer)(start + lane, blocked >> lane & 1 == 1);
+            }
         }
     }
 }

@@ -1,5 +1,6 @@
-//! Closest hits of coherent rays (camera rays of neighbouring pixels and samples) as
-//! packets of [`PACKET`] rays: the packet walks the tree once, each node's slots tested
+//! Closest hits and occlusion of coherent rays (camera rays of neighbouring pixels and
+//! samples, shadow rays from neighbouring points towards one light) as packets of
+//! [`PACKET`] rays: the packet walks the tree once, each node's slots tested
 //! against all its rays at once (one SIMD lane per ray), and each leaf is tested for the
 //! rays that entered it. A single ray pays a node's branches and stack work alone; a
 //! packet shares them among rays that go the same way (Wald et al., "Interactive
@@ -182,6 +183,30 @@ pub(crate) fn closest_packet<const N: usize, L: PacketLeaves>(
     rays: &[Ray],
     leaves: &mut L,
 ) -> [Option<Hit>; PACKET] {
+    walk_packet::<N, L, false>(nodes, rays, leaves).0
+}
+
+/// Which of `rays` (at most [`PACKET`]) something blocks, as [`super::traverse::any`]
+/// answers it: bit `lane` set for each blocked ray. A ray leaves the packet at its
+/// first hit, and the walk ends when every ray has. `nodes` is non-empty.
+#[inline(always)]
+pub(crate) fn occluded_packet<const N: usize, L: PacketLeaves>(
+    nodes: &[WideNode<N>],
+    rays: &[Ray],
+    leaves: &mut L,
+) -> u32 {
+    walk_packet::<N, L, true>(nodes, rays, leaves).1
+}
+
+/// The packet's walk: with `ANY`, each ray stops at its first hit (any-hit); otherwise
+/// it goes on to its closest. Returns each lane's hit (with `ANY`, a hit, not
+/// necessarily the closest) and the lanes that stopped.
+#[inline(always)]
+fn walk_packet<const N: usize, L: PacketLeaves, const ANY: bool>(
+    nodes: &[WideNode<N>],
+    rays: &[Ray],
+    leaves: &mut L,
+) -> ([Option<Hit>; PACKET], u32) {
     debug_assert!(rays.len() <= PACKET);
     // A NaN or degenerate ray misses everything (see Ray); so do the lanes past the end.
     let traceable = rays.iter().enumerate().fold(0u32, |mask, (lane, r)| {
@@ -194,6 +219,8 @@ pub(crate) fn closest_packet<const N: usize, L: PacketLeaves>(
         *t_max = ray.t_max;
     }
     let mut best = [None; PACKET];
+    // The lanes that stopped (any-hit only): they take no further part.
+    let mut stopped = 0u32;
     let mut stack = TraversalStack::<Entry>::new();
     let (mut child, mut count, mut active) = (0u32, 0u32, traceable);
     while active != 0 {
@@ -204,6 +231,16 @@ pub(crate) fn closest_packet<const N: usize, L: PacketLeaves>(
                 packet: &packet,
             };
             leaves.closest_lanes(child, count, lanes, &mut t_max, &mut best);
+            if ANY {
+                let mut found = [false; PACKET];
+                for (found, best) in found.iter_mut().zip(&best) {
+                    *found = best.is_some();
+                }
+                stopped |= lane_mask(&found) & active;
+                if stopped == traceable {
+                    break;
+                }
+            }
         } else {
             let node = &nodes[child as usize];
             // Entered slots, by the nearest entry of their rays.
@@ -248,21 +285,22 @@ pub(crate) fn closest_packet<const N: usize, L: PacketLeaves>(
                 continue;
             }
         }
-        // Pop the next subtree that can still hold a closer hit for one of its rays.
+        // Pop the next subtree that can still hold a closer hit for one of its rays
+        // (or, any-hit, that holds rays still looking).
         active = 0;
         while let Some(e) = stack.pop() {
             let mut open = [false; PACKET];
             for lane in 0..PACKET {
                 open[lane] = e.entry[lane] <= t_max[lane];
             }
-            let live = lane_mask(&open) & e.lanes;
+            let live = lane_mask(&open) & e.lanes & !stopped;
             if live != 0 {
                 (child, count, active) = (e.child, e.count, live);
                 break;
             }
         }
     }
-    best
+    (best, stopped)
 }
 
 #[cfg(test)]
