@@ -402,8 +402,9 @@ impl Bvh {
         }
     }
 
-    /// Closest hits: (t, prim, uv) with t = inf, prim = -1, uv = 0 on a miss.
-    #[pyo3(signature = (origins, directions, tnear, tfar, threads=None))]
+    /// Closest hits: (t, prim, uv) with t = inf, prim = -1, uv = 0 on a miss. `coherent`
+    /// rays (neighbours start near each other and run alike) are traced in packets.
+    #[pyo3(signature = (origins, directions, tnear, tfar, threads=None, coherent=false))]
     #[allow(clippy::type_complexity)]
     fn intersect<'py>(
         &self,
@@ -413,6 +414,7 @@ impl Bvh {
         tnear: Bound<'py, PyAny>,
         tfar: Bound<'py, PyAny>,
         threads: Option<usize>,
+        coherent: bool,
     ) -> PyResult<(
         Bound<'py, PyArray1<f32>>,
         Bound<'py, PyArray1<i64>>,
@@ -442,8 +444,9 @@ impl Bvh {
         };
         py.detach(|| {
             pools::install(threads, || {
-                // Scattered rays (from surfaces, in any order) are traced by where they start.
-                let Some(order) = self.batch_order(&batch) else {
+                // Scattered rays (from surfaces, in any order) are traced by where they
+                // start; coherent ones in their own order, in packets.
+                let Some(order) = self.batch_order(&batch).filter(|_| !coherent) else {
                     return t
                         .par_chunks_mut(CHUNK)
                         .zip(prim.par_chunks_mut(CHUNK))
@@ -454,7 +457,12 @@ impl Bvh {
                             let answer =
                                 |i: usize, hit: Option<Hit>| write_hit(t, prim, uv, i, hit);
                             let rays = |i: usize| batch.ray(first + i);
-                            self.accel.intersect_each(count, ALL_MASKS, rays, answer)
+                            match coherent {
+                                true => self
+                                    .accel
+                                    .intersect_coherent(count, ALL_MASKS, rays, answer),
+                                false => self.accel.intersect_each(count, ALL_MASKS, rays, answer),
+                            }
                         });
                 };
                 let traced = order.trace(
@@ -482,8 +490,9 @@ impl Bvh {
         Ok((t_out, prim_out, uv_out))
     }
 
-    /// Whether anything lies on each ray within [tnear, tfar].
-    #[pyo3(signature = (origins, directions, tnear, tfar, threads=None))]
+    /// Whether anything lies on each ray within [tnear, tfar]; `coherent` as for
+    /// `intersect`.
+    #[pyo3(signature = (origins, directions, tnear, tfar, threads=None, coherent=false))]
     fn occluded<'py>(
         &self,
         py: Python<'py>,
@@ -492,6 +501,7 @@ impl Bvh {
         tnear: Bound<'py, PyAny>,
         tfar: Bound<'py, PyAny>,
         threads: Option<usize>,
+        coherent: bool,
     ) -> PyResult<Bound<'py, PyArray1<bool>>> {
         let (mut near, mut far) = (None, None);
         let batch = batch(&origins, &directions, &tnear, &mut near, &tfar, &mut far)?;
@@ -500,7 +510,7 @@ impl Bvh {
         let blocked = unsafe { out.as_slice_mut().expect("contiguous") };
         py.detach(|| {
             pools::install(threads, || {
-                let Some(order) = self.batch_order(&batch) else {
+                let Some(order) = self.batch_order(&batch).filter(|_| !coherent) else {
                     return blocked
                         .par_chunks_mut(CHUNK)
                         .enumerate()
@@ -508,7 +518,12 @@ impl Bvh {
                             let count = out.len();
                             let rays = |i: usize| batch.ray(chunk * CHUNK + i);
                             let answer = |i: usize, blocked: bool| out[i] = blocked;
-                            self.accel.occluded_each(count, ALL_MASKS, rays, answer)
+                            match coherent {
+                                true => {
+                                    self.accel.occluded_coherent(count, ALL_MASKS, rays, answer)
+                                }
+                                false => self.accel.occluded_each(count, ALL_MASKS, rays, answer),
+                            }
                         });
                 };
                 let traced = order.trace(

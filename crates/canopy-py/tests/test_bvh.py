@@ -62,6 +62,32 @@ def test_every_builder_and_width_gives_the_brute_force_answer(builder, width):
     assert stats["primitives"] == 300 and stats["sah_cost"] > 0 and stats["build_ms"] >= 0
 
 
+@pytest.mark.parametrize("width", [2, 4, 8])
+def test_coherent_rays_in_packets_give_the_same_answers(width):
+    """A camera's rays row by row and shadow rays from one patch towards one point, as
+    packets: the same hits, bit for bit, and the same occlusion as ray by ray."""
+    vertices, faces = random_soup(1500, 5)
+    bvh = canopy.Bvh(vertices, faces, width=width)
+    eye = np.array([0.2, 0.1, -3.0], np.float32)
+    ys, xs = np.mgrid[-0.2:1.2:40j, -0.2:1.2:50j]
+    targets = np.stack([xs.ravel(), ys.ravel(), np.zeros(xs.size)], axis=1).astype(np.float32)
+    origins = np.broadcast_to(eye, targets.shape).copy()
+    camera = (origins, targets - origins)
+    hits = bvh.intersect(*camera)
+    assert 0.2 < np.mean(hits.prim >= 0) < 0.95
+    packets = bvh.intersect(*camera, coherent=True)
+    np.testing.assert_array_equal(packets.prim, hits.prim)
+    np.testing.assert_array_equal(packets.t, hits.t)
+    np.testing.assert_array_equal(packets.uv, hits.uv)
+    light = np.array([0.5, 2.0, 1.0], np.float32)
+    found = hits.prim >= 0
+    points = origins[found] + hits.t[found, None] * camera[1][found] * np.float32(0.999)
+    shadows = (points, light - points)
+    blocked = bvh.occluded(*shadows, tfar=0.999)
+    assert 0.05 < np.mean(blocked) < 0.95
+    np.testing.assert_array_equal(bvh.occluded(*shadows, tfar=0.999, coherent=True), blocked)
+
+
 @pytest.mark.parametrize("builder", ["none", "binned-sah", "lbvh"])
 @pytest.mark.parametrize("width", [2, 4, 8])
 def test_zero_and_denormal_directions_miss_in_every_structure(builder, width):

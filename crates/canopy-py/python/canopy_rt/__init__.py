@@ -226,23 +226,45 @@ class Bvh:
         return origins, directions, _per_ray(tnear, "tnear", n), _per_ray(tfar, "tfar", n)
 
     def intersect(
-        self, origins, directions, tnear=0.0, tfar=np.inf, *, threads: Optional[int] = None
+        self,
+        origins,
+        directions,
+        tnear=0.0,
+        tfar=np.inf,
+        *,
+        threads: Optional[int] = None,
+        coherent: bool = False,
     ) -> Hits:
         """Closest hits of the rays ``origin + t * direction``, ``tnear <= t <= tfar``.
 
         ``origins`` and ``directions`` are (n, 3); ``tnear`` and ``tfar`` numbers or (n,).
         Directions need not be unit length (``t`` is in their units). Ties go to the
         lower primitive index, so every builder and width gives the same answer.
+
+        ``coherent=True`` says that neighbouring rays start near each other and run in
+        similar directions (a camera's rays row by row, or many rays from one point): they
+        are then traced 16 at a time as packets, which is faster for such rays and slower
+        for scattered ones. The answers are the same either way.
         """
-        t, prim, uv = self._native.intersect(*self._rays(origins, directions, tnear, tfar), threads)
+        rays = self._rays(origins, directions, tnear, tfar)
+        t, prim, uv = self._native.intersect(*rays, threads, coherent)
         return Hits(t, prim, uv)
 
     def occluded(
-        self, origins, directions, tnear=0.0, tfar=np.inf, *, threads: Optional[int] = None
+        self,
+        origins,
+        directions,
+        tnear=0.0,
+        tfar=np.inf,
+        *,
+        threads: Optional[int] = None,
+        coherent: bool = False,
     ) -> np.ndarray:
         """(n,) bool: whether anything lies on each ray within ``[tnear, tfar]`` (any hit,
-        not the closest: faster, for shadow and visibility rays)."""
-        return self._native.occluded(*self._rays(origins, directions, tnear, tfar), threads)
+        not the closest: faster, for shadow and visibility rays). ``coherent`` as for
+        :meth:`intersect` (shadow rays from neighbouring points towards one light)."""
+        rays = self._rays(origins, directions, tnear, tfar)
+        return self._native.occluded(*rays, threads, coherent)
 
     def __repr__(self) -> str:
         return repr(self._native)

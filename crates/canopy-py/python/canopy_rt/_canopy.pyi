@@ -141,6 +141,7 @@ class Bvh:
         tnear: float | np.ndarray,
         tfar: float | np.ndarray,
         threads: Optional[int] = ...,
+        coherent: bool = ...,
     ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]: ...
     def occluded(
         self,
@@ -149,4 +150,5 @@ class Bvh:
         tnear: float | np.ndarray,
         tfar: float | np.ndarray,
         threads: Optional[int] = ...,
+        coherent: bool = ...,
     ) -> np.ndarray: ...
