@@ -405,7 +405,7 @@ impl Bvh {
     /// Closest hits: (t, prim, uv) with t = inf, prim = -1, uv = 0 on a miss. `coherent`
     /// rays (neighbours start near each other and run alike) are traced in packets.
     #[pyo3(signature = (origins, directions, tnear, tfar, threads=None, coherent=false))]
-    #[allow(clippy::type_complexity)]
+    #[allow(clippy::type_complexity, clippy::too_many_arguments)]
     fn intersect<'py>(
         &self,
         py: Python<'py>,
@@ -493,6 +493,7 @@ impl Bvh {
     /// Whether anything lies on each ray within [tnear, tfar]; `coherent` as for
     /// `intersect`.
     #[pyo3(signature = (origins, directions, tnear, tfar, threads=None, coherent=false))]
+    #[allow(clippy::too_many_arguments)]
     fn occluded<'py>(
         &self,
         py: Python<'py>,
