@@ -24,6 +24,7 @@ use glam::Vec3;
 use packet::{closest_packet, occluded_packet};
 use packet_packs::PackedPacketLeaves;
 use rayon::prelude::*;
+use std::marker::PhantomData;
 use traverse::{closest, ClosureLeaves, PackedLeaves, Query, SphereLeaves};
 
 pub use packet::PACKET;
@@ -484,13 +485,7 @@ where
         F: FnMut(u32, &Ray) -> Option<P>,
         P: IntoHit,
     {
-        let each = ClosestEach {
-            bvh: self,
-            count,
-            ray,
-            answer,
-            test: hit_prim,
-        };
+        let each = Batch::<N, _, _, _, ClosestOneByOne>::new(self, count, ray, answer, hit_prim);
         WideNode::<N>::dispatch(self.isa, each)
     }
 
@@ -510,13 +505,7 @@ where
         if !self.has_sphere_leaves() && self.packs.is_empty() {
             return self.intersect_each(count, ray, answer, hit_prim);
         }
-        let each = PacketEach {
-            bvh: self,
-            count,
-            ray,
-            answer,
-            test: hit_prim,
-        };
+        let each = Batch::<N, _, _, _, ClosestInPackets>::new(self, count, ray, answer, hit_prim);
         WideNode::<N>::dispatch(self.isa, each)
     }
 
@@ -527,13 +516,7 @@ where
         A: FnMut(usize, bool),
         F: FnMut(u32, &Ray) -> bool,
     {
-        let each = AnyEach {
-            bvh: self,
-            count,
-            ray,
-            answer,
-            test: hit_prim,
-        };
+        let each = Batch::<N, _, _, _, AnyOneByOne>::new(self, count, ray, answer, hit_prim);
         WideNode::<N>::dispatch(self.isa, each)
     }
 
@@ -550,27 +533,47 @@ where
         if !self.has_sphere_leaves() && self.packs.is_empty() {
             return self.occluded_each(count, ray, answer, hit_prim);
         }
-        let each = PacketAnyEach {
-            bvh: self,
-            count,
-            ray,
-            answer,
-            test: hit_prim,
-        };
+        let each = Batch::<N, _, _, _, AnyInPackets>::new(self, count, ray, answer, hit_prim);
         WideNode::<N>::dispatch(self.isa, each)
     }
 }
 
-/// Closest hits of `count` rays in one dispatch ([`BvhN::intersect_each`]).
-struct ClosestEach<'a, const N: usize, R, A, F> {
+/// Rays `0..count` for one dispatch: `ray(i)` makes ray `i`, `answer(i, _)` takes its
+/// answer, and `test` is the caller's test of the primitives the tree leaves to it. `Q`
+/// names the query and how the rays go (one of the four kinds below).
+struct Batch<'a, const N: usize, R, A, F, Q> {
     bvh: &'a BvhN<N>,
     count: usize,
     ray: R,
     answer: A,
     test: F,
+    query: PhantomData<Q>,
 }
 
-impl<const N: usize, R, A, F, P> Query<N> for ClosestEach<'_, N, R, A, F>
+impl<'a, const N: usize, R, A, F, Q> Batch<'a, N, R, A, F, Q> {
+    #[inline(always)]
+    fn new(bvh: &'a BvhN<N>, count: usize, ray: R, answer: A, test: F) -> Self {
+        Self {
+            bvh,
+            count,
+            ray,
+            answer,
+            test,
+            query: PhantomData,
+        }
+    }
+}
+
+/// Closest hits, ray by ray ([`BvhN::intersect_each`]).
+struct ClosestOneByOne;
+/// Closest hits in packets ([`BvhN::intersect_coherent`]).
+struct ClosestInPackets;
+/// Occlusion, ray by ray ([`BvhN::occluded_each`]).
+struct AnyOneByOne;
+/// Occlusion in packets ([`BvhN::occluded_coherent`]).
+struct AnyInPackets;
+
+impl<const N: usize, R, A, F, P> Query<N> for Batch<'_, N, R, A, F, ClosestOneByOne>
 where
     R: FnMut(usize) -> Ray,
     A: FnMut(usize, Option<Hit>),
@@ -601,16 +604,7 @@ where
     }
 }
 
-/// Closest hits of `count` rays in packets, in one dispatch ([`BvhN::intersect_coherent`]).
-struct PacketEach<'a, const N: usize, R, A, F> {
-    bvh: &'a BvhN<N>,
-    count: usize,
-    ray: R,
-    answer: A,
-    test: F,
-}
-
-impl<const N: usize, R, A, F, P> Query<N> for PacketEach<'_, N, R, A, F>
+impl<const N: usize, R, A, F, P> Query<N> for Batch<'_, N, R, A, F, ClosestInPackets>
 where
     R: FnMut(usize) -> Ray,
     A: FnMut(usize, Option<Hit>),
@@ -651,16 +645,7 @@ where
     }
 }
 
-/// Occlusion of `count` rays in one dispatch ([`BvhN::occluded_each`]).
-struct AnyEach<'a, const N: usize, R, A, F> {
-    bvh: &'a BvhN<N>,
-    count: usize,
-    ray: R,
-    answer: A,
-    test: F,
-}
-
-impl<const N: usize, R, A, F> Query<N> for AnyEach<'_, N, R, A, F>
+impl<const N: usize, R, A, F> Query<N> for Batch<'_, N, R, A, F, AnyOneByOne>
 where
     R: FnMut(usize) -> Ray,
     A: FnMut(usize, bool),
@@ -687,16 +672,7 @@ where
     }
 }
 
-/// Occlusion of `count` rays in packets, in one dispatch ([`BvhN::occluded_coherent`]).
-struct PacketAnyEach<'a, const N: usize, R, A, F> {
-    bvh: &'a BvhN<N>,
-    count: usize,
-    ray: R,
-    answer: A,
-    test: F,
-}
-
-impl<const N: usize, R, A, F> Query<N> for PacketAnyEach<'_, N, R, A, F>
+impl<const N: usize, R, A, F> Query<N> for Batch<'_, N, R, A, F, AnyInPackets>
 where
     R: FnMut(usize) -> Ray,
     A: FnMut(usize, bool),
