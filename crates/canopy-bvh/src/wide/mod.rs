@@ -21,7 +21,7 @@ use crate::view::{Child, ChildKind, TreeView};
 use crate::{Aabb, Bvh2, BvhError, Hit, IntoHit, Isa, IsaError, Ray, SahCosts, TreeStats};
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
-use packet::{closest_packet, occluded_packet};
+use packet::walk_packet;
 use packet_packs::PackedPacketLeaves;
 use rayon::prelude::*;
 use std::marker::PhantomData;
@@ -344,6 +344,44 @@ impl<const N: usize> BvhN<N> {
         !self.spheres.is_empty() && self.packs.is_empty()
     }
 
+    /// Whether coherent rays go in packets: the tree tests its leaves itself (spheres
+    /// kept or triangles packed); a closure's leaves go ray by ray.
+    #[inline(always)]
+    fn traces_packets(&self) -> bool {
+        self.has_sphere_leaves() || !self.packs.is_empty()
+    }
+
+    /// One packet of `rays` through the tree (which [`BvhN::traces_packets`]): kept
+    /// spheres and packed triangles tested for all its rays at once, anything else by
+    /// `test`. Each ray goes to its closest hit, or with `ANY` stops at its first; returns
+    /// each lane's hit and the lanes that stopped ([`packet::walk_packet`]).
+    #[inline(always)]
+    fn walk_packet<T, F, P, const ANY: bool>(
+        &self,
+        rays: &[Ray],
+        test: F,
+    ) -> ([Option<Hit>; PACKET], u32)
+    where
+        T: crate::triangle::PackKernel,
+        F: FnMut(u32, &Ray) -> Option<P>,
+        P: IntoHit,
+    {
+        if self.nodes.is_empty() {
+            return ([None; PACKET], 0);
+        }
+        if self.packs.is_empty() {
+            let mut leaves = SphereLeaves {
+                prims: &self.prim_indices,
+                spheres: &self.spheres,
+                test,
+            };
+            walk_packet::<N, _, ANY>(&self.nodes, rays, &mut leaves)
+        } else {
+            let mut leaves = PackedPacketLeaves::<T, _>::new(&self.packs, &self.spheres, test);
+            walk_packet::<N, _, ANY>(&self.nodes, rays, &mut leaves)
+        }
+    }
+
     /// Checks every primitive is in exactly one leaf, every slot box is the tight box of
     /// its contents, and every node is reached exactly once.
     pub fn validate(&self, boxes: &[Aabb]) -> Result<(), BvhError> {
@@ -502,7 +540,7 @@ where
         F: FnMut(u32, &Ray) -> Option<P>,
         P: IntoHit,
     {
-        if !self.has_sphere_leaves() && self.packs.is_empty() {
+        if !self.traces_packets() {
             return self.intersect_each(count, ray, answer, hit_prim);
         }
         let each = Batch::<N, _, _, _, ClosestInPackets>::new(self, count, ray, answer, hit_prim);
@@ -530,7 +568,7 @@ where
         A: FnMut(usize, bool),
         F: FnMut(u32, &Ray) -> bool,
     {
-        if !self.has_sphere_leaves() && self.packs.is_empty() {
+        if !self.traces_packets() {
             return self.occluded_each(count, ray, answer, hit_prim);
         }
         let each = Batch::<N, _, _, _, AnyInPackets>::new(self, count, ray, answer, hit_prim);
@@ -622,22 +660,7 @@ where
             for (lane, ray) in rays.iter_mut().enumerate() {
                 *ray = (self.ray)(start + lane);
             }
-            // `intersect_coherent` makes packets only of trees that keep their spheres
-            // or pack their triangles.
-            let hits = if bvh.nodes.is_empty() {
-                [None; PACKET]
-            } else if bvh.packs.is_empty() {
-                let mut leaves = SphereLeaves {
-                    prims: &bvh.prim_indices,
-                    spheres: &bvh.spheres,
-                    test: &mut self.test,
-                };
-                closest_packet(&bvh.nodes, rays, &mut leaves)
-            } else {
-                let mut leaves =
-                    PackedPacketLeaves::<T, _>::new(&bvh.packs, &bvh.spheres, &mut self.test);
-                closest_packet(&bvh.nodes, rays, &mut leaves)
-            };
+            let (hits, _) = bvh.walk_packet::<T, _, _, false>(rays, &mut self.test);
             for (lane, hit) in hits.into_iter().take(rays.len()).enumerate() {
                 (self.answer)(start + lane, hit);
             }
@@ -693,22 +716,7 @@ where
             for (lane, ray) in rays.iter_mut().enumerate() {
                 *ray = (self.ray)(start + lane);
             }
-            // `occluded_coherent` makes packets only of trees that keep their spheres
-            // or pack their triangles.
-            let blocked = if bvh.nodes.is_empty() {
-                0
-            } else if bvh.packs.is_empty() {
-                let mut leaves = SphereLeaves {
-                    prims: &bvh.prim_indices,
-                    spheres: &bvh.spheres,
-                    test: &mut blocker,
-                };
-                occluded_packet(&bvh.nodes, rays, &mut leaves)
-            } else {
-                let mut leaves =
-                    PackedPacketLeaves::<T, _>::new(&bvh.packs, &bvh.spheres, &mut blocker);
-                occluded_packet(&bvh.nodes, rays, &mut leaves)
-            };
+            let (_, blocked) = bvh.walk_packet::<T, _, _, true>(rays, &mut blocker);
             for lane in 0..rays.len() {
                 (self.answer)(start + lane, blocked >> lane & 1 == 1);
             }

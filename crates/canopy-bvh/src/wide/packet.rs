@@ -175,34 +175,13 @@ struct Entry {
     entry: [f32; PACKET],
 }
 
-/// The closest hit of each of `rays` (at most [`PACKET`]), as [`super::traverse::closest`]
-/// gives it. `nodes` is non-empty.
+/// The walk of `rays` (at most [`PACKET`]) through `nodes` (non-empty). Without `ANY`,
+/// each ray goes on to the closest hit [`super::traverse::closest`] gives it; with `ANY`,
+/// each stops at its first hit (any-hit, as [`super::traverse::any`] answers), leaving
+/// the packet, and the walk ends when every ray has. Returns each lane's hit (with
+/// `ANY`, a hit, not necessarily the closest) and the lanes that stopped.
 #[inline(always)]
-pub(crate) fn closest_packet<const N: usize, L: PacketLeaves>(
-    nodes: &[WideNode<N>],
-    rays: &[Ray],
-    leaves: &mut L,
-) -> [Option<Hit>; PACKET] {
-    walk_packet::<N, L, false>(nodes, rays, leaves).0
-}
-
-/// Which of `rays` (at most [`PACKET`]) something blocks, as [`super::traverse::any`]
-/// answers it: bit `lane` set for each blocked ray. A ray leaves the packet at its
-/// first hit, and the walk ends when every ray has. `nodes` is non-empty.
-#[inline(always)]
-pub(crate) fn occluded_packet<const N: usize, L: PacketLeaves>(
-    nodes: &[WideNode<N>],
-    rays: &[Ray],
-    leaves: &mut L,
-) -> u32 {
-    walk_packet::<N, L, true>(nodes, rays, leaves).1
-}
-
-/// The packet's walk: with `ANY`, each ray stops at its first hit (any-hit); otherwise
-/// it goes on to its closest. Returns each lane's hit (with `ANY`, a hit, not
-/// necessarily the closest) and the lanes that stopped.
-#[inline(always)]
-fn walk_packet<const N: usize, L: PacketLeaves, const ANY: bool>(
+pub(crate) fn walk_packet<const N: usize, L: PacketLeaves, const ANY: bool>(
     nodes: &[WideNode<N>],
     rays: &[Ray],
     leaves: &mut L,
