@@ -370,12 +370,7 @@ impl Rng {
     /// Uniform on the unit sphere.
     #[inline]
     pub fn unit_vector(&mut self) -> Vec3 {
-        let u = self.next_2d();
-        let z = 1.0 - 2.0 * u.x;
-        let r = (1.0 - z * z).max(0.0).sqrt();
-        let phi = std::f32::consts::TAU * u.y;
-        let (s, c) = phi.sin_cos();
-        Vec3::new(r * c, r * s, z)
+        crate::sampling::unit_vector(self.next_2d())
     }
 
     /// Uniform in the unit disk.

@@ -274,8 +274,10 @@ fn scatter(m: Material, dir: vec3<f32>, s: Surface, rng: ptr<function, Rng>) -> 
             let cos_theta = min(dot(-dir, shading), 1.0);
             let sin_theta = sqrt(max(1.0 - cos_theta * cos_theta, 0.0));
             let total_internal = eta * sin_theta > 1.0;
+            // Drawn whether or not total internal reflection decides, as on the CPU.
+            let choice = next_f32(rng);
             var direction = vec3<f32>(0.0);
-            if (total_internal || schlick(cos_theta, eta) > next_f32(rng)) {
+            if (total_internal || schlick(cos_theta, eta) > choice) {
                 direction = reflect_about(dir, shading);
             } else {
                 direction = refract_through(dir, shading, eta, cos_theta);

@@ -3,6 +3,7 @@
 
 mod camera_rays;
 mod path;
+mod scatter;
 mod wavefront;
 
 pub use wavefront::STREAM_PATHS;

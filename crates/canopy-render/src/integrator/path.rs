@@ -7,7 +7,7 @@ use super::Probe;
 use crate::accel::Accel;
 use crate::geometry::Surface;
 use crate::lights::Lights;
-use crate::material::Material;
+use crate::material::{BsdfSample, Material};
 use crate::rng::Rng;
 use crate::sampling::power_heuristic;
 use crate::scene::{Integrator, Scene};
@@ -130,6 +130,15 @@ pub(super) struct Vertex {
     pub goes_on: bool,
 }
 
+/// A vertex that scatters, up to its BSDF sample: the path goes on from `surface` by a
+/// sample of `material` unless the sample or roulette ends it, and `direct` is its light
+/// sampling.
+pub(super) struct Scattering {
+    pub surface: Surface,
+    pub material: Material,
+    pub direct: Option<DirectLight>,
+}
+
 impl Tracer<'_> {
     /// One sample of the radiance arriving along the camera ray `ray`, traced depth
     /// first: each segment and its shadow rays in turn.
@@ -153,54 +162,110 @@ impl Tracer<'_> {
     /// BSDF sample and roulette, then (for see-through surfaces) the shadow rays.
     #[inline(always)]
     pub fn vertex(&self, path: &mut PathState, hit: Option<Hit>, rng: &mut Rng) -> Vertex {
-        match self.scene.settings.integrator {
-            Integrator::Path => self.path_vertex(path, hit, rng),
-            Integrator::Bsdf => Vertex {
+        let Some(Scattering {
+            surface,
+            material,
+            direct,
+        }) = self.vertex_head(path, hit, rng)
+        else {
+            return Vertex {
                 direct: None,
-                goes_on: self.bsdf_vertex(path, hit, rng),
-            },
+                goes_on: false,
+            };
+        };
+        let sample = material.sample(path.ray.dir, &surface, rng);
+        Vertex {
+            direct,
+            goes_on: self.vertex_tail(path, &surface, sample, rng),
         }
+    }
+
+    /// The vertex up to its BSDF sample: the emission found is added and the lights
+    /// sampled; `None` where the path ends here.
+    #[inline(always)]
+    pub fn vertex_head(
+        &self,
+        path: &mut PathState,
+        hit: Option<Hit>,
+        rng: &mut Rng,
+    ) -> Option<Scattering> {
+        match self.scene.settings.integrator {
+            Integrator::Path => self.path_head(path, hit, rng),
+            Integrator::Bsdf => self.bsdf_head(path, hit),
+        }
+    }
+
+    /// The vertex from its BSDF sample on (`None`: drawn where it cannot scatter):
+    /// whether the path goes on, along its new `ray`.
+    #[inline(always)]
+    pub fn vertex_tail(
+        &self,
+        path: &mut PathState,
+        surface: &Surface,
+        sample: Option<BsdfSample>,
+        rng: &mut Rng,
+    ) -> bool {
+        let settings = self.scene.settings;
+        let Some(sample) = sample else {
+            return false;
+        };
+        path.throughput *= sample.weight;
+        if settings.integrator == Integrator::Path {
+            path.previous = (!sample.delta).then_some(BsdfVertex {
+                p: surface.p,
+                pdf: sample.pdf,
+            });
+            if settings.russian_roulette && path.segments >= ROULETTE_AFTER {
+                let survival = path.throughput.max_element().min(ROULETTE_MAX_SURVIVAL);
+                if rng.next_f32() >= survival {
+                    return false;
+                }
+                path.throughput /= survival;
+            }
+        }
+        if path.throughput == Vec3::ZERO {
+            return false;
+        }
+        path.ray = spawn_ray(surface, sample.direction);
+        path.segments += 1;
+        true
     }
 
     /// The report's estimator: at most `max_depth` segments, light only where a path
     /// happens to end on an emitter or in the background.
     #[inline(always)]
-    fn bsdf_vertex(&self, path: &mut PathState, hit: Option<Hit>, rng: &mut Rng) -> bool {
+    fn bsdf_head(&self, path: &mut PathState, hit: Option<Hit>) -> Option<Scattering> {
         let scene = self.scene;
         let Some(hit) = hit else {
             path.radiance += path.throughput * scene.background.radiance(path.ray.dir);
-            return false;
+            return None;
         };
-        let (surface, ref material) = scene.shade(&path.ray, &hit);
+        let (surface, material) = scene.shade(&path.ray, &hit);
         path.radiance += path.throughput * material.emitted();
         if path.segments == scene.settings.max_depth {
-            return false;
+            return None;
         }
-        let Some(sample) = material.sample(path.ray.dir, &surface, rng) else {
-            return false;
-        };
-        path.throughput *= sample.weight;
-        if path.throughput == Vec3::ZERO {
-            return false;
-        }
-        path.ray = spawn_ray(&surface, sample.direction);
-        path.segments += 1;
-        true
+        Some(Scattering {
+            surface,
+            material,
+            direct: None,
+        })
     }
 
     /// Path tracing with next-event estimation and MIS: every non-delta vertex sends one
     /// shadow ray to a point on a light and one towards the background (where it is an
     /// environment map: [`crate::Background::is_sampled`]), and the emitter or background
-    /// the BSDF-sampled ray finds next is weighted against those. Paths have at most `max_depth` segments, shadow rays counted, so
-    /// both estimators sum the same paths.
+    /// the BSDF-sampled ray finds next is weighted against those. Paths have at most
+    /// `max_depth` segments, shadow rays counted, so both estimators sum the same paths.
     #[inline(always)]
-    fn path_vertex(&self, path: &mut PathState, hit: Option<Hit>, rng: &mut Rng) -> Vertex {
+    fn path_head(
+        &self,
+        path: &mut PathState,
+        hit: Option<Hit>,
+        rng: &mut Rng,
+    ) -> Option<Scattering> {
         let scene = self.scene;
         let settings = scene.settings;
-        let end = Vertex {
-            direct: None,
-            goes_on: false,
-        };
         let Some(hit) = hit else {
             let weight = match path.previous {
                 Some(v) if scene.background.is_sampled() => {
@@ -209,9 +274,9 @@ impl Tracer<'_> {
                 _ => 1.0,
             };
             path.radiance += path.throughput * weight * scene.background.radiance(path.ray.dir);
-            return end;
+            return None;
         };
-        let (surface, ref material) = scene.shade(&path.ray, &hit);
+        let (surface, material) = scene.shade(&path.ray, &hit);
         let emitted = material.emitted();
         if emitted != Vec3::ZERO {
             let weight = match path.previous {
@@ -226,40 +291,17 @@ impl Tracer<'_> {
             path.radiance += path.throughput * weight * emitted;
         }
         if !material.scatters() || path.segments == settings.max_depth {
-            return end;
+            return None;
         }
         let direct = (!material.is_delta() && self.samples_light).then(|| DirectLight {
-            tests: self.light_tests(material, &path.ray, &surface, rng),
+            tests: self.light_tests(&material, &path.ray, &surface, rng),
             throughput: path.throughput,
         });
-        let end = Vertex {
+        Some(Scattering {
+            surface,
+            material,
             direct,
-            goes_on: false,
-        };
-        let Some(sample) = material.sample(path.ray.dir, &surface, rng) else {
-            return end;
-        };
-        path.throughput *= sample.weight;
-        path.previous = (!sample.delta).then_some(BsdfVertex {
-            p: surface.p,
-            pdf: sample.pdf,
-        });
-        if settings.russian_roulette && path.segments >= ROULETTE_AFTER {
-            let survival = path.throughput.max_element().min(ROULETTE_MAX_SURVIVAL);
-            if rng.next_f32() >= survival {
-                return end;
-            }
-            path.throughput /= survival;
-        }
-        if path.throughput == Vec3::ZERO {
-            return end;
-        }
-        path.ray = spawn_ray(&surface, sample.direction);
-        path.segments += 1;
-        Vertex {
-            direct,
-            goes_on: true,
-        }
+        })
     }
 
     /// Light reaching `surface` directly, towards the viewer of `ray`, as shadow tests:

@@ -10,7 +10,8 @@
 //! from its own random stream in the same order, so the image is the same bit for bit.
 
 use super::camera_rays::{camera_rays, PassSamples, Streams};
-use super::path::{DirectLight, PathState, Tracer, Work};
+use super::path::{DirectLight, PathState, Scattering, Tracer, Work};
+use super::scatter::Scatters;
 use super::Probe;
 use crate::camera::Camera;
 use crate::rng::Rng;
@@ -123,6 +124,8 @@ struct Stream {
     hits: Vec<Option<Hit>>,
     /// Whether each path goes on after the stage's vertex.
     goes_on: Vec<bool>,
+    /// The stage's BSDF samples drawn in lanes.
+    scatters: Scatters,
     /// The light sampling of the stage's vertices that sampled light: path and tests.
     directs: Vec<(u32, DirectLight)>,
     /// Shadow rays of the stage, in path order, and whether each is blocked.
@@ -147,13 +150,7 @@ impl Stream {
             self.closest_hits(tracer, coherent, work);
             self.goes_on.clear();
             self.directs.clear();
-            for (i, (p, hit)) in self.paths.iter_mut().zip(&self.hits).enumerate() {
-                let vertex = tracer.vertex(&mut p.path, *hit, &mut p.rng);
-                if let Some(direct) = vertex.direct {
-                    self.directs.push((i as u32, direct));
-                }
-                self.goes_on.push(vertex.goes_on);
-            }
+            self.vertices(tracer);
             self.shadow_rays(tracer, coherent, work);
             coherent = false;
             // Light that arrives, in path order, then the paths that ended leave.
@@ -173,6 +170,45 @@ impl Stream {
                     self.paths.swap_remove(i);
                 }
             }
+        }
+    }
+
+    /// Every path's vertex at the hit of its segment: emission and light sampling path
+    /// by path, then the BSDF samples grouped by material and drawn over SIMD lanes
+    /// ([`Scatters`]), then each path's roulette. Each path draws its numbers in the
+    /// order [`Tracer::vertex`] does.
+    fn vertices(&mut self, tracer: &Tracer) {
+        self.scatters.clear();
+        for (i, (p, hit)) in self.paths.iter_mut().zip(&self.hits).enumerate() {
+            let goes_on = match tracer.vertex_head(&mut p.path, *hit, &mut p.rng) {
+                None => false,
+                Some(Scattering {
+                    surface,
+                    material,
+                    direct,
+                }) => {
+                    if let Some(direct) = direct {
+                        self.directs.push((i as u32, direct));
+                    }
+                    let dir = p.path.ray.dir;
+                    let draw = material.draw(&mut p.rng);
+                    match self.scatters.push(i as u32, dir, surface, material, draw) {
+                        // Decided once the sample is drawn, below.
+                        Ok(()) => false,
+                        Err((surface, material)) => {
+                            let sample = material.sample_drawn(dir, &surface, draw);
+                            tracer.vertex_tail(&mut p.path, &surface, sample, &mut p.rng)
+                        }
+                    }
+                }
+            };
+            self.goes_on.push(goes_on);
+        }
+        self.scatters.sample();
+        for (queued, sample) in self.scatters.samples() {
+            let i = queued.path as usize;
+            let p = &mut self.paths[i];
+            self.goes_on[i] = tracer.vertex_tail(&mut p.path, &queued.surface, sample, &mut p.rng);
         }
     }
 

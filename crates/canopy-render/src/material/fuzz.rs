@@ -17,21 +17,28 @@ use glam::Vec3;
 use std::f32::consts::PI;
 
 /// Density per solid angle of drawing unit `direction` around unit `mirror` with `fuzz > 0`.
+/// Both cases are computed and one is selected, with no early return, so that loops over
+/// SIMD lanes vectorise ([`super::lanes`]).
+#[inline(always)]
 pub fn pdf(mirror: Vec3, fuzz: f32, direction: Vec3) -> f32 {
     let c = direction.dot(mirror);
     let disc = c * c - 1.0 + fuzz * fuzz;
-    if disc <= 0.0 {
-        return 0.0;
-    }
-    let root = disc.sqrt();
-    if fuzz < 1.0 {
+    let root = disc.max(0.0).sqrt();
+    let density = if fuzz < 1.0 {
+        let both_roots = (c * c + disc) / (2.0 * PI * fuzz * root);
         if c <= 0.0 {
-            return 0.0;
+            0.0
+        } else {
+            both_roots
         }
-        (c * c + disc) / (2.0 * PI * fuzz * root)
     } else {
         let t = c + root;
         t * t / (4.0 * PI * fuzz * root)
+    };
+    if disc <= 0.0 {
+        0.0
+    } else {
+        density
     }
 }
 

@@ -2,6 +2,7 @@
 
 mod fuzz;
 pub mod ggx;
+pub mod lanes;
 mod pbr;
 
 pub use pbr::Pbr;
@@ -9,7 +10,8 @@ pub use pbr::Pbr;
 use crate::geometry::Surface;
 use crate::rng::Rng;
 use crate::sampling::Frame;
-use glam::Vec3;
+use glam::{Vec2, Vec3};
+use lanes::LaneSample;
 use std::f32::consts::FRAC_1_PI;
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -43,17 +45,26 @@ pub struct BsdfSample {
     pub delta: bool,
 }
 
+/// The random numbers a material's sample is drawn from: `choice` picks a lobe (or
+/// glass's reflection), `u` a direction. Drawn apart from the sample so that the wavefront
+/// can draw each path's numbers, then sample a stage's vertices of one material together.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct BsdfDraw {
+    pub choice: f32,
+    pub u: Vec2,
+}
+
 /// The normals of a hit turned to face the side the ray arrived from.
 #[derive(Clone, Copy, Debug)]
-struct Facing {
-    geometric: Vec3,
-    shading: Vec3,
-    entering: bool,
+pub(crate) struct Facing {
+    pub geometric: Vec3,
+    pub shading: Vec3,
+    pub entering: bool,
 }
 
 impl Facing {
     #[inline]
-    fn new(dir: Vec3, surface: &Surface) -> Self {
+    pub fn new(dir: Vec3, surface: &Surface) -> Self {
         let entering = dir.dot(surface.geometric_normal) < 0.0;
         let (geometric, shading) = if entering {
             (surface.geometric_normal, surface.shading_normal)
@@ -102,79 +113,84 @@ impl Material {
     /// Reflection never goes below the geometric surface: with smooth-shading normals a
     /// drawn direction can, and that sample is absorbed (its density stays counted, so
     /// [`Material::eval`] and [`Material::pdf`] describe exactly this distribution).
+    #[inline]
     pub fn sample(&self, dir: Vec3, surface: &Surface, rng: &mut Rng) -> Option<BsdfSample> {
-        let facing = Facing::new(dir, surface);
-        match *self {
-            Material::Lambertian { albedo } => {
-                // Normal plus a uniform unit vector: cosine-distributed about the normal.
-                let d = facing.shading + rng.unit_vector();
-                let direction = if d.length_squared() < 1e-12 {
-                    facing.shading
-                } else {
-                    d.normalize()
-                };
-                let cos = direction.dot(facing.shading);
-                (direction.dot(facing.geometric) > 0.0 && cos > 0.0).then_some(BsdfSample {
-                    direction,
-                    weight: albedo,
-                    pdf: cos * FRAC_1_PI,
-                    delta: false,
-                })
+        let draw = self.draw(rng);
+        self.sample_drawn(dir, surface, draw)
+    }
+
+    /// The random numbers [`Material::sample`] takes from `rng`.
+    #[inline]
+    pub fn draw(&self, rng: &mut Rng) -> BsdfDraw {
+        match self {
+            Material::Lambertian { .. } | Material::Metal { .. } => BsdfDraw {
+                choice: 0.0,
+                u: rng.next_2d(),
+            },
+            Material::Dielectric { .. } => BsdfDraw {
+                choice: rng.next_f32(),
+                u: Vec2::ZERO,
+            },
+            Material::Pbr(_) => {
+                let choice = rng.next_f32();
+                BsdfDraw {
+                    choice,
+                    u: rng.next_2d(),
+                }
             }
-            Material::Metal { albedo, fuzz } => {
-                let reflected = reflect(dir, facing.shading);
-                let direction = (reflected + fuzz * rng.unit_vector()).normalize_or_zero();
-                let delta = fuzz == 0.0;
-                let pdf = if delta {
-                    0.0
-                } else {
-                    fuzz::pdf(reflected, fuzz, direction)
-                };
-                // A direction on the very edge of the lobe can round to density 0 (where
-                // the true density is unbounded): absorbed, like any sample without one.
-                (direction.dot(facing.geometric) > 0.0 && (delta || pdf > 0.0)).then_some(
-                    BsdfSample {
-                        direction,
-                        weight: albedo,
-                        pdf,
-                        delta,
-                    },
-                )
+            Material::Emissive { .. } => BsdfDraw::default(),
+        }
+    }
+
+    /// [`Material::sample`] from the numbers `draw`.
+    #[inline]
+    pub fn sample_drawn(&self, dir: Vec3, surface: &Surface, draw: BsdfDraw) -> Option<BsdfSample> {
+        let facing = Facing::new(dir, surface);
+        let lane = match *self {
+            Material::Lambertian { .. } => {
+                lanes::lambertian(facing.shading, facing.geometric, draw.u)
+            }
+            Material::Metal { fuzz, .. } => {
+                lanes::metal(dir, facing.shading, facing.geometric, fuzz, draw.u)
             }
             Material::Dielectric { ior } => {
                 let eta = if facing.entering { 1.0 / ior } else { ior };
-                let cos_theta = (-dir).dot(facing.shading).min(1.0);
-                let sin_theta = (1.0 - cos_theta * cos_theta).max(0.0).sqrt();
-                let total_internal = eta * sin_theta > 1.0;
-                let direction = if total_internal || schlick(cos_theta, eta) > rng.next_f32() {
-                    reflect(dir, facing.shading)
-                } else {
-                    refract(dir, facing.shading, eta, cos_theta)
-                };
-                Some(BsdfSample {
-                    direction: direction.normalize(),
-                    weight: Vec3::ONE,
-                    pdf: 0.0,
-                    delta: true,
-                })
+                lanes::dielectric(dir, facing.shading, eta, draw.choice)
             }
-            Material::Emissive { .. } => None,
+            Material::Emissive { .. } => return None,
             Material::Pbr(pbr) => {
                 let frame = Frame::from_z(facing.shading);
                 let wo = frame.to_local(-dir);
-                let choice = rng.next_f32();
-                let u = rng.next_2d();
-                let wi = pbr.sample(wo, choice, u)?;
+                let wi = pbr.sample(wo, draw.choice, draw.u)?;
                 let pdf = pbr.pdf(wo, wi);
                 let direction = frame.to_world(wi);
-                (direction.dot(facing.geometric) > 0.0 && pdf > 0.0).then(|| BsdfSample {
+                return (direction.dot(facing.geometric) > 0.0 && pdf > 0.0).then(|| BsdfSample {
                     direction,
                     weight: pbr.eval(wo, wi) / pdf,
                     pdf,
                     delta: false,
-                })
+                });
             }
-        }
+        };
+        self.with_weight(lane)
+    }
+
+    /// The sample of a Lambertian, metal or glass lobe drawn in [`lanes`], with the
+    /// material's weight; `None` where it does not scatter.
+    #[inline]
+    pub fn with_weight(&self, lane: LaneSample) -> Option<BsdfSample> {
+        let (weight, delta) = match *self {
+            Material::Lambertian { albedo } => (albedo, false),
+            Material::Metal { albedo, fuzz } => (albedo, fuzz == 0.0),
+            Material::Dielectric { .. } => (Vec3::ONE, true),
+            Material::Emissive { .. } | Material::Pbr(_) => return None,
+        };
+        lane.scatters.then_some(BsdfSample {
+            direction: lane.direction,
+            weight,
+            pdf: lane.pdf,
+            delta,
+        })
     }
 
     /// BSDF times cosine for light arriving from the unit direction `wi` and leaving
@@ -218,24 +234,28 @@ impl Material {
     }
 }
 
-#[inline]
+#[inline(always)]
 fn reflect(v: Vec3, n: Vec3) -> Vec3 {
     v - 2.0 * v.dot(n) * n
 }
 
 /// Refraction of unit `v` through a surface with unit normal `n` facing it.
-#[inline]
+#[inline(always)]
 fn refract(v: Vec3, n: Vec3, eta: f32, cos_theta: f32) -> Vec3 {
     let perpendicular = eta * (v + cos_theta * n);
     let parallel = -(1.0 - perpendicular.length_squared()).abs().sqrt() * n;
     perpendicular + parallel
 }
 
-/// Schlick's approximation of the Fresnel reflectance.
-#[inline]
+/// Schlick's approximation of the Fresnel reflectance (in multiplications, the same bits
+/// in scalar and SIMD code).
+#[inline(always)]
 fn schlick(cos_theta: f32, eta: f32) -> f32 {
-    let r0 = ((1.0 - eta) / (1.0 + eta)).powi(2);
-    r0 + (1.0 - r0) * (1.0 - cos_theta).powi(5)
+    let r = (1.0 - eta) / (1.0 + eta);
+    let r0 = r * r;
+    let m = 1.0 - cos_theta;
+    let m2 = m * m;
+    r0 + (1.0 - r0) * (m2 * m2 * m)
 }
 
 #[cfg(test)]
