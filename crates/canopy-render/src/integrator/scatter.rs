@@ -8,24 +8,12 @@
 //! bit for bit. Other materials are sampled by the caller, one at a time.
 
 use crate::geometry::Surface;
-use crate::material::lanes::{self, LaneSample};
+use crate::material::lanes::{LaneParams, LaneSample, Lobe};
 use crate::material::{BsdfDraw, BsdfSample, Facing, Material};
 use glam::{Vec2, Vec3};
 
 /// Vertices sampled together: a multiple of the widest vectors' 16 floats.
 const LANES: usize = 16;
-
-/// The materials whose samples are drawn in lanes.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Lobe {
-    Lambertian,
-    Metal,
-    Dielectric,
-}
-
-impl Lobe {
-    const ALL: [Lobe; 3] = [Lobe::Lambertian, Lobe::Metal, Lobe::Dielectric];
-}
 
 /// What [`LANES`] vertices' samples are drawn from, one array per coordinate.
 #[derive(Clone, Copy)]
@@ -34,9 +22,8 @@ struct Inputs {
     dir: [[f32; LANES]; 3],
     shading: [[f32; LANES]; 3],
     geometric: [[f32; LANES]; 3],
-    /// The drawn numbers: a direction's pair, or glass's choice in the first.
+    /// [`LaneParams`]' numbers and parameter.
     u: [[f32; LANES]; 2],
-    /// The metal's fuzz or the glass's relative index.
     param: [f32; LANES],
 }
 
@@ -103,14 +90,8 @@ impl Scatters {
         draw: BsdfDraw,
     ) -> Result<(), (Surface, Material)> {
         let facing = Facing::new(dir, &surface);
-        let (lobe, param, u) = match material {
-            Material::Lambertian { .. } => (Lobe::Lambertian, 0.0, draw.u),
-            Material::Metal { fuzz, .. } => (Lobe::Metal, fuzz, draw.u),
-            Material::Dielectric { ior } => {
-                let eta = if facing.entering { 1.0 / ior } else { ior };
-                (Lobe::Dielectric, eta, Vec2::new(draw.choice, 0.0))
-            }
-            Material::Emissive { .. } | Material::Pbr(_) => return Err((surface, material)),
+        let Some(LaneParams { lobe, param, u }) = material.lane_params(&facing, draw) else {
+            return Err((surface, material));
         };
         let group = &mut self.groups[lobe as usize];
         let lane = group.vertices.len() % LANES;
@@ -220,25 +201,26 @@ unsafe fn sample_lanes_avx2(lobe: Lobe, inputs: &[Inputs], outputs: &mut [Output
     sample_blocks(lobe, inputs, outputs);
 }
 
-/// One loop over the lanes of each block, which the compiler vectorises (each calls the
-/// lobe's function directly: a function passed as a closure was not always inlined).
+/// One loop over the lanes of each block, which the compiler vectorises: the lobe is a
+/// constant in each loop, so its `match` folds away (a lobe function passed as a closure
+/// was not always inlined).
 #[inline(always)]
 fn sample_blocks(lobe: Lobe, inputs: &[Inputs], outputs: &mut [Outputs]) {
     for (x, out) in inputs.iter().zip(outputs) {
         match lobe {
             Lobe::Lambertian => {
                 for lane in 0..LANES {
-                    out.set(lane, x.lambertian(lane));
+                    out.set(lane, x.sample(Lobe::Lambertian, lane));
                 }
             }
             Lobe::Metal => {
                 for lane in 0..LANES {
-                    out.set(lane, x.metal(lane));
+                    out.set(lane, x.sample(Lobe::Metal, lane));
                 }
             }
             Lobe::Dielectric => {
                 for lane in 0..LANES {
-                    out.set(lane, x.dielectric(lane));
+                    out.set(lane, x.sample(Lobe::Dielectric, lane));
                 }
             }
         }
@@ -257,48 +239,24 @@ impl Outputs {
 }
 
 impl Inputs {
+    /// The sample of lane `lane`, drawn as a `lobe`.
     #[inline(always)]
-    fn lambertian(&self, lane: usize) -> LaneSample {
-        lanes::lambertian(self.shading(lane), self.geometric(lane), self.u(lane))
-    }
-
-    #[inline(always)]
-    fn metal(&self, lane: usize) -> LaneSample {
-        let fuzz = self.param[lane];
-        lanes::metal(
-            self.dir(lane),
-            self.shading(lane),
-            self.geometric(lane),
-            fuzz,
-            self.u(lane),
+    fn sample(&self, lobe: Lobe, lane: usize) -> LaneSample {
+        let params = LaneParams {
+            lobe,
+            param: self.param[lane],
+            u: Vec2::new(self.u[0][lane], self.u[1][lane]),
+        };
+        params.sample(
+            Self::vec3(&self.dir, lane),
+            Self::vec3(&self.shading, lane),
+            Self::vec3(&self.geometric, lane),
         )
-    }
-
-    #[inline(always)]
-    fn dielectric(&self, lane: usize) -> LaneSample {
-        let (eta, choice) = (self.param[lane], self.u[0][lane]);
-        lanes::dielectric(self.dir(lane), self.shading(lane), eta, choice)
     }
 
     #[inline(always)]
     fn vec3(v: &[[f32; LANES]; 3], lane: usize) -> Vec3 {
         Vec3::new(v[0][lane], v[1][lane], v[2][lane])
-    }
-    #[inline(always)]
-    fn dir(&self, lane: usize) -> Vec3 {
-        Self::vec3(&self.dir, lane)
-    }
-    #[inline(always)]
-    fn shading(&self, lane: usize) -> Vec3 {
-        Self::vec3(&self.shading, lane)
-    }
-    #[inline(always)]
-    fn geometric(&self, lane: usize) -> Vec3 {
-        Self::vec3(&self.geometric, lane)
-    }
-    #[inline(always)]
-    fn u(&self, lane: usize) -> Vec2 {
-        Vec2::new(self.u[0][lane], self.u[1][lane])
     }
 }
 

@@ -19,6 +19,40 @@ pub struct LaneSample {
     pub scatters: bool,
 }
 
+/// The lobes sampled in lanes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Lobe {
+    Lambertian,
+    Metal,
+    Dielectric,
+}
+
+impl Lobe {
+    pub const ALL: [Lobe; 3] = [Lobe::Lambertian, Lobe::Metal, Lobe::Dielectric];
+}
+
+/// What a vertex's sample in lanes is drawn from besides its ray and normals: the lobe,
+/// its parameter (the metal's fuzz, the glass's relative index) and the drawn numbers (a
+/// direction's pair, or the glass's choice in `u.x`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LaneParams {
+    pub lobe: Lobe,
+    pub param: f32,
+    pub u: Vec2,
+}
+
+impl LaneParams {
+    /// The sample for a ray along `dir` at normals `shading` and `geometric` facing it.
+    #[inline(always)]
+    pub fn sample(&self, dir: Vec3, shading: Vec3, geometric: Vec3) -> LaneSample {
+        match self.lobe {
+            Lobe::Lambertian => lambertian(shading, geometric, self.u),
+            Lobe::Metal => metal(dir, shading, geometric, self.param, self.u),
+            Lobe::Dielectric => dielectric(dir, shading, self.param, self.u.x),
+        }
+    }
+}
+
 /// Lambertian: the shading normal plus a uniform unit vector (from `u`), which is
 /// cosine-distributed about the normal. `shading` and `geometric` face the arriving ray.
 #[inline(always)]

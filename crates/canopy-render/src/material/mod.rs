@@ -11,7 +11,7 @@ use crate::geometry::Surface;
 use crate::rng::Rng;
 use crate::sampling::Frame;
 use glam::{Vec2, Vec3};
-use lanes::LaneSample;
+use lanes::{LaneParams, LaneSample, Lobe};
 use std::f32::consts::FRAC_1_PI;
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -146,33 +146,39 @@ impl Material {
     #[inline]
     pub fn sample_drawn(&self, dir: Vec3, surface: &Surface, draw: BsdfDraw) -> Option<BsdfSample> {
         let facing = Facing::new(dir, surface);
-        let lane = match *self {
-            Material::Lambertian { .. } => {
-                lanes::lambertian(facing.shading, facing.geometric, draw.u)
-            }
-            Material::Metal { fuzz, .. } => {
-                lanes::metal(dir, facing.shading, facing.geometric, fuzz, draw.u)
-            }
+        if let Some(lane) = self.lane_params(&facing, draw) {
+            return self.with_weight(lane.sample(dir, facing.shading, facing.geometric));
+        }
+        let Material::Pbr(pbr) = self else {
+            return None; // an emitter
+        };
+        let frame = Frame::from_z(facing.shading);
+        let wo = frame.to_local(-dir);
+        let wi = pbr.sample(wo, draw.choice, draw.u)?;
+        let pdf = pbr.pdf(wo, wi);
+        let direction = frame.to_world(wi);
+        (direction.dot(facing.geometric) > 0.0 && pdf > 0.0).then(|| BsdfSample {
+            direction,
+            weight: pbr.eval(wo, wi) / pdf,
+            pdf,
+            delta: false,
+        })
+    }
+
+    /// How a Lambertian, metal or glass lobe's sample is drawn in [`lanes`] from the
+    /// numbers `draw` at a hit seen as `facing`; `None` for other materials.
+    #[inline]
+    pub(crate) fn lane_params(&self, facing: &Facing, draw: BsdfDraw) -> Option<LaneParams> {
+        let (lobe, param, u) = match *self {
+            Material::Lambertian { .. } => (Lobe::Lambertian, 0.0, draw.u),
+            Material::Metal { fuzz, .. } => (Lobe::Metal, fuzz, draw.u),
             Material::Dielectric { ior } => {
                 let eta = if facing.entering { 1.0 / ior } else { ior };
-                lanes::dielectric(dir, facing.shading, eta, draw.choice)
+                (Lobe::Dielectric, eta, Vec2::new(draw.choice, 0.0))
             }
-            Material::Emissive { .. } => return None,
-            Material::Pbr(pbr) => {
-                let frame = Frame::from_z(facing.shading);
-                let wo = frame.to_local(-dir);
-                let wi = pbr.sample(wo, draw.choice, draw.u)?;
-                let pdf = pbr.pdf(wo, wi);
-                let direction = frame.to_world(wi);
-                return (direction.dot(facing.geometric) > 0.0 && pdf > 0.0).then(|| BsdfSample {
-                    direction,
-                    weight: pbr.eval(wo, wi) / pdf,
-                    pdf,
-                    delta: false,
-                });
-            }
+            Material::Emissive { .. } | Material::Pbr(_) => return None,
         };
-        self.with_weight(lane)
+        Some(LaneParams { lobe, param, u })
     }
 
     /// The sample of a Lambertian, metal or glass lobe drawn in [`lanes`], with the
