@@ -11,8 +11,11 @@ GLTF = ROOT / "scenes" / "gltf"
 
 @pytest.fixture(scope="session")
 def canopy_bin() -> Path:
-    """The `canopy` binary of the same checkout (built by the test script)."""
-    path = Path(os.environ.get("CANOPY_BIN", ROOT / "target" / "release" / "canopy"))
+    """The `canopy` binary of the same checkout: $CANOPY_BIN (the test script sets it), else
+    the test profile's build, else the release build."""
+    built = [ROOT / "target" / profile / "canopy" for profile in ("test-opt", "release")]
+    default = next((p for p in built if p.exists()), built[0])
+    path = Path(os.environ.get("CANOPY_BIN", default))
     assert path.exists(), f"{path} is missing: run the tests through scripts/test.sh"
     return path
 

@@ -3,7 +3,7 @@
 //! bit) and the same occlusion as a loop over every primitive, in every layout and
 //! instruction set, before and after the spheres move.
 
-mod common;
+use crate::common;
 
 use canopy_bvh::{
     intersect_sphere, intersect_triangle, Aabb, Blas, BlasParams, Builder, BvhWidth, Geometry, Hit,

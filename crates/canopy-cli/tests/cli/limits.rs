@@ -7,7 +7,7 @@
 //! that the largest ones are accepted by the parser and then refused by a cheap check
 //! rather than rendering for days.
 
-mod common;
+use crate::common;
 
 use common::{canopy_within, scratch, stderr};
 use std::time::Duration;

@@ -3,7 +3,7 @@
 //! barycentrics, bit for bit) and same any-hit answer. Scenes mix triangles with other
 //! primitives (boxes, tested by the caller's closure), as a renderer's scenes do.
 
-mod common;
+use crate::common;
 use common::uniform;
 
 use canopy_bvh::{

@@ -2,7 +2,7 @@
 //! for every ray, the hit of a loop over every instance and every primitive. Transforms
 //! include rotations, mirrors (negative determinant) and non-uniform scale.
 
-mod common;
+use crate::common;
 use common::uniform;
 
 use canopy_bvh::{

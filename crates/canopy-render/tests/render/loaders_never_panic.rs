@@ -18,9 +18,9 @@ impl Assets for NoAssets {
     }
 }
 
-const OBJ: &[u8] = include_bytes!("../../../scenes/meshes/teapot.obj");
-const PLY: &[u8] = include_bytes!("../../../scenes/meshes/teapot.ply");
-const TOML: &str = include_str!("../../../scenes/cornell.toml");
+const OBJ: &[u8] = include_bytes!("../../../../scenes/meshes/teapot.obj");
+const PLY: &[u8] = include_bytes!("../../../../scenes/meshes/teapot.ply");
+const TOML: &str = include_str!("../../../../scenes/cornell.toml");
 
 /// A small valid PLY in each encoding: ASCII with normals and an extra element, and
 /// binary big-endian (the teapot above is little-endian).

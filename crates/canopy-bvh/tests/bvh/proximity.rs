@@ -3,7 +3,7 @@
 //! for a structure on its own and for instances placed by rotations, mirrors and
 //! non-uniform scale.
 
-mod common;
+use crate::common;
 use common::uniform;
 
 use canopy_bvh::{

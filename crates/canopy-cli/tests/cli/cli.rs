@@ -1,7 +1,7 @@
 //! Runs the `canopy` binary as a user would: a tiny render, and bad inputs that must give
 //! one clear message, a non-zero exit and no output file.
 
-mod common;
+use crate::common;
 
 use common::{canopy, outputs, scratch, stderr};
 use std::process::Command;

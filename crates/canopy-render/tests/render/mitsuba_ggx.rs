@@ -13,7 +13,7 @@ use glam::Vec3;
 
 #[test]
 fn values_and_densities_equal_mitsubas() {
-    let table = include_str!("data/mitsuba_ggx.csv");
+    let table = include_str!("../data/mitsuba_ggx.csv");
     let surface = Surface {
         p: Vec3::ZERO,
         geometric_normal: Vec3::Z,

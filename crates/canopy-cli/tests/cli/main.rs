@@ -1,0 +1,8 @@
+//! The `canopy` binary's integration tests: its commands, its promises and its limits.
+//!
+//! One binary for all of them (one link instead of one per file); each file is a module.
+
+mod cli;
+mod common;
+mod limits;
+mod safety;
