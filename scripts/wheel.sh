@@ -6,7 +6,7 @@
 #
 # Usage: scripts/wheel.sh [PROFILE]. PROFILE is a Cargo profile, `release` (the default:
 # the wheel users install) or `test-opt` (what scripts/test.sh tests: it shares the Rust
-# tests' compiled crates, so the wheel costs one more crate, not a second build).
+# tests' compiled crates, so the wheel costs canopy-py and pyo3's crates, not a second build).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 profile=${1:-release}
