@@ -6,8 +6,9 @@ Run it with `bench/distance_compare.sh` (which makes its own venv with open3d, n
 canopy's Python bindings; Open3D needs Debian's libusb-1.0-0). Both libraries are called
 from this script on the same float32 arrays: canopy as `canopy.RayScene`, Open3D as
 `open3d.t.geometry.RaycastingScene`, each with its thread count set per call (`threads=`
-and `nthreads=`). For each query (closest points, distance, signed distance, occupancy)
-and thread count the two run in turns, best of `--runs`; the script prints a table and
+and `nthreads=`). For each query (closest points, distance, signed distance, occupancy,
+and counting and listing every crossing along rays from the same points in random
+directions) and thread count the two run in turns, best of `--runs`; the script prints a table and
 one line `ratio <mesh> <query> <threads>: X.XX` per cell: canopy's speed over Open3D's.
 
 Query points: half uniform in the mesh's box grown by a fifth on every side, half near
@@ -80,6 +81,9 @@ def main():
     parser.add_argument("--runs", type=int, default=3)
     parser.add_argument("--nsamples", type=int, default=1,
                         help="rays Open3D's inside test votes with (its default: 1)")
+    parser.add_argument("--queries", nargs="+",
+                        default=["closest", "distance", "signed", "occupancy", "count", "list"],
+                        help="the queries to time (all by default)")
     parser.add_argument("--judge", type=int, default=50,
                         help="disagreements on inside/outside settled by the exact winding "
                              "number, a sum over every triangle in float64")
@@ -105,6 +109,10 @@ def main():
           f"Open3D {theirs_build * 1e3:.0f} ms")
 
     tensor = o3d.core.Tensor(points)
+    # Rays for counting and listing hits: from the query points, in random directions.
+    directions = np.random.default_rng(2).normal(size=points.shape).astype(np.float32)
+    rays = np.ascontiguousarray(np.hstack([points, directions]))
+    ray_tensor = o3d.core.Tensor(rays)
     n = args.nsamples
     queries = {
         "closest": (lambda t: ours.compute_closest_points(points, threads=t),
@@ -115,7 +123,15 @@ def main():
                    lambda t: theirs.compute_signed_distance(tensor, nthreads=t, nsamples=n)),
         "occupancy": (lambda t: ours.compute_occupancy(points, threads=t),
                       lambda t: theirs.compute_occupancy(tensor, nthreads=t, nsamples=n)),
+        "count": (lambda t: ours.count_intersections(rays, threads=t),
+                  lambda t: theirs.count_intersections(ray_tensor, nthreads=t)),
+        "list": (lambda t: ours.list_intersections(rays, threads=t),
+                 lambda t: theirs.list_intersections(ray_tensor, nthreads=t)),
     }
+    unknown = set(args.queries) - set(queries)
+    if unknown:
+        parser.error(f"unknown queries {sorted(unknown)}: choose from {list(queries)}")
+    queries = {name: calls for name, calls in queries.items() if name in args.queries}
     rows, answers = [], {}
     for query, (canopy_call, open3d_call) in queries.items():
         for threads in args.threads:
@@ -134,7 +150,32 @@ def main():
               f"{len(points) / ours_t / 1e6:>12.2f} {len(points) / theirs_t / 1e6:>12.2f} "
               f"{theirs_t / ours_t:>6.2f}")
 
-    # Agreement.
+    print()
+    for query, threads, ours_t, theirs_t in rows:
+        print(f"ratio {name} {query} {threads}: {theirs_t / ours_t:.2f}")
+    # Agreement, of the queries timed.
+    if ("count", "canopy") in answers and ("list", "canopy") in answers:
+        counts = answers["count", "canopy"]
+        their_counts = answers["count", "open3d"].numpy()
+        listed = answers["list", "canopy"]
+        their_splits = answers["list", "open3d"]["ray_splits"].numpy()
+        print(f"\ncrossings along {len(rays)} rays: counts differ on {int(np.sum(counts != their_counts))} "
+              f"rays (canopy counts a crossing at a shared edge once; Embree, under Open3D, once per "
+              f"triangle or not at all); {int(np.sum(counts % 2 != their_counts % 2))} differ in parity; "
+              f"lists agree with counts: {np.array_equal(np.diff(listed.ray_splits), counts)} (canopy), "
+              f"{np.array_equal(np.diff(their_splits), their_counts)} (Open3D)")
+        # A ray from a point crosses a closed surface an odd number of times exactly when
+        # the point is inside: judge the parity by the exact winding number at the origin.
+        odd = np.nonzero(counts % 2 != their_counts % 2)[0][:args.judge]
+        if len(odd):
+            triangles = vertices[faces].astype(np.float64)
+            exact = np.array([exact_winding_number(triangles, points[i].astype(np.float64)) > 0.5
+                              for i in odd])
+            print(f"judged by the exact winding number at the origins of {len(odd)} of the rays whose "
+                  f"parities differ: canopy's parity right at {int(np.sum(exact == (counts[odd] % 2 == 1)))}, "
+                  f"Open3D's at {int(np.sum(exact == (their_counts[odd] % 2 == 1)))}")
+    if not all((q, "canopy") in answers for q in ("distance", "closest", "signed", "occupancy")):
+        return
     distance = answers["distance", "canopy"]
     their_distance = answers["distance", "open3d"].numpy()
     worst = float(np.max(np.abs(distance - their_distance)))
@@ -164,9 +205,6 @@ def main():
               f"right at {int(np.sum(exact == inside[differ]))}, Open3D right at "
               f"{int(np.sum(exact == their_inside[differ]))}")
 
-    print()
-    for query, threads, ours_t, theirs_t in rows:
-        print(f"ratio {name} {query} {threads}: {theirs_t / ours_t:.2f}")
 
 
 if __name__ == "__main__":

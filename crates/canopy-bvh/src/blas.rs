@@ -110,6 +110,9 @@ pub struct Blas<G> {
     /// The tree laid out for point queries (nearest points, winding numbers), made at
     /// the first such query and dropped when the geometry changes.
     pub(crate) point_tree: OnceLock<PointTree>,
+    /// Whether the triangles close up (see `is_closed` in the point queries), worked
+    /// out at the first inside test and forgotten when the geometry changes.
+    pub(crate) closed: OnceLock<bool>,
 }
 
 impl<G: Geometry> Blas<G> {
@@ -125,6 +128,7 @@ impl<G: Geometry> Blas<G> {
             params: *params,
             build_time: Duration::ZERO,
             point_tree: OnceLock::new(),
+            closed: OnceLock::new(),
         };
         blas.rebuild();
         blas
@@ -134,6 +138,7 @@ impl<G: Geometry> Blas<G> {
     fn rebuild(&mut self) {
         let start = Instant::now();
         self.point_tree = OnceLock::new();
+        self.closed = OnceLock::new();
         let (geometry, params) = (&self.geometry, &self.params);
         let boxes = boxes_of(geometry);
         self.bounds = union_of(&boxes);
@@ -203,6 +208,7 @@ impl<G: Geometry> Blas<G> {
             return Ok(());
         }
         self.point_tree = OnceLock::new();
+        self.closed = OnceLock::new();
         let boxes = boxes_of(&self.geometry);
         self.bounds = union_of(&boxes);
         if let Some(tree) = &mut self.tree {

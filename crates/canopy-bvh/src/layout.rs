@@ -194,6 +194,24 @@ impl Tree {
         }
     }
 
+    /// Every hit of `ray` within its range, each given to `found` as it is met (with the
+    /// triangle's vertices where the tree holds them); same contract as
+    /// [`BvhN::for_each_hit`].
+    #[inline]
+    pub fn for_each_hit<F, P, H>(&self, ray: &Ray, hit_prim: F, found: H)
+    where
+        F: FnMut(u32, &Ray) -> Option<P>,
+        P: IntoHit,
+        H: FnMut(Hit, Option<[Vec3; 3]>),
+    {
+        match self {
+            Tree::Binary(t) => _ = t.occluded(ray, reporting(hit_prim, found)),
+            Tree::Gpu(t) => _ = t.occluded(ray, reporting(hit_prim, found)),
+            Tree::Four(t) => t.for_each_hit(ray, hit_prim, found),
+            Tree::Eight(t) => t.for_each_hit(ray, hit_prim, found),
+        }
+    }
+
     /// Whether batches over this tree are best traced in the order of their rays'
     /// origins ([`crate::BvhN::orders_batches`]; never for the binary and GPU layouts).
     pub fn orders_batches(&self) -> bool {
@@ -283,5 +301,21 @@ impl Tree {
             Tree::Four(t) => t.occluded_each(count, ray, answer, hit_prim),
             Tree::Eight(t) => t.occluded_each(count, ray, answer, hit_prim),
         }
+    }
+}
+
+/// An any-hit test that gives each hit to `found` and reports no blocker, so that an
+/// any-hit walk visits every primitive along the ray.
+fn reporting<F, P, H>(mut hit_prim: F, mut found: H) -> impl FnMut(u32, &Ray) -> bool
+where
+    F: FnMut(u32, &Ray) -> Option<P>,
+    P: IntoHit,
+    H: FnMut(Hit, Option<[Vec3; 3]>),
+{
+    move |prim, ray| {
+        if let Some(hit) = hit_prim(prim, ray) {
+            found(hit.into_hit(prim), None);
+        }
+        false
     }
 }

@@ -58,8 +58,8 @@ pub use isa::{Isa, IsaError};
 pub use layout::{BvhWidth, Tree};
 pub use optimize::{optimize, OptimizeBudget, OptimizeReport};
 pub use proximity::{
-    closest_point_on_triangle, solid_angle, Nearest, Placement, SurfaceQuery, TriangleSurface,
-    FAR_FIELD, INSIDE_FAR_FIELD,
+    closest_point_on_triangle, solid_angle, HitsAlong, Nearest, Placement, SurfaceQuery,
+    TriangleSurface, FAR_FIELD, INSIDE_FAR_FIELD,
 };
 pub use query::{trace_batch, RayQuery, ALL_MASKS, BATCH_CHUNK};
 pub use ray::{Hit, IntoHit, PrimHit, Ray};
@@ -68,6 +68,8 @@ pub use sphere::intersect_sphere;
 pub use stats::TreeStats;
 pub use tlas::Tlas;
 pub use traverse::{TraversalCounter, TraversalStats};
-pub use triangle::{intersect_triangle, ShearedRay, TrianglePack, NO_PRIM, PACK_LANES};
+pub use triangle::{
+    crosses_triangle, intersect_triangle, ShearedRay, TrianglePack, NO_PRIM, PACK_LANES,
+};
 pub use view::TreeView;
 pub use wide::{Bvh4, Bvh8, BvhN, WideNode, EMPTY_SLOT, PACKET, PREFETCH_ABOVE_BYTES};

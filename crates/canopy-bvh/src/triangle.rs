@@ -61,16 +61,7 @@ impl ShearedRay {
 /// double precision, as the paper prescribes. Both sides of a triangle are hit.
 #[inline]
 pub fn intersect_triangle(v: &[Vec3; 3], ray: &Ray, sheared: &ShearedRay) -> Option<PrimHit> {
-    let o = ray.origin;
-    let rel = |p: Vec3| [p.x - o.x, p.y - o.y, p.z - o.z];
-    let (a, b, c) = (rel(v[0]), rel(v[1]), rel(v[2]));
-    let s = sheared;
-    let edges = EdgeInput {
-        a: [a[s.kx], a[s.ky], a[s.kz]],
-        b: [b[s.kx], b[s.ky], b[s.kz]],
-        c: [c[s.kx], c[s.ky], c[s.kz]],
-    };
-    edges.hit(s.shear, ray.t_min, ray.t_max)
+    EdgeInput::new(v, ray, sheared).hit(sheared.shear, ray.t_min, ray.t_max)
 }
 
 /// One triangle's vertices relative to the ray origin, axes permuted to (kx, ky, kz).
@@ -80,10 +71,30 @@ struct EdgeInput {
     c: [f32; 3],
 }
 
+/// The triangle seen along the ray: its vertices sheared onto the plane across the ray
+/// (the ray at the origin), and the edge functions, each the weight of one vertex: `u`
+/// of `a` (edge b-c), `v` of `b` (edge c-a), `w` of `c` (edge a-b).
+struct Projected {
+    xy: [[f32; 2]; 3],
+    uvw: [f32; 3],
+}
+
 impl EdgeInput {
-    /// The scalar core that the SIMD kernels mirror operation for operation.
     #[inline(always)]
-    fn hit(&self, shear: Vec3, t_min: f32, t_max: f32) -> Option<PrimHit> {
+    fn new(v: &[Vec3; 3], ray: &Ray, s: &ShearedRay) -> Self {
+        let o = ray.origin;
+        let rel = |p: Vec3| [p.x - o.x, p.y - o.y, p.z - o.z];
+        let (a, b, c) = (rel(v[0]), rel(v[1]), rel(v[2]));
+        Self {
+            a: [a[s.kx], a[s.ky], a[s.kz]],
+            b: [b[s.kx], b[s.ky], b[s.kz]],
+            c: [c[s.kx], c[s.ky], c[s.kz]],
+        }
+    }
+
+    /// The projection and edge functions as the watertight test computes them.
+    #[inline(always)]
+    fn project(&self, shear: Vec3) -> Projected {
         let (a, b, c) = (self.a, self.b, self.c);
         let (ax, ay) = (a[0] - shear.x * a[2], a[1] - shear.y * a[2]);
         let (bx, by) = (b[0] - shear.x * b[2], b[1] - shear.y * b[2]);
@@ -98,6 +109,17 @@ impl EdgeInput {
             v = d(ax, cy, ay, cx);
             w = d(bx, ay, by, ax);
         }
+        Projected {
+            xy: [[ax, ay], [bx, by], [cx, cy]],
+            uvw: [u, v, w],
+        }
+    }
+
+    /// The scalar core that the SIMD kernels mirror operation for operation.
+    #[inline(always)]
+    fn hit(&self, shear: Vec3, t_min: f32, t_max: f32) -> Option<PrimHit> {
+        let Projected { uvw: [u, v, w], .. } = self.project(shear);
+        let (a, b, c) = (self.a, self.b, self.c);
         if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
             return None;
         }
@@ -112,6 +134,75 @@ impl EdgeInput {
             u: v / det,
             v: w / det,
         })
+    }
+}
+
+impl Projected {
+    /// Whether the ray, moved off every edge and vertex by an infinitesimal step, still
+    /// passes through the triangle (see [`crosses_triangle`]).
+    #[inline]
+    fn crossed(&self) -> bool {
+        let [a, b, c] = self.xy;
+        let [u, v, w] = self.uvw;
+        // Each edge function is `p1.x * p2.y - p1.y * p2.x` of its edge's two vertices.
+        let signs = [
+            displaced_sign(u, c, b),
+            displaced_sign(v, a, c),
+            displaced_sign(w, b, a),
+        ];
+        signs[0] != 0 && signs[0] == signs[1] && signs[1] == signs[2]
+    }
+}
+
+/// The sign of the edge function `f = p1.x * p2.y - p1.y * p2.x` at the point
+/// `(e, e * e)` for an infinitesimal `e > 0` instead of at the origin: `f + e (p1.y -
+/// p2.y) + e² (p2.x - p1.x)`. Where `f` is exactly zero the sign is that of the first
+/// non-zero term, and each is a difference of two floats, whose sign rounding never
+/// changes. The edge's other triangle computes the same terms negated, so the displaced
+/// ray passes through exactly one of them.
+#[inline(always)]
+fn displaced_sign(f: f32, p1: [f32; 2], p2: [f32; 2]) -> i8 {
+    let sign = |x: f32| (x > 0.0) as i8 - (x < 0.0) as i8;
+    [f, p1[1] - p2[1], p2[0] - p1[0]]
+        .into_iter()
+        .map(sign)
+        .find(|&s| s != 0)
+        .unwrap_or(0)
+}
+
+/// [`intersect_triangle`], counting each crossing of a surface once: where the ray passes
+/// exactly through an edge or a vertex (an edge function exactly zero, the case the
+/// watertight test gives to every triangle that shares it), only the triangles that the
+/// ray moved by an infinitesimal step off the edge would hit count, the tie rule of
+/// symbolic perturbation (Edelsbrunner and Mücke, "Simulation of Simplicity", 1990). A
+/// ray through a closed surface's edge or vertex then meets it twice, once in and once
+/// out, as a ray that misses them does; one that only grazes an edge meets it twice or
+/// not at all. Elsewhere the answer is `intersect_triangle`'s, bit for bit.
+#[inline]
+pub fn crosses_triangle(v: &[Vec3; 3], ray: &Ray, sheared: &ShearedRay) -> Option<PrimHit> {
+    let edges = EdgeInput::new(v, ray, sheared);
+    let hit = edges.hit(sheared.shear, ray.t_min, ray.t_max)?;
+    edges.project(sheared.shear).crossed().then_some(hit)
+}
+
+/// +1 where `ray` crosses the triangle `v` ([`crosses_triangle`]'s crossings) leaving
+/// through its front (the side `(v1 - v0) x (v2 - v0)` faces), -1 where it enters there,
+/// 0 where it does not cross. Summed along a ray from a point to infinity, it is the
+/// winding number of a closed surface at that point, exactly.
+#[inline]
+pub(crate) fn signed_crossing(v: &[Vec3; 3], ray: &Ray, sheared: &ShearedRay) -> i32 {
+    let edges = EdgeInput::new(v, ray, sheared);
+    if edges.hit(sheared.shear, ray.t_min, ray.t_max).is_none() {
+        return 0;
+    }
+    let projected = edges.project(sheared.shear);
+    if !projected.crossed() {
+        return 0;
+    }
+    // The edge functions' sum is negative for a ray that runs along the normal.
+    match projected.uvw.iter().sum::<f32>() < 0.0 {
+        true => 1,
+        false => -1,
     }
 }
 
@@ -160,6 +251,13 @@ impl TrianglePack {
         }
         self.prim[lane] = prim;
         self.triangles |= 1 << lane;
+    }
+
+    /// The vertices of triangle lane `lane`.
+    #[inline(always)]
+    pub fn vertices(&self, lane: usize) -> [Vec3; 3] {
+        self.v
+            .map(|p| Vec3::new(p[0][lane], p[1][lane], p[2][lane]))
     }
 
     pub fn set_other(&mut self, lane: usize, prim: u32) {
@@ -629,6 +727,33 @@ mod tests {
     fn hit(o: Vec3, d: Vec3, t_max: f32) -> Option<PrimHit> {
         let ray = Ray::new(o, d, 0.0, t_max);
         intersect_triangle(&tri(), &ray, &ShearedRay::new(&ray))
+    }
+
+    #[test]
+    fn a_crossing_is_signed_by_the_side_the_ray_leaves_through() {
+        let mut state = 7u32;
+        let mut next = move || {
+            state ^= state << 13;
+            state ^= state >> 17;
+            state ^= state << 5;
+            state as f32 / u32::MAX as f32 - 0.5
+        };
+        let mut seen = [0; 2];
+        for _ in 0..2000 {
+            let v = [0; 3].map(|_| Vec3::new(next(), next(), next()));
+            let normal = (v[1] - v[0]).cross(v[2] - v[0]);
+            let inside = (v[0] + v[1] + v[2]) / 3.0;
+            let d = Vec3::new(next(), next(), next()).normalize();
+            if normal.normalize().dot(d).abs() < 1e-3 {
+                continue;
+            }
+            let ray = Ray::new(inside - d, d, 0.0, f32::INFINITY);
+            let sign = signed_crossing(&v, &ray, &ShearedRay::new(&ray));
+            let leaves = normal.dot(d) > 0.0;
+            assert_eq!(sign, if leaves { 1 } else { -1 }, "{v:?} {d}");
+            seen[leaves as usize] += 1;
+        }
+        assert!(seen[0] > 500 && seen[1] > 500, "{seen:?}");
     }
 
     #[test]

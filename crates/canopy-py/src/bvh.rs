@@ -9,7 +9,8 @@ use canopy_render::scene::Primitive;
 use canopy_render::{Accel, AccelKind};
 use glam::Vec3;
 use numpy::{
-    PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3,
+    PyArray1, PyArray2, PyArray3, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2,
+    PyReadonlyArray3,
 };
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -326,6 +327,33 @@ impl Bvh {
             })
             .collect();
         Self::build(py, primitives, o)
+    }
+
+    /// The primitives, for pickling: ("triangles", (F, 3, 3) vertices of each) or
+    /// ("boxes", (N, 2, 3) min and max corners), exactly as built.
+    fn primitives<'py>(
+        &self,
+        py: Python<'py>,
+    ) -> PyResult<(&'static str, Bound<'py, PyArray3<f32>>)> {
+        let primitives = self.accel.primitives();
+        let (kind, corners) = match primitives.first().map(|p| &p.shape) {
+            Some(Shape::Cuboid(_)) => ("boxes", 2),
+            _ => ("triangles", 3),
+        };
+        let mut flat = Vec::with_capacity(primitives.len() * corners * 3);
+        for p in primitives {
+            match &p.shape {
+                Shape::Triangle(t) => flat.extend(t.v.iter().flat_map(|v| v.to_array())),
+                Shape::Cuboid(c) => {
+                    flat.extend([c.local.min, c.local.max].iter().flat_map(|v| v.to_array()))
+                }
+                Shape::Sphere(_) => {
+                    return Err(PyValueError::new_err("a Bvh holds triangles or boxes only"))
+                }
+            }
+        }
+        let array = PyArray1::from_vec(py, flat).reshape([primitives.len(), corners, 3])?;
+        Ok((kind, array))
     }
 
     #[getter]

@@ -7,7 +7,8 @@ use crate::arrays;
 use crate::bvh::batch;
 use crate::pools;
 use canopy_bvh::{
-    Blas, BlasParams, Hit, Instance, Nearest, Ray, RayQuery, SurfaceQuery, Tlas, TriangleMesh,
+    Blas, BlasParams, Hit, HitsAlong, Instance, Nearest, Ray, RayQuery, SurfaceQuery, Tlas,
+    TriangleMesh,
 };
 use glam::Vec3;
 use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray2};
@@ -22,6 +23,8 @@ type MeshBlas = Arc<Blas<TriangleMesh>>;
 /// tree over the instances is built at the first query after a change.
 #[pyclass(module = "canopy_rt._canopy")]
 pub struct RayScene {
+    /// The builder's name as given (for pickling).
+    builder: String,
     meshes: Vec<MeshBlas>,
     instances: Vec<Instance>,
     params: BlasParams,
@@ -85,6 +88,14 @@ fn check_transform(instance: &Instance, index: usize, what: &str) -> PyResult<()
             "{what}: the transform must be finite and invertible: {e}"
         ))
     })
+}
+
+/// Which hits along a ray count: each crossing of the surface once, or every triangle.
+fn hits_along(per_triangle: bool) -> HitsAlong {
+    match per_triangle {
+        true => HitsAlong::Triangles,
+        false => HitsAlong::Crossings,
+    }
 }
 
 /// Points per parallel task of the point queries.
@@ -191,6 +202,7 @@ impl RayScene {
             .map_err(|e: canopy_bvh::UnknownBuilder| PyValueError::new_err(e.to_string()))?;
         let width: canopy_bvh::BvhWidth =
             width.to_string().parse().map_err(PyValueError::new_err)?;
+        let name = kind.to_string();
         let builder = match kind {
             canopy_render::AccelKind::None => None,
             canopy_render::AccelKind::Bvh(b) => Some(b),
@@ -198,6 +210,7 @@ impl RayScene {
         let mut params = BlasParams::new(builder, width);
         params.build = canopy_bvh::packed_params(&params.build);
         Ok(Self {
+            builder: name,
             meshes: Vec::new(),
             instances: Vec::new(),
             params,
@@ -276,6 +289,92 @@ impl RayScene {
         *slot = moved;
         self.changed();
         Ok(())
+    }
+
+    /// Gives geometry `geometry` new vertex positions (as many as it has; the triangles
+    /// stay) and refits its tree: every box recomputed, the topology kept.
+    #[pyo3(signature = (geometry, vertices, threads=None))]
+    fn set_vertices(
+        &mut self,
+        py: Python<'_>,
+        geometry: u32,
+        vertices: PyReadonlyArray2<'_, f32>,
+        threads: Option<usize>,
+    ) -> PyResult<()> {
+        let count = self.meshes.len();
+        let Some(slot) = self.meshes.get(geometry as usize) else {
+            return Err(PyValueError::new_err(format!(
+                "set_vertices: geometry {geometry} does not exist (the scene has {count})"
+            )));
+        };
+        let has = slot.geometry().vertices().len();
+        let positions: Vec<Vec3> = arrays::points("vertices", &vertices)?
+            .iter()
+            .map(|&p| p.into())
+            .collect();
+        if positions.len() != has {
+            return Err(PyValueError::new_err(format!(
+                "set_vertices: geometry {geometry} has {has} vertices, not {}; a mesh with \
+                 other vertices or triangles is a new geometry (add_geometry)",
+                positions.len()
+            )));
+        }
+        self.changed();
+        let blas = Arc::make_mut(&mut self.meshes[geometry as usize]);
+        let mut edited = Ok(());
+        let refit = py.detach(|| {
+            pools::install(threads, || {
+                blas.update(|mesh| edited = mesh.set_vertices(positions))
+            })
+        })?;
+        refit.map_err(|e| {
+            PyValueError::new_err(format!(
+                "set_vertices: geometry {geometry} was built by {} with spatial splits, \
+                 which cannot be refitted ({e}); add the moved mesh as a new geometry",
+                self.builder
+            ))
+        })?;
+        // Checked above: the count matches and the positions are finite.
+        edited.map_err(|e| PyValueError::new_err(format!("set_vertices: {e}")))
+    }
+
+    /// Everything the scene was made from, for pickling: (builder, width, each
+    /// geometry's (vertices, faces), each instance's (geometry, (3, 4) transform, mask)).
+    #[allow(clippy::type_complexity)]
+    fn state<'py>(
+        &self,
+        py: Python<'py>,
+    ) -> PyResult<(
+        String,
+        u32,
+        Vec<(Bound<'py, PyArray2<f32>>, Bound<'py, PyArray2<i64>>)>,
+        Vec<(u32, Bound<'py, PyArray2<f32>>, u32)>,
+    )> {
+        let mut geometries = Vec::with_capacity(self.meshes.len());
+        for blas in &self.meshes {
+            let mesh = blas.geometry();
+            let vertices: Vec<f32> = mesh.vertices().iter().flat_map(|v| v.to_array()).collect();
+            let faces: Vec<i64> = mesh.indices().iter().flatten().map(|&i| i as i64).collect();
+            geometries.push((
+                PyArray1::from_vec(py, vertices).reshape([mesh.vertices().len(), 3])?,
+                PyArray1::from_vec(py, faces).reshape([mesh.indices().len(), 3])?,
+            ));
+        }
+        let mut instances = Vec::with_capacity(self.instances.len());
+        for instance in &self.instances {
+            let m = instance.to_world();
+            let (x, y, z, t) = (
+                m.matrix3.x_axis,
+                m.matrix3.y_axis,
+                m.matrix3.z_axis,
+                m.translation,
+            );
+            let rows: Vec<f32> = (0..3).flat_map(|r| [x[r], y[r], z[r], t[r]]).collect();
+            let transform = PyArray1::from_vec(py, rows).reshape([3, 4])?;
+            instances.push((instance.blas, transform, instance.mask));
+        }
+        let width = self.params.width.children();
+        Ok((self.builder.clone(), width, geometries, instances))
     }
 
     #[getter]
@@ -495,9 +594,9 @@ impl RayScene {
         })
     }
 
-    /// How many times each ray meets the surface within [tnear, tfar] (each triangle
-    /// once).
-    #[pyo3(signature = (origins, directions, tnear, tfar, mask, threads=None))]
+    /// How many times each ray crosses the surface within [tnear, tfar] (or, with
+    /// `per_triangle`, how many triangles it hits).
+    #[pyo3(signature = (origins, directions, tnear, tfar, mask, per_triangle, threads=None))]
     #[allow(clippy::too_many_arguments)]
     fn count_intersections<'py>(
         &self,
@@ -507,18 +606,21 @@ impl RayScene {
         tnear: Bound<'py, PyAny>,
         tfar: Bound<'py, PyAny>,
         mask: u32,
+        per_triangle: bool,
         threads: Option<usize>,
     ) -> PyResult<Bound<'py, PyArray1<i64>>> {
         let (mut near, mut far) = (None, None);
         let batch = batch(&origins, &directions, &tnear, &mut near, &tfar, &mut far)?;
+        let along = hits_along(per_triangle);
         self.per_row(py, batch.len(), threads, |tlas, i| {
-            tlas.hits(&batch.ray(i), mask).len() as i64
+            tlas.count_hits(&batch.ray(i), mask, along) as i64
         })
     }
 
-    /// Every hit of each ray within [tnear, tfar], nearest first: (ray_splits, ray, t,
+    /// The hits of each ray within [tnear, tfar], nearest first, one per crossing of the
+    /// surface (or, with `per_triangle`, one per triangle hit): (ray_splits, ray, t,
     /// then the rows of [`HitRows`]); ray i's hits are rows ray_splits[i]..ray_splits[i+1].
-    #[pyo3(signature = (origins, directions, tnear, tfar, mask, threads=None))]
+    #[pyo3(signature = (origins, directions, tnear, tfar, mask, per_triangle, threads=None))]
     #[allow(clippy::type_complexity, clippy::too_many_arguments)]
     fn list_intersections<'py>(
         &self,
@@ -528,6 +630,7 @@ impl RayScene {
         tnear: Bound<'py, PyAny>,
         tfar: Bound<'py, PyAny>,
         mask: u32,
+        per_triangle: bool,
         threads: Option<usize>,
     ) -> PyResult<(
         Bound<'py, PyArray1<i64>>,
@@ -537,18 +640,29 @@ impl RayScene {
     )> {
         let (mut near, mut far) = (None, None);
         let batch = batch(&origins, &directions, &tnear, &mut near, &tfar, &mut far)?;
+        let along = hits_along(per_triangle);
         let n = batch.len();
         let tlas = py.detach(|| self.tlas(threads))?;
-        let per_ray: Vec<Vec<Hit>> = py.detach(|| {
+        // Each task lists its rays' hits in one vector (no allocation per ray); the
+        // tasks' lists are then written out in ray order.
+        let per_task: Vec<(usize, Vec<u32>, Vec<Hit>)> = py.detach(|| {
             pools::install(threads, || {
-                (0..n)
+                (0..n.div_ceil(POINT_CHUNK))
                     .into_par_iter()
-                    .with_min_len(POINT_CHUNK)
-                    .map(|i| tlas.hits(&batch.ray(i), mask))
+                    .map_init(Vec::new, |scratch, task| {
+                        let rays = task * POINT_CHUNK..((task + 1) * POINT_CHUNK).min(n);
+                        let (mut counts, mut hits) = (Vec::with_capacity(rays.len()), Vec::new());
+                        for i in rays {
+                            tlas.hits_into(&batch.ray(i), mask, along, scratch);
+                            counts.push(scratch.len() as u32);
+                            hits.extend_from_slice(scratch);
+                        }
+                        (task * POINT_CHUNK, counts, hits)
+                    })
                     .collect()
             })
         })?;
-        let total: usize = per_ray.iter().map(Vec::len).sum();
+        let total: usize = per_task.iter().map(|(_, _, hits)| hits.len()).sum();
         let splits_out = PyArray1::<i64>::zeros(py, n + 1, false);
         let ray_out = PyArray1::<i64>::zeros(py, total, false);
         let t_out = PyArray1::<f32>::zeros(py, total, false);
@@ -563,12 +677,16 @@ impl RayScene {
             )
         };
         let mut row = 0;
-        for (i, hits) in per_ray.iter().enumerate() {
-            splits[i] = row as i64;
-            for hit in hits {
-                (ray[row], t[row]) = (i as i64, hit.t);
-                all.write(&tlas, row, Some(*hit));
-                row += 1;
+        for (first, counts, hits) in &per_task {
+            let mut hits = hits.iter();
+            for (k, &count) in counts.iter().enumerate() {
+                let i = first + k;
+                splits[i] = row as i64;
+                for hit in hits.by_ref().take(count as usize) {
+                    (ray[row], t[row]) = (i as i64, hit.t);
+                    all.write(&tlas, row, Some(*hit));
+                    row += 1;
+                }
             }
         }
         splits[n] = row as i64;

@@ -1,5 +1,6 @@
 //! `canopy_rt.render`, `canopy_rt.load_scene` and `canopy_rt.read_image`.
 
+use crate::pools;
 use crate::scene::PyScene;
 use canopy_bvh::BvhWidth;
 use canopy_job::{
@@ -317,8 +318,10 @@ pub fn render<'py>(
         progress,
         error: None,
     };
+    // `None`: the job's own pool where `threads` is set, else all cores (in a forked
+    // child, a pool of its own: see `pools`).
     let outcome = py
-        .detach(|| job.prepare()?.run(&mut observer))
+        .detach(|| pools::install(None, || job.prepare()?.run(&mut observer)))?
         .map_err(job_error)?;
     if let Some(error) = observer.error {
         return Err(error);

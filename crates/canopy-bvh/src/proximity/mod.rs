@@ -4,6 +4,7 @@
 //! along a ray. [`SurfaceQuery`] is their interface; [`crate::Blas`] over triangles and
 //! [`crate::Tlas`] over such structures answer it, walking any tree layout.
 
+mod along;
 mod queries;
 mod triangle;
 mod walk;
@@ -148,10 +149,10 @@ pub trait SurfaceQuery: Sync {
     /// of their radii counted by their far-field expansions ([`FAR_FIELD`]).
     fn winding_number_within(&self, query: Vec3, far_field: f32) -> f64;
 
-    /// Appends every hit of `ray` within its range, in no particular order, on the
-    /// instances `mask` accepts (a triangle referenced by several leaves may appear
-    /// more than once: [`SurfaceQuery::hits`] sorts and removes repeats).
-    fn all_hits(&self, ray: &Ray, mask: u32, out: &mut Vec<Hit>);
+    /// Appends the hits of `ray` within its range that `along` counts, in no particular
+    /// order, on the instances `mask` accepts (a triangle referenced by several leaves
+    /// may appear more than once: [`SurfaceQuery::hits`] sorts and removes repeats).
+    fn all_hits(&self, ray: &Ray, mask: u32, along: HitsAlong, out: &mut Vec<Hit>);
 
     /// The nearest point of the surface to `query` no farther than `max_distance`.
     /// Equal distances go to the lower instance, then the lower triangle.
@@ -172,10 +173,15 @@ pub trait SurfaceQuery: Sync {
             .map_or(f32::INFINITY, |n| n.distance)
     }
 
-    /// Whether `query` lies inside: a winding number above one half (computed to the
-    /// accuracy that decides it, [`INSIDE_FAR_FIELD`]).
+    /// The winding number at `query` as accurately as telling inside from outside
+    /// needs: exact (an integer) where the surface is closed (a ray's signed
+    /// crossings), and otherwise to about 0.1 ([`INSIDE_FAR_FIELD`]).
+    fn inside_winding_number(&self, query: Vec3) -> f64;
+
+    /// Whether `query` lies inside: a winding number above one half
+    /// ([`SurfaceQuery::inside_winding_number`]).
     fn contains(&self, query: Vec3) -> bool {
-        self.winding_number_within(query, INSIDE_FAR_FIELD) > 0.5
+        self.inside_winding_number(query) > 0.5
     }
 
     /// [`SurfaceQuery::distance`], negative inside.
@@ -187,18 +193,45 @@ pub trait SurfaceQuery: Sync {
         }
     }
 
-    /// Every hit of `ray` within its range, once each, nearest first (equal distances
-    /// by instance, then triangle).
-    fn hits(&self, ray: &Ray, mask: u32) -> Vec<Hit> {
+    /// The hits of `ray` within its range that `along` counts, once each, nearest first
+    /// (equal distances by instance, then triangle).
+    fn hits(&self, ray: &Ray, mask: u32, along: HitsAlong) -> Vec<Hit> {
         let mut hits = Vec::new();
-        self.all_hits(ray, mask, &mut hits);
-        hits.sort_unstable_by(|a, b| {
+        self.hits_into(ray, mask, along, &mut hits);
+        hits
+    }
+
+    /// How many hits [`SurfaceQuery::hits`] reports, without listing them.
+    fn count_hits(&self, ray: &Ray, mask: u32, along: HitsAlong) -> usize {
+        self.hits(ray, mask, along).len()
+    }
+
+    /// [`SurfaceQuery::hits`] into `out` (cleared first), whose memory a batch of rays
+    /// reuses.
+    fn hits_into(&self, ray: &Ray, mask: u32, along: HitsAlong, out: &mut Vec<Hit>) {
+        out.clear();
+        self.all_hits(ray, mask, along, out);
+        out.sort_unstable_by(|a, b| {
             a.t.total_cmp(&b.t)
                 .then((a.inst, a.prim).cmp(&(b.inst, b.prim)))
         });
-        hits.dedup_by(|a, b| (a.inst, a.prim) == (b.inst, b.prim) && a.t == b.t);
-        hits
+        out.dedup_by(|a, b| (a.inst, a.prim) == (b.inst, b.prim) && a.t == b.t);
     }
+}
+
+/// Which hits along a ray [`SurfaceQuery::hits`] reports.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum HitsAlong {
+    /// Each crossing of the surface once: a ray through an edge or a vertex that
+    /// triangles share crosses there once, not once per triangle, and a ray through a
+    /// closed surface crosses it an even number of times wherever it passes (the tie
+    /// rule of [`crate::crosses_triangle`]). Coincident triangles (two faces back to
+    /// back) are two crossings.
+    #[default]
+    Crossings,
+    /// Every triangle the watertight test hits ([`crate::intersect_triangle`]): a ray
+    /// through a shared edge or vertex hits each triangle around it.
+    Triangles,
 }
 
 impl<S: SurfaceQuery + Send> SurfaceQuery for std::sync::Arc<S> {
@@ -215,8 +248,16 @@ impl<S: SurfaceQuery + Send> SurfaceQuery for std::sync::Arc<S> {
         (**self).winding_number_within(query, far_field)
     }
 
-    fn all_hits(&self, ray: &Ray, mask: u32, out: &mut Vec<Hit>) {
-        (**self).all_hits(ray, mask, out)
+    fn inside_winding_number(&self, query: Vec3) -> f64 {
+        (**self).inside_winding_number(query)
+    }
+
+    fn count_hits(&self, ray: &Ray, mask: u32, along: HitsAlong) -> usize {
+        (**self).count_hits(ray, mask, along)
+    }
+
+    fn all_hits(&self, ray: &Ray, mask: u32, along: HitsAlong, out: &mut Vec<Hit>) {
+        (**self).all_hits(ray, mask, along, out)
     }
 }
 

@@ -2,9 +2,9 @@
 //! triangles (its tree in any layout, or brute force), and a [`Tlas`] of them.
 
 use super::walk::{self, beats, Best};
-use super::{closest_point_on_triangle, solid_angle, Nearest, Placement, SurfaceQuery};
-use super::{PointTree, TriangleSurface};
-use crate::{intersect_triangle, Blas, Hit, Ray, RayQuery, ShearedRay, Tlas};
+use super::{closest_point_on_triangle, solid_angle, HitsAlong, Nearest, Placement, SurfaceQuery};
+use super::{PointTree, TriangleSurface, INSIDE_FAR_FIELD};
+use crate::{Blas, Hit, Ray, RayQuery, Tlas};
 use glam::Vec3;
 
 /// Measures triangle `prim` (vertices `v` in the query's space) against `query`, and
@@ -80,18 +80,25 @@ impl<G: TriangleSurface> SurfaceQuery for Blas<G> {
         }
     }
 
-    fn all_hits(&self, ray: &Ray, _mask: u32, out: &mut Vec<Hit>) {
-        let g = self.geometry();
-        let sheared = ShearedRay::new(ray);
-        let test = |prim: u32| {
-            if let Some(h) = intersect_triangle(&g.vertices_of_triangle(prim), ray, &sheared) {
-                out.push(Hit::new(prim, h));
+    fn inside_winding_number(&self, query: Vec3) -> f64 {
+        match self.is_closed() {
+            true => self.winding_by_crossings(query) as f64,
+            false => self.winding_number_within(query, INSIDE_FAR_FIELD),
+        }
+    }
+
+    fn all_hits(&self, ray: &Ray, _mask: u32, along: HitsAlong, out: &mut Vec<Hit>) {
+        self.each_hit(ray, along, |hit, _| out.push(hit));
+    }
+
+    fn count_hits(&self, ray: &Ray, mask: u32, along: HitsAlong) -> usize {
+        match self.repeats_triangles() {
+            true => self.hits(ray, mask, along).len(),
+            false => {
+                let mut count = 0;
+                self.each_hit(ray, along, |_, _| count += 1);
+                count
             }
-        };
-        match self.tree() {
-            Some(tree) => walk::primitives_along(tree.view(), ray, test),
-            None if ray.is_traceable() => (0..g.len() as u32).for_each(test),
-            None => {}
         }
     }
 }
@@ -150,24 +157,34 @@ impl<B: RayQuery + SurfaceQuery> SurfaceQuery for Tlas<B> {
             .sum()
     }
 
-    fn all_hits(&self, ray: &Ray, mask: u32, out: &mut Vec<Hit>) {
-        let test = |index: u32| {
-            let instance = &self.instances()[index as usize];
-            if instance.mask & mask == 0 {
-                return;
-            }
-            let blas = &self.blases()[instance.blas as usize];
-            let first = out.len();
-            match instance.is_identity() {
-                true => blas.all_hits(ray, mask, out),
-                false => blas.all_hits(&instance.ray_to_local(ray), mask, out),
-            }
-            out[first..].iter_mut().for_each(|h| h.inst = index);
-        };
-        match self.tree() {
-            Some(tree) => walk::primitives_along(tree.view(), ray, test),
-            None if ray.is_traceable() => (0..self.instances().len() as u32).for_each(test),
-            None => {}
+    fn inside_winding_number(&self, query: Vec3) -> f64 {
+        if let Some((blas, _, _)) = self.alone() {
+            return blas.inside_winding_number(query);
         }
+        // As `winding_number_within`: each instance in its own space.
+        self.instances()
+            .iter()
+            .map(|instance| {
+                let blas = &self.blases()[instance.blas as usize];
+                let local = instance.to_local().transform_point3(query);
+                blas.inside_winding_number(local)
+            })
+            .sum()
+    }
+
+    fn all_hits(&self, ray: &Ray, mask: u32, along: HitsAlong, out: &mut Vec<Hit>) {
+        self.each_instance_along(ray, mask, |index, blas, ray| {
+            let first = out.len();
+            blas.all_hits(ray, mask, along, out);
+            out[first..].iter_mut().for_each(|h| h.inst = index);
+        });
+    }
+
+    fn count_hits(&self, ray: &Ray, mask: u32, along: HitsAlong) -> usize {
+        let mut count = 0;
+        self.each_instance_along(ray, mask, |_, blas, ray| {
+            count += blas.count_hits(ray, mask, along)
+        });
+        count
     }
 }

@@ -1,12 +1,11 @@
 //! Walks of any tree layout (through [`TreeView`]) for the queries that are not the
 //! closest hit: the nearest primitive to a point, nearest child first and pruned by box
 //! distance (a top-level tree's instances; a `Blas` walks its own point layout the same
-//! way, [`super::PointTree::nearest`]), and every primitive a ray passes through.
+//! way, [`super::PointTree::nearest`]).
 
 use super::Nearest;
-use crate::aabb::SlabRay;
 use crate::view::{Child, ChildKind, TreeView};
-use crate::{Aabb, Ray};
+use crate::Aabb;
 use glam::Vec3;
 
 /// Squared distance from `point` to the box (0 inside; infinite for an empty box).
@@ -81,35 +80,4 @@ pub(crate) fn nearest(
         }
     }
     best
-}
-
-/// Calls `visit(prim)` for every primitive in a leaf whose box `ray` passes through
-/// within its range (once per leaf that holds it).
-pub(crate) fn primitives_along(view: &dyn TreeView, ray: &Ray, mut visit: impl FnMut(u32)) {
-    if !ray.is_traceable() {
-        return;
-    }
-    let Some(root) = view.root() else {
-        return;
-    };
-    let slab = SlabRay::new(ray);
-    let crosses = |c: &Child| slab.entry_or_inf(c.bounds.min, c.bounds.max) != f32::INFINITY;
-    let mut stack: Vec<Child> = Vec::with_capacity(64);
-    let mut children = Vec::with_capacity(8);
-    if crosses(&root) {
-        stack.push(root);
-    }
-    while let Some(child) = stack.pop() {
-        match child.kind {
-            ChildKind::Leaf { first, count } => {
-                view.prim_indices()[first..first + count]
-                    .iter()
-                    .for_each(|&p| visit(p));
-            }
-            ChildKind::Inner(node) => {
-                view.children(node, &mut children);
-                stack.extend(children.iter().filter(|c| crosses(c)));
-            }
-        }
-    }
 }

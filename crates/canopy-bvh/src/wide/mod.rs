@@ -25,7 +25,7 @@ use packet::walk_packet;
 use packet_packs::PackedPacketLeaves;
 use rayon::prelude::*;
 use std::marker::PhantomData;
-use traverse::{closest, ClosureLeaves, PackedLeaves, Query, SphereLeaves};
+use traverse::{closest, ClosureLeaves, EveryHit, PackedLeaves, Query, SphereLeaves};
 
 pub use packet::PACKET;
 pub(crate) use traverse::Dispatch;
@@ -512,6 +512,33 @@ impl<const N: usize> BvhN<N>
 where
     WideNode<N>: Dispatch<N>,
 {
+    /// Every hit of `ray` within its range, each given to `found` as it is met (in no
+    /// particular order; a primitive in several leaves, after spatial splits, once per
+    /// leaf), with the triangle's vertices where its pack holds them. Triangles in packs
+    /// are tested by canopy itself; the closure tests the rest.
+    pub fn for_each_hit<F, P, H>(&self, ray: &Ray, hit_prim: F, found: H)
+    where
+        F: FnMut(u32, &Ray) -> Option<P>,
+        P: IntoHit,
+        H: FnMut(Hit, Option<[Vec3; 3]>),
+    {
+        if self.nodes.is_empty() {
+            return;
+        }
+        let query = EveryHitQuery {
+            bvh: self,
+            ray,
+            test: hit_prim,
+            found,
+        };
+        WideNode::<N>::dispatch(self.isa, query)
+    }
+}
+
+impl<const N: usize> BvhN<N>
+where
+    WideNode<N>: Dispatch<N>,
+{
     /// Closest hits of rays `0..count` on this thread: `ray(i)` makes ray `i` and
     /// `answer(i, hit)` takes its hit, in order. Answers are those of
     /// [`BvhN::intersect`]; the instruction set is chosen once for all the rays, and the
@@ -803,6 +830,52 @@ impl<const N: usize, F: FnMut(u32, &Ray) -> bool> Query<N> for AnyQuery<'_, N, F
         } else {
             let mut leaves = PackedLeaves::<T, F>::new(&bvh.packs, &bvh.spheres, test);
             unsafe { traverse::any::<N, K, _>(&bvh.nodes, ray, &mut leaves, bvh.prefetches()) }
+        }
+    }
+}
+
+struct EveryHitQuery<'a, const N: usize, F, H> {
+    bvh: &'a BvhN<N>,
+    ray: &'a Ray,
+    test: F,
+    found: H,
+}
+
+impl<const N: usize, F, P, H> Query<N> for EveryHitQuery<'_, N, F, H>
+where
+    F: FnMut(u32, &Ray) -> Option<P>,
+    P: IntoHit,
+    H: FnMut(Hit, Option<[Vec3; 3]>),
+{
+    type Out = ();
+
+    #[inline(always)]
+    unsafe fn run<K: kernels::NodeKernel<N>, T: crate::triangle::PackKernel>(self) {
+        let Self {
+            bvh,
+            ray,
+            test,
+            found,
+        } = self;
+        let prims = &bvh.prim_indices;
+        // SAFETY (all calls): the caller guarantees the instruction sets.
+        if bvh.has_sphere_leaves() {
+            let spheres = &bvh.spheres;
+            let leaves = SphereLeaves {
+                prims,
+                spheres,
+                test,
+            };
+            let mut every = EveryHit { leaves, found };
+            unsafe { traverse::any::<N, K, _>(&bvh.nodes, ray, &mut every, bvh.prefetches()) };
+        } else if bvh.packs.is_empty() {
+            let leaves = ClosureLeaves { prims, test };
+            let mut every = EveryHit { leaves, found };
+            unsafe { traverse::any::<N, K, _>(&bvh.nodes, ray, &mut every, bvh.prefetches()) };
+        } else {
+            let leaves = PackedLeaves::<T, F>::new(&bvh.packs, &bvh.spheres, test);
+            let mut every = EveryHit { leaves, found };
+            unsafe { traverse::any::<N, K, _>(&bvh.nodes, ray, &mut every, bvh.prefetches()) };
         }
     }
 }

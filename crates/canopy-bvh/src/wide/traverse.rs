@@ -12,6 +12,7 @@ use crate::triangle::{
     triangle_lanes, PackHits, PackKernel, PackRay, ScalarPack, TrianglePack, PACK_LANES,
 };
 use crate::{Hit, IntoHit, Isa, Ray};
+use glam::Vec3;
 use std::marker::PhantomData;
 
 /// The closest-hit search state: the ray, its `t_max` shrunk to the best hit so far.
@@ -522,6 +523,139 @@ impl<T: PackKernel, F: FnMut(u32, &Ray) -> bool> AnyLeaves for PackedLeaves<'_, 
             if self.any_packs(std::array::from_ref(pack), at, &pack_ray, ray, &mut scratch) {
                 return true;
             }
+            at += 1;
+        }
+        false
+    }
+}
+
+/// Leaves of an every-hit walk: [`any`] over leaves that never report a blocker, so
+/// that every leaf whose box the ray's range passes through is tested, and each hit in
+/// them goes to `found`, with the triangle's vertices where the leaf holds them (a
+/// pack's lane, already in the cache: the caller need not fetch them from the mesh).
+pub(crate) struct EveryHit<L, H> {
+    pub leaves: L,
+    pub found: H,
+}
+
+impl<L: PrefetchLeaves, H> PrefetchLeaves for EveryHit<L, H> {
+    #[inline(always)]
+    fn prefetch(&self, first: u32, count: u32) {
+        self.leaves.prefetch(first, count);
+    }
+}
+
+impl<F, P, H> AnyLeaves for EveryHit<ClosureLeaves<'_, F>, H>
+where
+    F: FnMut(u32, &Ray) -> Option<P>,
+    P: IntoHit,
+    H: FnMut(Hit, Option<[Vec3; 3]>),
+{
+    #[inline(always)]
+    fn any(&mut self, first: u32, count: u32, ray: &Ray) -> bool {
+        let leaves = &mut self.leaves;
+        let first = first as usize;
+        for &prim in &leaves.prims[first..first + count as usize] {
+            if let Some(hit) = (leaves.test)(prim, ray) {
+                (self.found)(hit.into_hit(prim), None);
+            }
+        }
+        false
+    }
+}
+
+impl<F, P, H> AnyLeaves for EveryHit<SphereLeaves<'_, F>, H>
+where
+    F: FnMut(u32, &Ray) -> Option<P>,
+    P: IntoHit,
+    H: FnMut(Hit, Option<[Vec3; 3]>),
+{
+    #[inline(always)]
+    fn any(&mut self, first: u32, count: u32, ray: &Ray) -> bool {
+        let leaves = &mut self.leaves;
+        let range = first as usize..(first + count) as usize;
+        for (&prim, sphere) in leaves.prims[range.clone()]
+            .iter()
+            .zip(&leaves.spheres[range])
+        {
+            let hit = match sphere.is_sphere() {
+                true => sphere.intersect(ray).map(|t| t.into_hit(prim)),
+                false => (leaves.test)(prim, ray).map(|hit| hit.into_hit(prim)),
+            };
+            if let Some(hit) = hit {
+                (self.found)(hit, None);
+            }
+        }
+        false
+    }
+}
+
+impl<T, F, P, H> EveryHit<PackedLeaves<'_, T, F>, H>
+where
+    T: PackKernel,
+    F: FnMut(u32, &Ray) -> Option<P>,
+    P: IntoHit,
+    H: FnMut(Hit, Option<[Vec3; 3]>),
+{
+    /// Reports the hits in one pack or a pair tested together.
+    #[inline(always)]
+    fn every_in_packs<const PACKS: usize>(
+        &mut self,
+        packs: &[TrianglePack; PACKS],
+        first_pack: usize,
+        pack_ray: &PackRay,
+        ray: &Ray,
+    ) {
+        let leaves = &mut self.leaves;
+        if triangle_lanes(packs) != 0 {
+            let hits = &mut leaves.hits;
+            // SAFETY: `dispatch` runs this only where `T`'s instruction set exists.
+            let mask = unsafe {
+                test_packs::<T, true, PACKS>(packs, pack_ray, ray.t_min, ray.t_max, hits)
+            };
+            for lane in lanes(mask) {
+                let (pack, in_pack) = (&packs[lane / PACK_LANES], lane % PACK_LANES);
+                let hit = Hit::new(pack.prim[in_pack], hits.lane(lane));
+                (self.found)(hit, Some(pack.vertices(in_pack)));
+            }
+        }
+        for (k, pack) in packs.iter().enumerate() {
+            for lane in lanes(pack.others) {
+                let prim = pack.prim[lane];
+                let hit = match leaves.spheres.get((first_pack + k) * PACK_LANES + lane) {
+                    Some(sphere) if sphere.is_sphere() => {
+                        sphere.intersect(ray).map(|t| t.into_hit(prim))
+                    }
+                    _ => (leaves.test)(prim, ray).map(|hit| hit.into_hit(prim)),
+                };
+                if let Some(hit) = hit {
+                    (self.found)(hit, None);
+                }
+            }
+        }
+    }
+}
+
+impl<T, F, P, H> AnyLeaves for EveryHit<PackedLeaves<'_, T, F>, H>
+where
+    T: PackKernel,
+    F: FnMut(u32, &Ray) -> Option<P>,
+    P: IntoHit,
+    H: FnMut(Hit, Option<[Vec3; 3]>),
+{
+    #[inline(always)]
+    fn any(&mut self, first: u32, count: u32, ray: &Ray) -> bool {
+        let pack_ray = self.leaves.pack_ray(ray);
+        let packs = self.leaves.packs;
+        let (pairs, rest) = pairs_and_rest::<T>(leaf_packs(packs, first, count));
+        // Loops, not closures, as in the any-hit test above.
+        let mut at = first as usize / PACK_LANES;
+        for pair in pairs {
+            self.every_in_packs(pair, at, &pack_ray, ray);
+            at += 2;
+        }
+        for pack in rest {
+            self.every_in_packs(std::array::from_ref(pack), at, &pack_ray, ray);
             at += 1;
         }
         false

@@ -4,6 +4,7 @@
 
 mod brute_force;
 mod common;
+mod crossings;
 mod instances;
 mod proximity;
 mod spheres;

@@ -4,54 +4,14 @@
 //! non-uniform scale.
 
 use crate::common;
-use common::uniform;
+use common::{structures, torus, uniform};
 
 use canopy_bvh::{
-    closest_point_on_triangle, intersect_triangle, solid_angle, Blas, BlasParams, Builder,
-    BvhWidth, Hit, Instance, Ray, ShearedRay, SurfaceQuery, Tlas, TriangleMesh, ALL_MASKS,
-    INSIDE_FAR_FIELD,
+    closest_point_on_triangle, crosses_triangle, intersect_triangle, solid_angle, Blas, BlasParams,
+    Builder, BvhWidth, Hit, HitsAlong, Instance, Ray, ShearedRay, SurfaceQuery, Tlas, TriangleMesh,
+    ALL_MASKS, INSIDE_FAR_FIELD,
 };
 use glam::{Affine3A, Quat, Vec3};
-
-/// A closed torus (major radius 1, minor 0.35) with normals facing out, its tube's
-/// radius rippled so that it is not convex anywhere: `rings` × `sides` quads.
-fn torus(rings: u32, sides: u32) -> TriangleMesh {
-    let tau = std::f32::consts::TAU;
-    let mut vertices = Vec::new();
-    for i in 0..rings {
-        for j in 0..sides {
-            let (u, v) = (i as f32 / rings as f32 * tau, j as f32 / sides as f32 * tau);
-            let r = 0.35 * (1.0 + 0.2 * (3.0 * u).sin() * (2.0 * v).cos());
-            let ring = 1.0 + r * v.cos();
-            vertices.push(Vec3::new(ring * u.cos(), ring * u.sin(), r * v.sin()));
-        }
-    }
-    let at = |i: u32, j: u32| (i % rings) * sides + j % sides;
-    let mut indices = Vec::new();
-    for i in 0..rings {
-        for j in 0..sides {
-            let (a, b, c, d) = (at(i, j), at(i + 1, j), at(i + 1, j + 1), at(i, j + 1));
-            indices.push([a, b, c]);
-            indices.push([a, c, d]);
-        }
-    }
-    TriangleMesh::new(vertices, indices).unwrap()
-}
-
-/// Every builder at every width, and brute force.
-fn structures(mesh: &TriangleMesh) -> Vec<(String, Blas<TriangleMesh>)> {
-    let mut all = vec![(
-        "brute force".to_string(),
-        Blas::build(mesh.clone(), &BlasParams::new(None, BvhWidth::Two)),
-    )];
-    for builder in Builder::ALL {
-        for width in BvhWidth::ALL {
-            let blas = Blas::build(mesh.clone(), &BlasParams::new(Some(*builder), width));
-            all.push((format!("{builder} width {width}"), blas));
-        }
-    }
-    all
-}
 
 /// Query points around `bounds`: inside, outside, near the surface and far away.
 fn points(count: usize, seed: u32, scale: f32) -> Vec<Vec3> {
@@ -166,8 +126,17 @@ fn an_open_surface_has_fractional_winding_numbers() {
     }
 }
 
-/// Every hit by a loop over every triangle of every instance, sorted.
-fn hits_by_loop(meshes: &[(&TriangleMesh, Instance)], ray: &Ray, mask: u32) -> Vec<Hit> {
+/// Every hit that `along` counts by a loop over every triangle of every instance, sorted.
+fn hits_by_loop(
+    meshes: &[(&TriangleMesh, Instance)],
+    ray: &Ray,
+    mask: u32,
+    along: HitsAlong,
+) -> Vec<Hit> {
+    let test = match along {
+        HitsAlong::Crossings => crosses_triangle,
+        HitsAlong::Triangles => intersect_triangle,
+    };
     let mut hits = Vec::new();
     for (inst, (mesh, instance)) in meshes.iter().enumerate() {
         if instance.mask & mask == 0 {
@@ -176,7 +145,7 @@ fn hits_by_loop(meshes: &[(&TriangleMesh, Instance)], ray: &Ray, mask: u32) -> V
         let local = instance.ray_to_local(ray);
         let sheared = ShearedRay::new(&local);
         for prim in 0..mesh.indices().len() as u32 {
-            if let Some(h) = intersect_triangle(&mesh.vertices_of(prim), &local, &sheared) {
+            if let Some(h) = test(&mesh.vertices_of(prim), &local, &sheared) {
                 hits.push(Hit {
                     inst: inst as u32,
                     ..Hit::new(prim, h)
@@ -210,9 +179,13 @@ fn every_hit_along_a_ray_is_brute_forces_for_every_builder_and_layout() {
     let mut crossed = 0;
     for (name, blas) in structures(&mesh) {
         for ray in rays(200, 10) {
-            let expected = hits_by_loop(&alone, &ray, ALL_MASKS);
-            crossed += expected.len();
-            assert_eq!(blas.hits(&ray, ALL_MASKS), expected, "{name}: {ray:?}");
+            for along in [HitsAlong::Crossings, HitsAlong::Triangles] {
+                let expected = hits_by_loop(&alone, &ray, ALL_MASKS, along);
+                crossed += expected.len();
+                let found = blas.hits(&ray, ALL_MASKS, along);
+                assert_eq!(found, expected, "{name}, {along:?}: {ray:?}");
+                assert_eq!(blas.count_hits(&ray, ALL_MASKS, along), expected.len());
+            }
         }
     }
     assert!(crossed > 1000, "the rays cross the torus ({crossed} hits)");
@@ -280,11 +253,11 @@ fn instances_answer_in_world_measure_for_every_top_builder_and_layout() {
             }
             for ray in rays(100, 13) {
                 for mask in [ALL_MASKS, 1, 2] {
-                    assert_eq!(
-                        tlas.hits(&ray, mask),
-                        hits_by_loop(&placed, &ray, mask),
-                        "{name}"
-                    );
+                    for along in [HitsAlong::Crossings, HitsAlong::Triangles] {
+                        let expected = hits_by_loop(&placed, &ray, mask, along);
+                        assert_eq!(tlas.hits(&ray, mask, along), expected, "{name}, {along:?}");
+                        assert_eq!(tlas.count_hits(&ray, mask, along), expected.len());
+                    }
                 }
             }
         }

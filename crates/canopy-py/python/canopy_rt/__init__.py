@@ -46,6 +46,7 @@ __all__ = [
     "builders",
     "scenes",
     "devices",
+    "example_mesh",
     "load_mesh",
     "load_scene",
     "read_image",
@@ -105,6 +106,24 @@ def _per_ray(value, name: str, n: int):
     return np.require(array, requirements=["C_CONTIGUOUS", "ALIGNED"])
 
 
+def _ray_batch(origins, directions, tnear, tfar):
+    """Checked (origins, directions, tnear, tfar) for the native calls: ``origins`` and
+    ``directions`` (n, 3) each, or, with ``directions`` None, ``origins`` (n, 6) rows of
+    origin then direction (Open3D's ray tensors)."""
+    if directions is None:
+        rays = _array(origins, "rays", np.float32, 2, "(n, 6)")
+        if rays.shape[1] != 6:
+            raise ValueError(
+                f"rays without directions must have shape (n, 6) (origin, direction), not {rays.shape}"
+            )
+        origins = np.ascontiguousarray(rays[:, :3])
+        directions = np.ascontiguousarray(rays[:, 3:])
+    origins = _array(origins, "origins", np.float32, 2, "(n, 3)")
+    directions = _array(directions, "directions", np.float32, 2, "(n, 3)")
+    n = origins.shape[0]
+    return origins, directions, _per_ray(tnear, "tnear", n), _per_ray(tfar, "tfar", n)
+
+
 def _options(builder, width, max_leaf_size, sah_traversal, sah_intersection, ploc_radius, max_duplication,
              optimize, threads):
     if not isinstance(builder, str):
@@ -137,6 +156,9 @@ class Bvh:
     triangles, whose leaves hold up to two packs of four; the SAH costs, ``ploc_radius``, and
     ``max_duplication``, the fraction of extra references ``sbvh`` may make); ``optimize=s``
     improves the tree by reinsertion for ``s`` seconds before it is laid out.
+
+    A ``Bvh`` pickles (for ``multiprocessing``, Ray's object store): the pickle holds
+    its primitives and options, and loading builds the tree again.
     """
 
     def __init__(
@@ -156,14 +178,12 @@ class Bvh:
     ):
         vertices = _array(vertices, "vertices", np.float32, 2, "(V, 3)")
         faces = _array(faces, "faces", np.int64, 2, "(F, 3)")
-        self._native = _canopy.Bvh(
-            vertices,
-            faces,
-            **_options(
-                builder, width, max_leaf_size, sah_traversal, sah_intersection, ploc_radius, max_duplication,
-                optimize, threads,
-            ),
+        options = _options(
+            builder, width, max_leaf_size, sah_traversal, sah_intersection, ploc_radius, max_duplication,
+            optimize, threads,
         )
+        self._native = _canopy.Bvh(vertices, faces, **options)
+        self._options = options
 
     @classmethod
     def from_boxes(
@@ -184,14 +204,22 @@ class Bvh:
         (or, starting inside, where it leaves)."""
         boxes = _array(boxes, "boxes", np.float32, 3, "(N, 2, 3)")
         self = cls.__new__(cls)
-        self._native = _canopy.Bvh.from_boxes(
-            boxes,
-            **_options(
-                builder, width, max_leaf_size, sah_traversal, sah_intersection, ploc_radius, max_duplication,
-                optimize, threads,
-            ),
+        options = _options(
+            builder, width, max_leaf_size, sah_traversal, sah_intersection, ploc_radius, max_duplication,
+            optimize, threads,
         )
+        self._native = _canopy.Bvh.from_boxes(boxes, **options)
+        self._options = options
         return self
+
+    def __reduce__(self):
+        # A pickle holds the primitives and the options; unpickling builds the tree again
+        # (with all cores), which gives the same answers: ties never depend on the tree.
+        # A serialised tree would load faster but make the pickle three times larger, and
+        # the unsafe traversal would have to trust its bytes (docs/performance.md).
+        kind, primitives = self._native.primitives()
+        options = {k: v for k, v in self._options.items() if k != "threads"}
+        return _unpickle_bvh, (kind, primitives, options)
 
     @property
     def primitive_count(self) -> int:
@@ -219,16 +247,10 @@ class Bvh:
         relative to the whole surface. Seconds on a million triangles."""
         return self._native.epo()
 
-    def _rays(self, origins, directions, tnear, tfar):
-        origins = _array(origins, "origins", np.float32, 2, "(n, 3)")
-        directions = _array(directions, "directions", np.float32, 2, "(n, 3)")
-        n = origins.shape[0]
-        return origins, directions, _per_ray(tnear, "tnear", n), _per_ray(tfar, "tfar", n)
-
     def intersect(
         self,
         origins,
-        directions,
+        directions=None,
         tnear=0.0,
         tfar=np.inf,
         *,
@@ -237,7 +259,8 @@ class Bvh:
     ) -> Hits:
         """Closest hits of the rays ``origin + t * direction``, ``tnear <= t <= tfar``.
 
-        ``origins`` and ``directions`` are (n, 3); ``tnear`` and ``tfar`` numbers or (n,).
+        ``origins`` and ``directions`` are (n, 3) (or ``origins`` alone (n, 6), each row
+        an origin then a direction, as Open3D's rays); ``tnear`` and ``tfar`` numbers or (n,).
         Directions need not be unit length (``t`` is in their units). Ties go to the
         lower primitive index, so every builder and width gives the same answer.
 
@@ -246,14 +269,14 @@ class Bvh:
         are then traced 16 at a time as packets, which is faster for such rays and slower
         for scattered ones. The answers are the same either way.
         """
-        rays = self._rays(origins, directions, tnear, tfar)
+        rays = _ray_batch(origins, directions, tnear, tfar)
         t, prim, uv = self._native.intersect(*rays, threads, coherent)
         return Hits(t, prim, uv)
 
     def occluded(
         self,
         origins,
-        directions,
+        directions=None,
         tnear=0.0,
         tfar=np.inf,
         *,
@@ -263,11 +286,19 @@ class Bvh:
         """(n,) bool: whether anything lies on each ray within ``[tnear, tfar]`` (any hit,
         not the closest: faster, for shadow and visibility rays). ``coherent`` as for
         :meth:`intersect` (shadow rays from neighbouring points towards one light)."""
-        rays = self._rays(origins, directions, tnear, tfar)
+        rays = _ray_batch(origins, directions, tnear, tfar)
         return self._native.occluded(*rays, threads, coherent)
 
     def __repr__(self) -> str:
         return repr(self._native)
+
+
+def _unpickle_bvh(kind: str, primitives: np.ndarray, options: dict) -> Bvh:
+    if kind == "boxes":
+        return Bvh.from_boxes(primitives, **options)
+    # Each triangle's own three vertices: the same triangles, in the same order.
+    faces = np.arange(3 * len(primitives), dtype=np.int64).reshape(-1, 3)
+    return Bvh(primitives.reshape(-1, 3), faces, **options)
 
 
 def scenes() -> list:
@@ -280,6 +311,15 @@ def devices() -> List[str]:
     """The GPU adapters that ``device="gpu"`` can render on, described; empty when
     there is none (``canopy devices`` on the command line)."""
     return _canopy.devices()
+
+
+def example_mesh() -> Tuple[np.ndarray, np.ndarray]:
+    """The vertices (V, 3) float32 and triangles (F, 3) int64 of a small Stanford bunny
+    (3674 triangles, about 10 units tall, +y up) shipped with the package, for examples
+    and first tries: the same file as canopy's scenes use (``scenes/meshes/bunny.ply``)."""
+    from pathlib import Path
+
+    return load_mesh(Path(__file__).parent / "data" / "bunny.ply")
 
 
 def load_mesh(path) -> Tuple[np.ndarray, np.ndarray]:

@@ -100,12 +100,28 @@ class RayScene:
     (any invertible affine transform: rotations, mirrors, non-uniform scale), each with
     a 32-bit mask that rays select by. ``builder`` and ``width`` choose the BVHs as for
     :class:`canopy.Bvh`. The top-level tree is rebuilt at the first query after
-    instances change (milliseconds for thousands)."""
+    instances change (milliseconds for thousands).
+
+    Rays are ``origins`` and ``directions`` (n, 3), or one (n, 6) array of origin and
+    direction rows (Open3D's). A scene pickles (for ``multiprocessing``, Ray's object
+    store): the pickle holds its meshes and instances, and the trees are built again."""
 
     def __init__(self, *, builder: str = "binned-sah", width: int = 8):
         if not isinstance(builder, str):
             raise TypeError(f"builder must be a name (see canopy_rt.builders()), not {builder!r}")
         self._native = _canopy.RayScene(builder, int(width))
+
+    def __getstate__(self) -> dict:
+        # The meshes and instances; unpickling builds the trees again (see Bvh).
+        builder, width, geometries, instances = self._native.state()
+        return {"builder": builder, "width": width, "geometries": geometries, "instances": instances}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__init__(builder=state["builder"], width=state["width"])
+        for vertices, faces in state["geometries"]:
+            self.add_geometry(vertices, faces)
+        for geometry, transform, mask in state["instances"]:
+            self.add_instance(geometry, transform, mask=mask)
 
     def add_geometry(self, vertices, faces, *, threads: Optional[int] = None) -> int:
         """Adds a triangle mesh (``vertices`` (V, 3), ``faces`` (F, 3)) without placing
@@ -134,6 +150,17 @@ class RayScene:
         """Moves an instance (the top-level tree is rebuilt at the next query)."""
         self._native.set_transform(int(instance), _transform(transform))
 
+    def set_vertices(self, geometry: int, vertices, *, threads: Optional[int] = None) -> None:
+        """Moves a geometry's vertices (``vertices`` (V, 3), as many as it has; its
+        triangles stay) and refits its tree: every box recomputed, the topology kept,
+        far faster than a new build (a tree whose nodes overlap more after large moves
+        traces more slowly). Every instance of the geometry moves with it. Refused for a
+        tree built with spatial splits (``builder="sbvh"``)."""
+        from . import _array
+
+        vertices = _array(vertices, "vertices", np.float32, 2, "(V, 3)")
+        self._native.set_vertices(int(geometry), vertices, threads)
+
     @property
     def geometry_count(self) -> int:
         return self._native.geometry_count
@@ -143,14 +170,11 @@ class RayScene:
         return self._native.instance_count
 
     def _rays(self, origins, directions, tnear, tfar):
-        from . import _array, _per_ray
+        from . import _ray_batch
 
-        origins = _array(origins, "origins", np.float32, 2, "(n, 3)")
-        directions = _array(directions, "directions", np.float32, 2, "(n, 3)")
-        n = origins.shape[0]
-        return origins, directions, _per_ray(tnear, "tnear", n), _per_ray(tfar, "tfar", n)
+        return _ray_batch(origins, directions, tnear, tfar)
 
-    def intersect(self, origins, directions, tnear=0.0, tfar=np.inf, *, mask: int = EVERY_RAY,
+    def intersect(self, origins, directions=None, tnear=0.0, tfar=np.inf, *, mask: int = EVERY_RAY,
                   threads: Optional[int] = None) -> RayHits:
         """Closest hits of the rays ``origin + t * direction``, ``tnear <= t <= tfar``,
         among the instances whose mask shares a bit with ``mask``. Ties go to the lower
@@ -158,7 +182,7 @@ class RayScene:
         hits = self._native.intersect(*self._rays(origins, directions, tnear, tfar), _mask(mask), threads)
         return RayHits(*hits)
 
-    def occluded(self, origins, directions, tnear=0.0, tfar=np.inf, *, mask: int = EVERY_RAY,
+    def occluded(self, origins, directions=None, tnear=0.0, tfar=np.inf, *, mask: int = EVERY_RAY,
                  threads: Optional[int] = None) -> np.ndarray:
         """(n,) bool: whether anything ``mask`` sees lies on each ray within its range."""
         return self._native.occluded(*self._rays(origins, directions, tnear, tfar), _mask(mask), threads)
@@ -202,18 +226,29 @@ class RayScene:
         same as 0.0 and 1.0."""
         return self._native.inside(self._points(points), threads)
 
-    def count_intersections(self, origins, directions, tnear=0.0, tfar=np.inf, *,
-                            mask: int = EVERY_RAY, threads: Optional[int] = None) -> np.ndarray:
-        """(n,) int64 how many triangles each ray meets within its range (each once)."""
-        return self._native.count_intersections(
-            *self._rays(origins, directions, tnear, tfar), _mask(mask), threads)
+    def count_intersections(self, origins, directions=None, tnear=0.0, tfar=np.inf, *,
+                            mask: int = EVERY_RAY, per_triangle: bool = False,
+                            threads: Optional[int] = None) -> np.ndarray:
+        """(n,) int64 how many times each ray crosses the surface within its range.
 
-    def list_intersections(self, origins, directions, tnear=0.0, tfar=np.inf, *,
-                           mask: int = EVERY_RAY, threads: Optional[int] = None) -> RayHitLists:
-        """Every hit of each ray within its range, nearest first (equal distances by
-        instance, then triangle)."""
+        A ray through an edge or a vertex that triangles share crosses there once, so a
+        ray through a closed mesh from outside crosses it an even number of times
+        wherever it passes (the exact tie rule of symbolic perturbation; a ray that only
+        grazes an edge counts 0 or 2). Coincident triangles facing apart are two
+        crossings. ``per_triangle=True`` counts every triangle hit instead (a ray
+        through a shared edge hits each triangle around it)."""
+        return self._native.count_intersections(
+            *self._rays(origins, directions, tnear, tfar), _mask(mask), bool(per_triangle), threads)
+
+    def list_intersections(self, origins, directions=None, tnear=0.0, tfar=np.inf, *,
+                           mask: int = EVERY_RAY, per_triangle: bool = False,
+                           threads: Optional[int] = None) -> RayHitLists:
+        """Each crossing of the surface by each ray within its range, nearest first
+        (equal distances by instance, then triangle): the rows
+        :meth:`count_intersections` counts, one triangle for each crossing.
+        ``per_triangle=True`` lists every triangle hit instead."""
         lists = self._native.list_intersections(
-            *self._rays(origins, directions, tnear, tfar), _mask(mask), threads)
+            *self._rays(origins, directions, tnear, tfar), _mask(mask), bool(per_triangle), threads)
         splits, ray, t, rows = lists
         return RayHitLists(splits, ray, t, *rows)
 
