@@ -118,7 +118,13 @@ impl EdgeInput {
     /// The scalar core that the SIMD kernels mirror operation for operation.
     #[inline(always)]
     fn hit(&self, shear: Vec3, t_min: f32, t_max: f32) -> Option<PrimHit> {
-        let Projected { uvw: [u, v, w], .. } = self.project(shear);
+        self.hit_projected(&self.project(shear), shear, t_min, t_max)
+    }
+
+    /// [`EdgeInput::hit`] from the projection already made.
+    #[inline(always)]
+    fn hit_projected(&self, p: &Projected, shear: Vec3, t_min: f32, t_max: f32) -> Option<PrimHit> {
+        let [u, v, w] = p.uvw;
         let (a, b, c) = (self.a, self.b, self.c);
         if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
             return None;
@@ -180,9 +186,16 @@ fn displaced_sign(f: f32, p1: [f32; 2], p2: [f32; 2]) -> i8 {
 /// not at all. Elsewhere the answer is `intersect_triangle`'s, bit for bit.
 #[inline]
 pub fn crosses_triangle(v: &[Vec3; 3], ray: &Ray, sheared: &ShearedRay) -> Option<PrimHit> {
+    crossing(v, ray, sheared).map(|(hit, _)| hit)
+}
+
+/// The hit of a crossing ([`crosses_triangle`]) and the projection it was decided on.
+#[inline(always)]
+fn crossing(v: &[Vec3; 3], ray: &Ray, sheared: &ShearedRay) -> Option<(PrimHit, Projected)> {
     let edges = EdgeInput::new(v, ray, sheared);
-    let hit = edges.hit(sheared.shear, ray.t_min, ray.t_max)?;
-    edges.project(sheared.shear).crossed().then_some(hit)
+    let projected = edges.project(sheared.shear);
+    let hit = edges.hit_projected(&projected, sheared.shear, ray.t_min, ray.t_max)?;
+    projected.crossed().then_some((hit, projected))
 }
 
 /// +1 where `ray` crosses the triangle `v` ([`crosses_triangle`]'s crossings) leaving
@@ -191,18 +204,11 @@ pub fn crosses_triangle(v: &[Vec3; 3], ray: &Ray, sheared: &ShearedRay) -> Optio
 /// winding number of a closed surface at that point, exactly.
 #[inline]
 pub(crate) fn signed_crossing(v: &[Vec3; 3], ray: &Ray, sheared: &ShearedRay) -> i32 {
-    let edges = EdgeInput::new(v, ray, sheared);
-    if edges.hit(sheared.shear, ray.t_min, ray.t_max).is_none() {
-        return 0;
-    }
-    let projected = edges.project(sheared.shear);
-    if !projected.crossed() {
-        return 0;
-    }
     // The edge functions' sum is negative for a ray that runs along the normal.
-    match projected.uvw.iter().sum::<f32>() < 0.0 {
-        true => 1,
-        false => -1,
+    match crossing(v, ray, sheared) {
+        None => 0,
+        Some((_, projected)) if projected.uvw.iter().sum::<f32>() < 0.0 => 1,
+        Some(_) => -1,
     }
 }
 

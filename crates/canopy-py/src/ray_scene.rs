@@ -23,8 +23,6 @@ type MeshBlas = Arc<Blas<TriangleMesh>>;
 /// tree over the instances is built at the first query after a change.
 #[pyclass(module = "canopy_rt._canopy")]
 pub struct RayScene {
-    /// The builder's name as given (for pickling).
-    builder: String,
     meshes: Vec<MeshBlas>,
     instances: Vec<Instance>,
     params: BlasParams,
@@ -71,6 +69,15 @@ impl RayScene {
             })
         })?;
         Ok(out)
+    }
+
+    /// The builder's name, as `RayScene(builder=...)` takes it.
+    fn builder_name(&self) -> String {
+        match self.params.builder {
+            None => canopy_render::AccelKind::None,
+            Some(builder) => canopy_render::AccelKind::Bvh(builder),
+        }
+        .to_string()
     }
 
     fn changed(&mut self) {
@@ -202,7 +209,6 @@ impl RayScene {
             .map_err(|e: canopy_bvh::UnknownBuilder| PyValueError::new_err(e.to_string()))?;
         let width: canopy_bvh::BvhWidth =
             width.to_string().parse().map_err(PyValueError::new_err)?;
-        let name = kind.to_string();
         let builder = match kind {
             canopy_render::AccelKind::None => None,
             canopy_render::AccelKind::Bvh(b) => Some(b),
@@ -210,7 +216,6 @@ impl RayScene {
         let mut params = BlasParams::new(builder, width);
         params.build = canopy_bvh::packed_params(&params.build);
         Ok(Self {
-            builder: name,
             meshes: Vec::new(),
             instances: Vec::new(),
             params,
@@ -331,7 +336,7 @@ impl RayScene {
             PyValueError::new_err(format!(
                 "set_vertices: geometry {geometry} was built by {} with spatial splits, \
                  which cannot be refitted ({e}); add the moved mesh as a new geometry",
-                self.builder
+                self.builder_name()
             ))
         })?;
         // Checked above: the count matches and the positions are finite.
@@ -374,7 +379,7 @@ impl RayScene {
             instances.push((instance.blas, transform, instance.mask));
         }
         let width = self.params.width.children();
-        Ok((self.builder.clone(), width, geometries, instances))
+        Ok((self.builder_name(), width, geometries, instances))
     }
 
     #[getter]

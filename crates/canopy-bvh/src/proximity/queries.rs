@@ -144,32 +144,16 @@ impl<B: RayQuery + SurfaceQuery> SurfaceQuery for Tlas<B> {
         if let Some((blas, _, _)) = self.alone() {
             return blas.winding_number_within(query, far_field);
         }
-        // The winding number is unchanged by a transform that keeps orientation. A
-        // mirror keeps the instance's inside too: its normals are mirrored with it, as
-        // the renderer's are ([`crate::Instance::normal_to_world`]).
-        self.instances()
-            .iter()
-            .map(|instance| {
-                let blas = &self.blases()[instance.blas as usize];
-                let local = instance.to_local().transform_point3(query);
-                blas.winding_number_within(local, far_field)
-            })
-            .sum()
+        self.sum_over_instances(query, |blas, local| {
+            blas.winding_number_within(local, far_field)
+        })
     }
 
     fn inside_winding_number(&self, query: Vec3) -> f64 {
         if let Some((blas, _, _)) = self.alone() {
             return blas.inside_winding_number(query);
         }
-        // As `winding_number_within`: each instance in its own space.
-        self.instances()
-            .iter()
-            .map(|instance| {
-                let blas = &self.blases()[instance.blas as usize];
-                let local = instance.to_local().transform_point3(query);
-                blas.inside_winding_number(local)
-            })
-            .sum()
+        self.sum_over_instances(query, |blas, local| blas.inside_winding_number(local))
     }
 
     fn all_hits(&self, ray: &Ray, mask: u32, along: HitsAlong, out: &mut Vec<Hit>) {
@@ -186,5 +170,21 @@ impl<B: RayQuery + SurfaceQuery> SurfaceQuery for Tlas<B> {
             count += blas.count_hits(ray, mask, along)
         });
         count
+    }
+}
+
+impl<B: RayQuery + SurfaceQuery> Tlas<B> {
+    /// The sum of `winding(structure, query in its space)` over every instance. The
+    /// winding number is unchanged by a transform that keeps orientation. A mirror keeps
+    /// the instance's inside too: its normals are mirrored with it, as the renderer's are
+    /// ([`crate::Instance::normal_to_world`]).
+    fn sum_over_instances(&self, query: Vec3, winding: impl Fn(&B, Vec3) -> f64) -> f64 {
+        self.instances()
+            .iter()
+            .map(|instance| {
+                let blas = &self.blases()[instance.blas as usize];
+                winding(blas, instance.to_local().transform_point3(query))
+            })
+            .sum()
     }
 }
