@@ -202,6 +202,11 @@ def tiles_agree(a, b, sa, sb, tile: int = 32) -> float:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("scenes", nargs="*", default=["paper-1"])
+    # The bench scenes read meshes beside the repository (the lit dragon): allowed here.
+    shared = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "shared", "assets")
+    parser.add_argument("--allow-path", action="append",
+                        default=[shared] if os.path.isdir(shared) else [],
+                        help="a folder the scenes may read files from, beside their own")
     parser.add_argument("--spp", type=int, default=128)
     parser.add_argument("--size", default="480x480")
     parser.add_argument("--depth", type=int, default=5)
@@ -225,7 +230,7 @@ def main() -> int:
           f"samplers: canopy {args.sampler or 'the scene default'}, mitsuba {args.mitsuba_sampler}")
 
     for name in args.scenes:
-        info = canopy.load_scene(name)
+        info = canopy.load_scene(name, allow_paths=args.allow_path)
         with tempfile.TemporaryDirectory() as workdir:
             scene = mi.load_dict(mitsuba_scene(mi, info, width, height, args.depth, workdir,
                                                args.mitsuba_sampler))
@@ -241,7 +246,7 @@ def main() -> int:
                     options["schedule"] = args.schedule
                 if args.sampler:
                     options["sampler"] = args.sampler
-                return canopy.render(name, **options)
+                return canopy.render(name, allow_paths=args.allow_path, **options)
 
             times = {"canopy": [], "mitsuba": []}
             images = {"canopy": [], "mitsuba": []}

@@ -14,6 +14,10 @@ use std::time::Instant;
 pub struct BvhArgs {
     /// Built-in scene name, scene file, or a bare OBJ/PLY mesh.
     input: String,
+    /// A folder the scene may also read files from (meshes, models, maps). A scene reads
+    /// only files in its own folder unless this allows more; repeat it for several.
+    #[arg(long, value_name = "DIR")]
+    allow_path: Vec<std::path::PathBuf>,
     /// Builders, comma-separated, or `all`.
     #[arg(long, default_value = "all", long_help = builders_help("BVH builders, comma-separated, or `all`:"))]
     bvh: String,
@@ -87,7 +91,7 @@ fn parse_builders(list: &str) -> anyhow::Result<Vec<Builder>> {
 pub fn run(args: &BvhArgs) -> anyhow::Result<()> {
     let builders = parse_builders(&args.bvh)?;
     let params = args.build.params();
-    let mut scene = canopy_render::load_scene(&args.input)?;
+    let mut scene = canopy_render::load_scene_allowing(&args.input, &args.allow_path)?;
     if !scene.instances.is_empty() {
         // One tree over every placed triangle: the instances baked into world space.
         let flat = scene.primitives.len() as u64 + scene.instanced_triangles();

@@ -24,6 +24,10 @@ const BYTES_PER_PRIMITIVE: u64 =
 pub struct CheckArgs {
     /// Built-in scene name, scene file, or a bare OBJ/PLY mesh.
     scene: String,
+    /// A folder the scene may also read files from (meshes, models, maps). A scene reads
+    /// only files in its own folder unless this allows more; repeat it for several.
+    #[arg(long, value_name = "DIR")]
+    allow_path: Vec<std::path::PathBuf>,
     /// Print the description as one JSON object (warnings also go to stderr).
     #[arg(long)]
     json: bool,
@@ -53,8 +57,7 @@ struct Description {
 }
 
 pub fn run(args: &CheckArgs) -> anyhow::Result<()> {
-    let scene = canopy_render::load_scene(&args.scene)?;
-    scene.settings.check().map_err(anyhow::Error::msg)?;
+    let scene = canopy_render::load_scene_allowing(&args.scene, &args.allow_path)?;
     let description = describe(&args.scene, &scene);
     for warning in &description.warnings {
         eprintln!("warning: {warning}");

@@ -109,6 +109,10 @@ pub struct RenderArgs {
     /// Continue the render saved in a checkpoint (scene and settings come from it).
     #[arg(long, value_name = "FILE", conflicts_with_all = ["scene", "size", "spp", "depth", "seed", "integrator", "no_roulette", "sampler", "heatmap"])]
     resume: Option<PathBuf>,
+    /// A folder the scene may also read files from (meshes, models, maps). A scene reads
+    /// only files in its own folder unless this allows more; repeat it for several.
+    #[arg(long, value_name = "DIR")]
+    allow_path: Vec<std::path::PathBuf>,
     /// Print the summary as one JSON object (warnings also go to stderr).
     #[arg(long)]
     json: bool,
@@ -188,7 +192,7 @@ struct Job {
 
 fn load_job(args: &RenderArgs) -> anyhow::Result<Job> {
     if let Some(path) = &args.resume {
-        let resumed = canopy_job::Resumed::load(path)?;
+        let resumed = canopy_job::Resumed::load(path, &args.allow_path)?;
         return Ok(Job {
             source: resumed.source,
             scene: resumed.scene,
@@ -201,7 +205,7 @@ fn load_job(args: &RenderArgs) -> anyhow::Result<Job> {
         .scene
         .as_deref()
         .expect("clap requires a scene without --resume");
-    let mut scene = canopy_render::load_scene(arg)?;
+    let mut scene = canopy_render::load_scene_allowing(arg, &args.allow_path)?;
     apply_overrides(&mut scene, args)?;
     Ok(Job {
         source: canopy_render::scene_source(arg)?,

@@ -47,7 +47,7 @@ impl<'s> RenderJob<'s> {
     /// structure.
     pub fn prepare(&self) -> Result<Prepared<'_>, JobError> {
         let settings = self.scene.settings;
-        settings.check().map_err(JobError::Invalid)?;
+        self.scene.validate().map_err(JobError::Invalid)?;
         self.region()
             .check_within(settings.width, settings.height)
             .map_err(JobError::Invalid)?;

@@ -19,10 +19,23 @@ pub struct Resumed {
 }
 
 impl Resumed {
-    /// Loads the checkpoint at `path` and the scene it names.
-    pub fn load(path: &Path) -> Result<Self, JobError> {
+    /// Loads the checkpoint at `path` and the scene it names (whose own files may also
+    /// lie in the folders `allowed`, as for [`canopy_render::load_scene_allowing`]).
+    ///
+    /// A checkpoint is a file anyone can craft: the scene it names must be a built-in
+    /// scene or a file of a scene format (`.toml`, `.obj`, `.ply`, `.gltf`, `.glb`), and an
+    /// error in loading it shows nothing of the file's text.
+    pub fn load(path: &Path, allowed: &[PathBuf]) -> Result<Self, JobError> {
         let checkpoint = Checkpoint::load(path)?;
-        let scene = canopy_render::load_scene(&checkpoint.scene)?;
+        let named = &checkpoint.scene;
+        if !names_a_scene(named) {
+            return Err(JobError::Invalid(format!(
+                "{}: the checkpoint names `{named}` as its scene, which is neither a built-in scene nor a scene file (.toml, .obj, .ply, .gltf, .glb)",
+                path.display()
+            )));
+        }
+        let scene = canopy_render::load_scene_allowing(named, allowed)
+            .map_err(|e| JobError::Scene(e.withholding_text()))?;
         Self::with_checkpoint(checkpoint, scene, path)
     }
 
@@ -59,4 +72,20 @@ impl Resumed {
         job.checkpoint.on_interrupt = Some(self.path.clone());
         job
     }
+}
+
+/// Whether a checkpoint's scene is one canopy could have rendered: a built-in scene's
+/// name, or a path with a scene file's extension.
+fn names_a_scene(named: &str) -> bool {
+    if canopy_render::BuiltinScene::find(named).is_some() {
+        return true;
+    }
+    let extension = Path::new(named)
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    matches!(
+        extension.as_deref(),
+        Some("toml" | "obj" | "ply" | "gltf" | "glb")
+    )
 }

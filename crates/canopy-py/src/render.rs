@@ -7,7 +7,7 @@ use canopy_job::{
     CheckpointPolicy, Device, JobError, Observer, RenderJob, Resumed, Schedule, Structure,
 };
 use canopy_render::mesh::{parse_mesh, MeshFormat};
-use canopy_render::{load_scene as load, AccelKind, Accumulator, Region, Scene};
+use canopy_render::{load_scene_allowing as load, AccelKind, Accumulator, Region, Scene};
 use numpy::ndarray::Array2;
 use numpy::{IntoPyArray, PyArray2, PyArray3, PyReadonlyArray2, ToPyArray};
 use pyo3::exceptions::{PyOSError, PyRuntimeError, PyValueError};
@@ -134,8 +134,11 @@ impl SceneInfo {
 }
 
 #[pyfunction]
-pub fn load_scene(py: Python<'_>, scene: &str) -> PyResult<SceneInfo> {
-    let scene = py.detach(|| load(scene)).map_err(scene_error)?;
+#[pyo3(signature = (scene, allow_paths=Vec::new()))]
+pub fn load_scene(py: Python<'_>, scene: &str, allow_paths: Vec<PathBuf>) -> PyResult<SceneInfo> {
+    let scene = py
+        .detach(|| load(scene, &allow_paths))
+        .map_err(scene_error)?;
     Ok(SceneInfo { scene })
 }
 
@@ -154,7 +157,7 @@ pub fn load_scene(py: Python<'_>, scene: &str) -> PyResult<SceneInfo> {
 #[pyo3(signature = (scene=None, spp=None, size=None, seed=None, max_depth=None, integrator=None,
     russian_roulette=None, sampler=None, device="cpu", bvh="binned-sah", width=8, threads=None, progress=None,
     region=None, checkpoint=None, checkpoint_every=60.0, resume=None, schedule="wavefront",
-    samples=None, camera=None, instances=None))]
+    samples=None, camera=None, instances=None, allow_paths=Vec::new()))]
 #[allow(clippy::too_many_arguments)]
 pub fn render<'py>(
     py: Python<'py>,
@@ -179,6 +182,7 @@ pub fn render<'py>(
     samples: Option<(u32, u32)>,
     camera: Option<Bound<'py, PyDict>>,
     instances: Option<std::collections::HashMap<u32, PyReadonlyArray2<'py, f32>>>,
+    allow_paths: Vec<PathBuf>,
 ) -> PyResult<Bound<'py, PyArray3<f32>>> {
     let device: Device = device.parse().map_err(PyValueError::new_err)?;
     let schedule: Schedule = schedule.parse().map_err(PyValueError::new_err)?;
@@ -226,7 +230,9 @@ pub fn render<'py>(
     let given = match scene {
         None => None,
         Some(SceneArg::Named(name)) => {
-            let scene = py.detach(|| load(&name)).map_err(scene_error)?;
+            let scene = py
+                .detach(|| load(&name, &allow_paths))
+                .map_err(scene_error)?;
             let source = canopy_render::scene_source(&name).map_err(scene_error)?;
             Some((scene, source))
         }
@@ -239,7 +245,9 @@ pub fn render<'py>(
     let (mut scene, source, resumed) = match (given, &resume) {
         (None, None) => return Err(PyValueError::new_err("render() needs a scene (or resume=)")),
         (None, Some(path)) => {
-            let r = py.detach(|| Resumed::load(path)).map_err(job_error)?;
+            let r = py
+                .detach(|| Resumed::load(path, &allow_paths))
+                .map_err(job_error)?;
             (r.scene, r.source, Some((r.accumulator, r.owner)))
         }
         (Some((scene, _)), Some(path)) => {

@@ -393,18 +393,20 @@ impl PyScene {
         })
     }
 
-    /// Adds the glTF model at `path`, placed by `transform` (a (3, 4) float32 matrix);
-    /// returns how many instances it placed. Changes nothing when the file is refused.
+    /// Adds the glTF model at `path`, placed by `transform` (a (3, 4) float32 matrix),
+    /// its buffers and images read from its folder or those of `allow_paths`; returns
+    /// how many instances it placed. Changes nothing when the file is refused.
     fn add_gltf(
         &mut self,
         py: Python<'_>,
         path: std::path::PathBuf,
         transform: PyReadonlyArray2<'_, f32>,
+        allow_paths: Vec<std::path::PathBuf>,
     ) -> PyResult<usize> {
         let to_world = arrays::affine(&transform)?;
         let scene = &mut self.scene;
         let before = scene.instances.len();
-        py.detach(|| scene.add_gltf(&path, to_world))
+        py.detach(|| scene.add_gltf(&path, to_world, &allow_paths))
             .map_err(refused("add_gltf"))?;
         Ok(self.scene.instances.len() - before)
     }

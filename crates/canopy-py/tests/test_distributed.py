@@ -90,8 +90,13 @@ file = "../meshes/teapot.ply"
 material = { type = "lambertian", albedo = [0.8, 0.3, 0.2] }
 """)
     calls = []
-    image = distributed.render(scene, tile=16, progress=lambda done, total: calls.append((done, total)))
-    np.testing.assert_array_equal(image, canopy.render(str(scene)))
+    # The mesh lies beside the scene's folder: read only where allowed, on every worker.
+    with pytest.raises(ValueError, match="leads out of the scene's folder"):
+        distributed.render(scene, tile=16)
+    allowed = [tmp_path / "meshes"]
+    image = distributed.render(scene, tile=16, allow_paths=allowed,
+                               progress=lambda done, total: calls.append((done, total)))
+    np.testing.assert_array_equal(image, canopy.render(str(scene), allow_paths=allowed))
     assert calls == [(i, 6) for i in range(1, 7)]
 
 

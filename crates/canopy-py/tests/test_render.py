@@ -67,6 +67,13 @@ def test_a_failing_progress_callback_stops_the_render():
         ({"scene": "cornell", "bvh": "octree"}, ValueError, "unknown"),
         ({"scene": "cornell", "schedule": "sideways"}, ValueError, "unknown schedule `sideways`"),
         ({"scene": "cornell", "sampler": "halton"}, ValueError, "unknown sampler `halton`"),
+        # Integers the native code cannot hold name their argument (not an anonymous
+        # OverflowError).
+        ({"scene": "cornell", "size": (-1, 10)}, ValueError, "size=(-1, 10) must not be negative"),
+        ({"scene": "cornell", "threads": -1}, ValueError, "threads=-1 must not be negative"),
+        ({"scene": "cornell", "spp": 1 << 40}, ValueError, "spp=1099511627776 is too large"),
+        ({"scene": "cornell", "seed": 1 << 70}, ValueError, "seed=1180591620717411303424 is too large"),
+        ({"scene": "cornell", "region": (0, -2, 4, 4)}, ValueError, "region=(0, -2, 4, 4) must not be"),
     ],
 )
 def test_bad_render_arguments_raise(kwargs, error, words):
@@ -214,3 +221,26 @@ def test_read_image_refuses_special_files_and_oversized_images(tmp_path):
     )
     with pytest.raises(OSError, match="huge.png: a 20000x20000 image is larger than"):
         canopy.read_image(huge)
+
+
+@pytest.mark.parametrize(
+    "call, words",
+    [
+        (lambda: canopy.Scene(size=(-1, 10)), "size=(-1, 10) must not be negative"),
+        (lambda: canopy.Scene(spp=-3), "spp=-3 must not be negative"),
+        (lambda: canopy.RayScene().add_instance(-1), "geometry=-1 must not be negative"),
+        (lambda: canopy.RayScene(width=-4), "width=-4 must not be negative"),
+        (
+            lambda: canopy.Bvh(*canopy.example_mesh(), max_leaf_size=-1),
+            "max_leaf_size=-1 must not be negative",
+        ),
+        (
+            lambda: canopy.Bvh(*canopy.example_mesh()).intersect([[0, 0, 0]], [[0, 0, 1]], threads=-2),
+            "threads=-2 must not be negative",
+        ),
+    ],
+)
+def test_negative_and_huge_integers_name_their_argument(call, words):
+    with pytest.raises(ValueError) as e:
+        call()
+    assert words in str(e.value), str(e.value)

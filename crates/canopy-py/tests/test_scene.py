@@ -1,11 +1,14 @@
 """Scenes built in Python: the same pixels as the scene file with the same contents,
 instances with any invertible transform, errors that name the call, and checkpoints."""
 
+import json
+import pickle
+
 import numpy as np
 import pytest
 
 import canopy_rt as canopy
-from conftest import MESHES
+from conftest import GLTF, MESHES
 
 TEAPOT = MESHES / "teapot.obj"
 
@@ -72,7 +75,7 @@ def table_scene(look_from=(0, 3, 9), vfov=35, back=None) -> canopy.Scene:
 def test_a_python_scene_renders_the_scene_files_pixels(tmp_path):
     path = tmp_path / "table.toml"
     path.write_text(SCENE_FILE)
-    from_file = canopy.render(str(path))
+    from_file = canopy.render(str(path), allow_paths=[MESHES])
     scene = table_scene()
     info = scene.info()
     assert info.counts["primitives"] == 4 and info.counts["instances"] == 2
@@ -254,7 +257,7 @@ render = {{ width = 32, height = 24, spp = 2 }}
 file = "{truck}"
 rotate = [0, 30, 0]
 """)
-    from_file = canopy.render(str(path))
+    from_file = canopy.render(str(path), allow_paths=[GLTF])
     scene = canopy.Scene(size=(32, 24), spp=2)
     scene.camera(look_from=(6, 3, 8), look_at=(0, 1, 0))
     turned = np.eye(4)
@@ -377,3 +380,41 @@ def test_a_glowing_metallic_roughness_material_lights_the_scene():
     assert [m.get("emission") for m in materials if m["type"] == "pbr"] == [[3.0, 2.0, 1.0]]
     with pytest.raises(ValueError, match="emission"):
         scene.add_material(canopy.pbr((0.5, 0.5, 0.5), emission=(-1.0, 0.0, 0.0)))
+
+
+def _triangle_gltf(buffer_uri: str) -> str:
+    return json.dumps({
+        "asset": {"version": "2.0"}, "nodes": [{"mesh": 0}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}}]}],
+        "buffers": [{"byteLength": 36, "uri": buffer_uri}],
+        "bufferViews": [{"buffer": 0, "byteLength": 36}],
+        "accessors": [{"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3",
+                       "min": [0, 0, 0], "max": [1, 1, 0]}],
+    })
+
+
+def test_a_scene_reads_only_its_own_folder_unless_allowed(tmp_path):
+    """Files a scene names outside its folder (``../``, absolute, percent-encoded) are
+    refused by load_scene, render and Scene.add_gltf, and read where allow_paths allows;
+    a pickled scene keeps its allowance."""
+    outside, models = tmp_path / "outside", tmp_path / "models"
+    outside.mkdir()
+    models.mkdir()
+    (outside / "tri.bin").write_bytes(np.array([0, 0, 0, 1, 0, 0, 0, 1, 0], np.float32).tobytes())
+    (outside / "tri.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    (models / "scene.toml").write_text(
+        '[camera]\nlook_from = [0, 0, 3]\nlook_at = [0, 0, 0]\n[render]\nwidth = 8\nheight = 8\nspp = 1\n'
+        '[[meshes]]\nfile = "../outside/tri.obj"\nmaterial = { type = "lambertian", albedo = [0.5, 0.5, 0.5] }\n')
+    for call in (lambda **k: canopy.load_scene(models / "scene.toml", **k),
+                 lambda **k: canopy.render(models / "scene.toml", **k)):
+        with pytest.raises(ValueError, match="leads out of the scene's folder"):
+            call()
+        call(allow_paths=[outside])
+    for uri in ("../outside/tri.bin", "%2e%2e/outside/tri.bin", str(outside / "tri.bin")):
+        (models / "m.gltf").write_text(_triangle_gltf(uri))
+        scene = canopy.Scene()
+        with pytest.raises(ValueError, match="leads out of the scene's folder"):
+            scene.add_gltf(models / "m.gltf")
+        assert scene.add_gltf(models / "m.gltf", allow_paths=[outside]) == 1
+        again = pickle.loads(pickle.dumps(scene))
+        assert again.info().counts == scene.info().counts

@@ -43,6 +43,30 @@ pub enum SceneError {
     Model { file: String, message: String },
     #[error("unknown scene `{0}`: neither a built-in scene (see `canopy scenes`) nor a file")]
     Unknown(String),
+    /// An error in a file named by someone other than the user, told without its text.
+    #[error("{file}{}: this scene does not load; `canopy check {file}` says why", line.map(|l| format!(":{l}")).unwrap_or_default())]
+    Withheld { file: String, line: Option<usize> },
+    /// A setting of how the scene is read (a folder it may read from) is wrong.
+    #[error("{0}")]
+    Usage(String),
+}
+
+impl SceneError {
+    /// The error without anything read from the file (its lines, keys, values): for a
+    /// file that someone other than the user named (a checkpoint names its scene), whose
+    /// contents must never be shown. It says where, and how the user can see why.
+    pub fn withholding_text(self) -> Self {
+        let (file, line) = match &self {
+            SceneError::Syntax { file, line, .. }
+            | SceneError::Invalid { file, line, .. }
+            | SceneError::Mesh { file, line, .. } => (file.clone(), Some(*line)),
+            SceneError::MeshFile { file, .. } | SceneError::Model { file, .. } => {
+                (file.clone(), None)
+            }
+            _ => return self,
+        };
+        SceneError::Withheld { file, line }
+    }
 }
 
 /// An image that could not be written.

@@ -43,7 +43,7 @@ pub use rng::Sampler;
 pub use scene::{Integrator, MeshInstance, RenderSettings, Scene, SceneMesh};
 
 use scene_file::{parse_scene, DirAssets};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// Largest scene file read (a scene with a million inline spheres fits).
 pub const MAX_SCENE_FILE_BYTES: u64 = 256 << 20;
@@ -63,9 +63,10 @@ pub fn check_parse_memory(size: u64, available: Option<u64>) -> Result<(), Strin
     )
 }
 
-/// Loads a scene file; its meshes are found relative to its directory. Its size is
-/// checked against the memory parsing it needs before it is read.
-pub fn load_scene_file(path: &Path) -> Result<Scene, SceneError> {
+/// Loads a scene file; its meshes are found relative to its directory, and only there
+/// or in the folders of `allowed` (see [`DirAssets`]). Its size is checked against the
+/// memory parsing it needs before it is read.
+pub fn load_scene_file(path: &Path, allowed: &[PathBuf]) -> Result<Scene, SceneError> {
     let display = path.display().to_string();
     let read_error = |cause: files::ReadError| SceneError::Read {
         file: display.clone(),
@@ -81,29 +82,44 @@ pub fn load_scene_file(path: &Path) -> Result<Scene, SceneError> {
         file: display.clone(),
         cause: std::io::Error::other("not a text (UTF-8) file"),
     })?;
-    let dir = path.parent().unwrap_or(Path::new(".")).to_owned();
-    let mut scene = parse_scene(&source, &display, &DirAssets(dir))?;
+    let (assets, _) = DirAssets::beside(path);
+    let assets = assets.allowing(allowed).map_err(SceneError::Usage)?;
+    let mut scene = parse_scene(&source, &display, &assets)?;
     scene.inputs.insert(0, path.to_owned());
     Ok(scene)
 }
 
 /// A built-in scene by name, else a file by path: a glTF model ([`scene_from_gltf`]), a
-/// bare OBJ or PLY mesh ([`scene_from_mesh`]), or a scene file.
+/// bare OBJ or PLY mesh ([`scene_from_mesh`]), or a scene file. The files it names are
+/// read from its own folder only ([`load_scene_allowing`] allows more).
 pub fn load_scene(name_or_path: &str) -> Result<Scene, SceneError> {
-    if let Some(builtin) = BuiltinScene::find(name_or_path) {
-        return builtin.load();
-    }
-    let path = Path::new(name_or_path);
-    if !path.exists() {
-        return Err(SceneError::Unknown(name_or_path.to_owned()));
-    }
-    if is_gltf(path) {
-        scene_from_gltf(path)
-    } else if mesh::MeshFormat::from_path(name_or_path).is_ok() {
-        scene_from_mesh(path)
+    load_scene_allowing(name_or_path, &[])
+}
+
+/// [`load_scene`], where the files a scene names may also lie in the folders `allowed`.
+pub fn load_scene_allowing(name_or_path: &str, allowed: &[PathBuf]) -> Result<Scene, SceneError> {
+    let scene = if let Some(builtin) = BuiltinScene::find(name_or_path) {
+        builtin.load()?
     } else {
-        load_scene_file(path)
-    }
+        let path = Path::new(name_or_path);
+        if !path.exists() {
+            return Err(SceneError::Unknown(name_or_path.to_owned()));
+        }
+        if is_gltf(path) {
+            scene_from_gltf(path, allowed)?
+        } else if mesh::MeshFormat::from_path(name_or_path).is_ok() {
+            scene_from_mesh(path)?
+        } else {
+            load_scene_file(path, allowed)?
+        }
+    };
+    // What the loaders built is checked once more as a whole, by the check the render
+    // job makes: a scene `canopy check` accepts is one the renderer can use.
+    scene.validate().map_err(|message| SceneError::Model {
+        file: name_or_path.to_owned(),
+        message,
+    })?;
+    Ok(scene)
 }
 
 /// A scene of one mesh file: grey, smooth-shaded where the file has normals, under the
@@ -117,9 +133,8 @@ pub fn scene_from_mesh(path: &Path) -> Result<Scene, SceneError> {
         cause,
     };
     let invalid = |message: String| fail(mesh::MeshError::Invalid(message));
-    let (assets, file) = DirAssets::beside(path);
-    let format = mesh::MeshFormat::from_path(&file).map_err(fail)?;
-    let bytes = scene_file::Assets::read(&assets, &file).map_err(invalid)?;
+    let format = mesh::MeshFormat::from_path(&path.to_string_lossy()).map_err(fail)?;
+    let bytes = scene_file::read_input_file(path).map_err(invalid)?;
     let data = mesh::parse_mesh(&bytes, format).map_err(fail)?;
     drop(bytes);
     let stem = path
@@ -167,14 +182,15 @@ pub(crate) fn frame_from_front(scene: &mut Scene) -> Result<(), String> {
 
 /// A scene from a glTF 2.0 file (`.glb`, or `.gltf` with its buffers beside it or in
 /// data URIs): see [`gltf_scene`]. Errors name the file and the object at fault.
-pub fn scene_from_gltf(path: &Path) -> Result<Scene, SceneError> {
+pub fn scene_from_gltf(path: &Path, allowed: &[PathBuf]) -> Result<Scene, SceneError> {
     let display = path.display().to_string();
     let fail = |message: String| SceneError::Model {
         file: display.clone(),
         message,
     };
-    let (assets, file) = DirAssets::beside(path);
-    let bytes = scene_file::Assets::read(&assets, &file).map_err(fail)?;
+    let (assets, _) = DirAssets::beside(path);
+    let assets = assets.allowing(allowed).map_err(SceneError::Usage)?;
+    let bytes = scene_file::read_input_file(path).map_err(fail)?;
     let stem = path
         .file_stem()
         .map(|s| s.to_string_lossy().into_owned())

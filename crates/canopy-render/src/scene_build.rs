@@ -147,7 +147,8 @@ impl Scene {
         Ok(())
     }
 
-    /// Adds the glTF model at `path` (`.glb`, or `.gltf` with its buffers beside it),
+    /// Adds the glTF model at `path` (`.glb`, or `.gltf` with its buffers beside it, or in
+    /// the folders `allowed`),
     /// placed by `to_world`: its meshes, materials and instances, and notes of what it
     /// uses that canopy does not read yet (see [`crate::gltf_scene`]). Returns its
     /// camera, placed, if it has one (the scene's camera is not changed). Changes
@@ -156,11 +157,13 @@ impl Scene {
         &mut self,
         path: &Path,
         to_world: Affine3A,
+        allowed: &[std::path::PathBuf],
     ) -> Result<Option<crate::gltf_scene::ModelCamera>, String> {
         let name = path.display().to_string();
         let fail = |e: String| format!("`{name}`: {e}");
-        let (assets, file) = crate::scene_file::DirAssets::beside(path);
-        let bytes = crate::scene_file::Assets::read(&assets, &file).map_err(fail)?;
+        let (assets, _) = crate::scene_file::DirAssets::beside(path);
+        let assets = assets.allowing(allowed)?;
+        let bytes = crate::scene_file::read_input_file(path).map_err(fail)?;
         let before = Appended::lengths(self);
         let added = crate::gltf_scene::add_gltf(self, &bytes, &assets, to_world);
         match added {
@@ -393,7 +396,7 @@ impl Scene {
         if self.instances.len() as u64 >= MAX_INSTANCES {
             return Err(format!("a scene holds at most {MAX_INSTANCES} instances"));
         }
-        check_placement(local, to_world, self.instances.len())?;
+        check_placement(local, to_world)?;
         self.instances.push(MeshInstance {
             mesh,
             to_world,
@@ -416,18 +419,65 @@ impl Scene {
             ));
         };
         let local = self.meshes[placed.mesh as usize].mesh.bounding_box();
-        check_placement(local, to_world, instance as usize)?;
+        check_placement(local, to_world)?;
         self.instances[instance as usize].to_world = to_world;
         Ok(())
     }
 }
 
-/// Why a mesh with box `local` cannot be placed by `to_world` as instance `index`.
-fn check_placement(local: Aabb, to_world: Affine3A, index: usize) -> Result<(), String> {
+impl Scene {
+    /// Why this scene cannot be rendered, if it cannot: the one check of a whole scene that
+    /// every front end makes (scene files, glTF, meshes, built-in scenes, scenes built in
+    /// code), so that what `canopy check` accepts, the renderer can build and render. The
+    /// calls that build a scene check as they go; this sees the scene as it is now, after
+    /// any field was changed directly.
+    pub fn validate(&self) -> Result<(), String> {
+        self.settings.check()?;
+        self.camera.check().map_err(|e| format!("camera: {e}"))?;
+        for (i, m) in self.materials.iter().enumerate() {
+            m.check().map_err(|e| format!("material {i}: {e}"))?;
+        }
+        for (i, p) in self.primitives.iter().enumerate() {
+            self.check_material_index(p.material)
+                .map_err(|e| format!("primitive {i}: {e}"))?;
+            let b = p.shape.bounds();
+            if !in_range(&[b.min.to_array(), b.max.to_array()].concat()) {
+                return Err(format!(
+                    "primitive {i} reaches {} .. {}, beyond ±{MAX_COORDINATE:e}",
+                    b.min, b.max
+                ));
+            }
+        }
+        if self.instances.len() as u64 > MAX_INSTANCES {
+            return Err(format!("a scene holds at most {MAX_INSTANCES} instances"));
+        }
+        for (i, placed) in self.instances.iter().enumerate() {
+            let Some(mesh) = self.meshes.get(placed.mesh as usize) else {
+                return Err(format!(
+                    "instance {i}: mesh {} does not exist (the scene has {})",
+                    placed.mesh,
+                    self.meshes.len()
+                ));
+            };
+            self.check_material_index(placed.material)
+                .map_err(|e| format!("instance {i}: {e}"))?;
+            check_placement(mesh.mesh.bounding_box(), placed.to_world)
+                .map_err(|e| format!("instance {i} of mesh `{}`: {e}", mesh.name))?;
+        }
+        Ok(())
+    }
+}
+
+/// Why a mesh with box `local` cannot be placed by `to_world`: the one placement check of
+/// scene files, glTF, Python and [`Scene::validate`].
+pub(crate) fn check_placement(local: Aabb, to_world: Affine3A) -> Result<(), String> {
     let placed = Instance::new(0, to_world);
-    placed
-        .check(index)
-        .map_err(|e| format!("the transform must be finite and invertible: {e}"))?;
+    placed.check(0).map_err(|e| match e {
+        canopy_bvh::InstanceError::Singular { determinant, .. } => format!(
+            "the transform is not invertible (its determinant is {determinant:e}; is a scale zero or tiny?)"
+        ),
+        _ => "the transform is not finite".to_string(),
+    })?;
     let world = placed.world_bounds(local);
     if !local.is_empty() && !in_range(&[world.min.to_array(), world.max.to_array()].concat()) {
         return Err(format!(

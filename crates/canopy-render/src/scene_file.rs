@@ -33,50 +33,102 @@ pub trait Assets {
     }
 }
 
-/// Files relative to a directory (the scene file's own).
-pub struct DirAssets(pub PathBuf);
+/// The files a scene names, read from its own folder (the scene file's, or a model's):
+/// a path that leads out of it — `../`, an absolute path, a link to elsewhere, a
+/// percent-encoded `..` once decoded — is refused unless it lies in a folder the user
+/// allowed ([`DirAssets::allowing`]). On a render farm that renders files its users
+/// upload, a scene can then never read (or quote in an error) another file of the
+/// machine.
+pub struct DirAssets {
+    dir: PathBuf,
+    /// Further folders the user allowed, resolved.
+    allowed: Vec<PathBuf>,
+}
 
 impl DirAssets {
+    /// Files in `dir` (and its subfolders) only.
+    pub fn new(dir: impl Into<PathBuf>) -> Self {
+        Self {
+            dir: dir.into(),
+            allowed: Vec::new(),
+        }
+    }
+
     /// The directory holding `path`, and the file's name in it: how a file given on
     /// its own (a mesh, a model) is read, with what lies beside it.
     pub fn beside(path: &std::path::Path) -> (Self, String) {
-        let dir = path
-            .parent()
-            .unwrap_or(std::path::Path::new("."))
-            .to_owned();
+        let dir = crate::files::directory_of(path).to_owned();
         let file = path
             .file_name()
             .map(|f| f.to_string_lossy().into_owned())
             .unwrap_or_default();
-        (Self(dir), file)
+        (Self::new(dir), file)
+    }
+
+    /// Also the files in `dirs` (and their subfolders). Fails naming a folder that does
+    /// not exist.
+    pub fn allowing(mut self, dirs: &[PathBuf]) -> Result<Self, String> {
+        for dir in dirs {
+            let resolved = std::fs::canonicalize(dir)
+                .ok()
+                .filter(|d| d.is_dir())
+                .ok_or_else(|| {
+                    format!(
+                        "{}: an allowed path must be an existing folder",
+                        dir.display()
+                    )
+                })?;
+            self.allowed.push(resolved);
+        }
+        Ok(self)
+    }
+
+    /// Where the file `path` (as the scene writes it) is, links followed, if it lies in
+    /// the scene's folder or an allowed one.
+    pub fn resolve(&self, path: &str) -> Result<PathBuf, String> {
+        let full = self.dir.join(path);
+        let resolved = std::fs::canonicalize(&full)
+            .map_err(|e| format!("cannot read {}: {e}", full.display()))?;
+        let root = std::fs::canonicalize(&self.dir)
+            .map_err(|e| format!("cannot read {}: {e}", self.dir.display()))?;
+        if resolved.starts_with(&root) || self.allowed.iter().any(|a| resolved.starts_with(a)) {
+            return Ok(resolved);
+        }
+        Err(format!(
+            "`{path}` leads out of the scene's folder {} (to {}); a scene reads only files in its own folder, unless the user allows more (`--allow-path DIR`, Python `allow_paths=`)",
+            root.display(),
+            resolved.display()
+        ))
     }
 }
 
 impl Assets for DirAssets {
     fn read(&self, path: &str) -> Result<Vec<u8>, String> {
-        let full = self.0.join(path);
-        let fail = |e: &dyn std::fmt::Display| format!("cannot read {}: {e}", full.display());
-        let size = regular_file_size(&full).map_err(|e| fail(&e))?;
-        check_fits_in_memory(size, available_memory())?;
-        read_regular_file(&full, size).map_err(|e| fail(&e))
+        read_input_file(&self.resolve(path)?)
     }
 
     fn locate(&self, path: &str) -> Option<PathBuf> {
-        Some(self.0.join(path))
+        self.resolve(path).ok()
     }
 }
 
-/// Bytes of memory a mesh takes per byte of its file, generously: a binary PLY spends
-/// about 20 bytes per triangle, canopy about 40 for the triangle, 40 for its primitive
-/// record and 70 for its share of a BVH.
-const MEMORY_PER_FILE_BYTE: u64 = 8;
+/// The bytes of an input file (a regular file, no larger than memory holds); errors
+/// name it.
+pub fn read_input_file(path: &std::path::Path) -> Result<Vec<u8>, String> {
+    let fail = |e: &dyn std::fmt::Display| format!("cannot read {}: {e}", path.display());
+    let size = regular_file_size(path).map_err(|e| fail(&e))?;
+    check_fits_in_memory(size, available_memory())?;
+    read_regular_file(path, size).map_err(|e| fail(&e))
+}
 
-/// Refuses a mesh file whose loaded size would exceed the memory available (when known).
+/// Refuses a file larger than the memory available (when known). What it decodes to is
+/// checked by its reader: meshes by [`crate::mesh::parse_mesh`], models, images and
+/// environment maps by the sizes they declare.
 fn check_fits_in_memory(file_bytes: u64, available: Option<u64>) -> Result<(), String> {
     crate::files::check_memory(
-        file_bytes.saturating_mul(MEMORY_PER_FILE_BYTE),
+        file_bytes,
         available,
-        &format!("loading a mesh file of {} MiB", file_bytes >> 20),
+        &format!("reading a file of {} MiB", file_bytes >> 20),
     )
 }
 
@@ -910,10 +962,10 @@ mod tests {
     }
 
     #[test]
-    fn a_mesh_too_big_for_memory_is_refused_before_reading() {
-        let err = check_fits_in_memory(4 << 30, Some(8 << 30)).unwrap_err();
+    fn a_file_too_big_for_memory_is_refused_before_reading() {
+        let err = check_fits_in_memory(9 << 30, Some(8 << 30)).unwrap_err();
         assert!(
-            err.contains("4096 MiB") && err.contains("8192 MiB available"),
+            err.contains("9216 MiB") && err.contains("8192 MiB available"),
             "{err}"
         );
         assert!(check_fits_in_memory(1 << 20, Some(8 << 30)).is_ok());

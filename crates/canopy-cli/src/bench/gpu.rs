@@ -7,9 +7,10 @@ use crate::limits;
 use anyhow::Context;
 use canopy_bvh::BuildParams;
 use canopy_render::{
-    load_scene, render, Accel, AccelKind, Accumulator, BvhWidth, Integrator, Scene,
+    load_scene_allowing, render, Accel, AccelKind, Accumulator, BvhWidth, Integrator, Scene,
 };
 use clap::Args;
+use std::path::PathBuf;
 use std::time::Instant;
 
 #[derive(Args)]
@@ -33,6 +34,9 @@ pub struct GpuArgs {
     /// CPU worker threads, 1 to 1024 [default: all cores].
     #[arg(long, value_parser = limits::threads())]
     threads: Option<u32>,
+    /// A folder the scenes may also read files from (see `canopy render --allow-path`).
+    #[arg(long, value_name = "DIR")]
+    allow_path: Vec<PathBuf>,
 }
 
 struct Row {
@@ -49,7 +53,7 @@ pub fn run(args: &GpuArgs) -> anyhow::Result<()> {
         .build()
         .context("cannot start the worker threads")?;
     let scenes = if args.scenes.is_empty() {
-        default_scenes()
+        default_scenes(&args.allow_path)
     } else {
         args.scenes.clone()
     };
@@ -57,7 +61,7 @@ pub fn run(args: &GpuArgs) -> anyhow::Result<()> {
     let mut rows = Vec::new();
     for name in &scenes {
         // Mesh instances stay instances on both devices (two-level traversal).
-        let mut scene = load_scene(name)?;
+        let mut scene = load_scene_allowing(name, &args.allow_path)?;
         (scene.settings.width, scene.settings.height) = args.size;
         scene.settings.spp = args.spp;
         scene.settings.max_depth = args.depth;
@@ -88,8 +92,8 @@ pub fn run(args: &GpuArgs) -> anyhow::Result<()> {
 }
 
 /// The built-in reference scenes, and the dragon when its scene loads (it needs the
-/// shared meshes next to the repository).
-fn default_scenes() -> Vec<String> {
+/// shared meshes next to the repository, and `--allow-path` naming their folder).
+fn default_scenes(allowed: &[PathBuf]) -> Vec<String> {
     let mut scenes = vec!["paper-1".to_string(), "paper-5".to_string()];
     // The 202k dragon, a textured model, and one with a normal map and see-through
     // surfaces, where they load (run from the repository).
@@ -98,7 +102,7 @@ fn default_scenes() -> Vec<String> {
         "scenes/gltf/CesiumMilkTruck.glb",
         "scenes/gltf/AlphaBlendModeTest.glb",
     ] {
-        match load_scene(file) {
+        match load_scene_allowing(file, allowed) {
             Ok(_) => scenes.push(file.to_string()),
             Err(e) => eprintln!("skipping {file}: {e}"),
         }

@@ -7,7 +7,8 @@ use crate::limits;
 use anyhow::Context;
 use canopy_bvh::BuildParams;
 use canopy_render::{
-    load_scene, render, render_counted, Accel, AccelKind, BvhWidth, Film, Integrator, Scene,
+    load_scene_allowing, render, render_counted, Accel, AccelKind, BvhWidth, Film, Integrator,
+    Scene,
 };
 use clap::Args;
 use glam::Vec3;
@@ -35,6 +36,9 @@ pub struct LightsArgs {
     /// Write the table (Markdown) here too.
     #[arg(short, long)]
     out: Option<PathBuf>,
+    /// A folder the scenes may also read files from (see `canopy render --allow-path`).
+    #[arg(long, value_name = "DIR")]
+    allow_path: Vec<PathBuf>,
 }
 
 /// One integrator on one scene at the time budget.
@@ -67,7 +71,7 @@ pub fn run(args: &LightsArgs) -> anyhow::Result<()> {
     };
     let mut rows = Vec::new();
     for name in &scenes {
-        let mut scene = load_scene(name)?;
+        let mut scene = load_scene_allowing(name, &args.allow_path)?;
         if let Some(out) = &args.out {
             crate::safety::refuse_inputs(out, &scene.inputs, "table")?;
         }

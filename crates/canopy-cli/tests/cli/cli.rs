@@ -363,7 +363,7 @@ fn bare_meshes_are_named_by_themselves_and_empty_ones_are_refused() {
         ("flat.ply", "error: flat.ply: no triangle with any area"),
         (
             "bad.obj",
-            "error: bad.obj: not a valid OBJ file: face vertex index out of bounds",
+            "error: bad.obj: line 4: vertex index 9 is out of bounds: the file has 3 vertices",
         ),
     ];
     for (mesh, expected) in cases {

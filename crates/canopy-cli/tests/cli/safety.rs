@@ -249,9 +249,11 @@ fn special_files_are_refused_without_hanging() {
             "[[meshes]]\nfile = \"{mesh}\"\nmaterial = {{ type = \"lambertian\", albedo = [1, 1, 1] }}\n"
         );
         std::fs::write(dir.join("s.toml"), scene).unwrap();
+        // The links lead out of the scene's folder: allowed there, they are refused as
+        // special files.
         for command in [
-            &["render", "s.toml", "-o", "x.png"][..],
-            &["check", "s.toml"],
+            &["render", "s.toml", "-o", "x.png", "--allow-path", "/dev"][..],
+            &["check", "s.toml", "--allow-path", "/dev"],
         ] {
             let out = canopy_within(command, &dir, Duration::from_secs(30));
             assert_eq!(out.status.code(), Some(1), "{mesh}: {}", stderr(&out));
@@ -523,6 +525,11 @@ fn meaningless_scenes_fail_check_and_render() {
         (
             format!("{CAMERA}[[spheres]]\ncenter = [0, 0, 0]\nradius = 1\nmaterial = {{ type = \"emissive\", radiance = [1e38, 1, 1] }}\n"),
             "`radiance` components must be in [0, 1e12]",
+        ),
+        (
+            // Passed `check`, then panicked in `render` building the top-level tree.
+            format!("{CAMERA}[geometry.m]\nfile = \"m.obj\"\n[[instances]]\ngeometry = \"m\"\nscale = 1e-13\n{lambert}"),
+            "instance 0 of `m`: the transform is not invertible",
         ),
         (
             sphere_scene("background = [1, 1e30, 1]\n"),
@@ -821,4 +828,81 @@ fn write_grid_obj(path: &Path, n: u32) {
         }
     }
     std::fs::write(path, text).unwrap();
+}
+
+/// A scene reads only the files in its own folder: `../`, absolute paths, links that lead
+/// out and percent-encoded `..` in a glTF model's URIs are refused before anything is
+/// read (so nothing of the file can show in an error), unless `--allow-path` allows the
+/// folder they lead to.
+#[test]
+fn a_scene_reads_only_files_in_its_own_folder() {
+    let dir = scratch("confined");
+    let (scenes, outside) = (dir.join("scenes"), dir.join("outside"));
+    std::fs::create_dir_all(&scenes).unwrap();
+    std::fs::create_dir_all(&outside).unwrap();
+    let secret = "v 0 0 0 secret-word\n";
+    std::fs::write(
+        outside.join("m.obj"),
+        "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n",
+    )
+    .unwrap();
+    std::fs::write(outside.join("secret.obj"), secret).unwrap();
+    std::os::unix::fs::symlink(outside.join("secret.obj"), scenes.join("link.obj")).unwrap();
+    let lambert = "material = { type = \"lambertian\", albedo = [0.5, 0.5, 0.5] }\n";
+    let mesh_scene = |file: &str| format!("{CAMERA}[[meshes]]\nfile = \"{file}\"\n{lambert}");
+    let absolute = outside.join("secret.obj").display().to_string();
+    for file in ["../outside/secret.obj", absolute.as_str(), "link.obj"] {
+        std::fs::write(scenes.join("s.toml"), mesh_scene(file)).unwrap();
+        for command in [
+            &["check", "s.toml"][..],
+            &["render", "s.toml", "-o", "x.png"],
+        ] {
+            let out = canopy_within(command, &scenes, Duration::from_secs(30));
+            let err = stderr(&out);
+            assert_eq!(out.status.code(), Some(1), "{file}: {err}");
+            assert!(
+                err.contains("leads out of the scene's folder"),
+                "{file}: {err}"
+            );
+            assert!(!err.contains("secret-word"), "{file}: {err}");
+        }
+    }
+    // Allowed, the folder's files are read.
+    std::fs::write(scenes.join("s.toml"), mesh_scene("../outside/m.obj")).unwrap();
+    let allow = outside.display().to_string();
+    let out = canopy(&["check", "s.toml", "--allow-path", &allow], &scenes);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    let out = canopy(&["check", "s.toml", "--allow-path", "no-such-dir"], &scenes);
+    assert!(
+        stderr(&out).contains("no-such-dir: an allowed path must be an existing folder"),
+        "{}",
+        stderr(&out)
+    );
+
+    // A glTF model's buffers, however their URIs spell the way out.
+    std::fs::write(outside.join("buffer.bin"), [0u8; 44]).unwrap();
+    let gltf = |uri: &str| {
+        format!(
+            r#"{{"asset":{{"version":"2.0"}},"nodes":[{{"mesh":0}}],"meshes":[{{"primitives":[{{"attributes":{{"POSITION":0}}}}]}}],
+"buffers":[{{"byteLength":36,"uri":"{uri}"}}],"bufferViews":[{{"buffer":0,"byteLength":36}}],
+"accessors":[{{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[1,1,0]}}]}}"#
+        )
+    };
+    let absolute = outside.join("buffer.bin").display().to_string();
+    for uri in [
+        "../outside/buffer.bin",
+        "%2e%2e/outside/buffer.bin",
+        "%2E%2E%2Foutside%2Fbuffer.bin",
+        absolute.as_str(),
+    ] {
+        std::fs::write(scenes.join("model.gltf"), gltf(uri)).unwrap();
+        let out = canopy(&["check", "model.gltf"], &scenes);
+        assert_eq!(out.status.code(), Some(1), "{uri}");
+        assert!(
+            stderr(&out).contains("leads out of the scene's folder"),
+            "{uri}: {}",
+            stderr(&out)
+        );
+    }
+    std::fs::remove_dir_all(dir).unwrap();
 }

@@ -139,7 +139,7 @@ fn a_stopped_render_saves_its_state_and_resumes_into_the_same_image() {
 
     // Resumed (scene found again by its name), it goes on from sample 2 to the same image,
     // then removes its checkpoint.
-    let resumed = Resumed::load(&checkpoint).unwrap();
+    let resumed = Resumed::load(&checkpoint, &[]).unwrap();
     let mut seen = Recorder::default();
     let done = resumed.job().prepare().unwrap().run(&mut seen).unwrap();
     assert_eq!(seen.passes, [(3, 5), (4, 5), (5, 5)]);
@@ -358,7 +358,7 @@ fn two_renders_sharing_a_checkpoint_path_never_destroy_each_others_work() {
     let refused = third.prepare().err().expect("refused");
     assert!(refused.to_string().contains("another render"), "{refused}");
     // ... and the render that continues it may save over it and remove it.
-    let resumed = Resumed::load(&ck).unwrap();
+    let resumed = Resumed::load(&ck, &[]).unwrap();
     let finished = resumed.job().prepare().unwrap().run(&mut ()).unwrap();
     assert!(finished.complete && !ck.exists());
     std::fs::remove_dir_all(dir).unwrap();
@@ -381,5 +381,37 @@ fn a_render_stopped_before_its_first_sample_saves_nothing() {
     assert_eq!(outcome.accumulator.samples, 0);
     assert!(!outcome.complete && outcome.saved.is_none());
     assert!(!ck.exists());
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+/// A checkpoint is a file anyone can craft: one that names a file that is no scene (a
+/// password file, say) is refused without reading it, and one that names a scene file
+/// which does not load is refused without quoting a word of it.
+#[test]
+fn a_crafted_checkpoint_never_shows_the_file_it_names() {
+    let dir = std::env::temp_dir().join(format!("canopy-crafted-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let secret = "root:x:0:0:secret-word";
+    let scene = small("cornell", 4, 4, 1);
+    for (named, expected) in [
+        ("passwd", "neither a built-in scene nor a scene file"),
+        ("passwd.toml", "this scene does not load; `canopy check"),
+    ] {
+        let target = dir.join(named);
+        std::fs::write(&target, format!("{secret}\n[camera]\n")).unwrap();
+        let checkpoint = dir.join(format!("{named}.checkpoint"));
+        Checkpoint::new(target.to_str().unwrap(), &scene, Accumulator::new(4, 4))
+            .save(&checkpoint)
+            .unwrap();
+        let error = match Resumed::load(&checkpoint, &[]) {
+            Err(e) => e.to_string(),
+            Ok(_) => panic!("{named}: resumed"),
+        };
+        assert!(error.contains(expected), "{named}: {error}");
+        assert!(
+            !error.contains("secret") && !error.contains("root"),
+            "{named}: {error}"
+        );
+    }
     std::fs::remove_dir_all(dir).unwrap();
 }

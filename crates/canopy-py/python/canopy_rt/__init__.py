@@ -23,6 +23,7 @@ from typing import Callable, List, NamedTuple, Optional, Sequence, Tuple, Union
 import numpy as np
 
 from . import _canopy
+from ._arguments import naming_arguments, naming_arguments_of_methods
 from .scene import Scene, _transform, dielectric, emissive, eval_material, lambertian, metal, pbr
 from .ray_scene import ClosestPoints, RayHitLists, RayHits, RayScene
 
@@ -141,6 +142,7 @@ def _options(builder, width, max_leaf_size, sah_traversal, sah_intersection, plo
     )
 
 
+@naming_arguments_of_methods
 class Bvh:
     """A bounding volume hierarchy over a triangle mesh or over boxes.
 
@@ -328,12 +330,17 @@ def load_mesh(path) -> Tuple[np.ndarray, np.ndarray]:
     return _canopy.load_mesh(str(path))
 
 
-def load_scene(scene: str) -> SceneInfo:
+def load_scene(scene: str, *, allow_paths: Sequence = ()) -> SceneInfo:
     """Loads a built-in scene by name (``"cornell"``), a scene file, or an OBJ/PLY mesh,
-    and describes it: ``name``, ``settings``, ``counts``, ``bounds``, ``warnings``."""
-    return _canopy.load_scene(str(scene))
+    and describes it: ``name``, ``settings``, ``counts``, ``bounds``, ``warnings``.
+
+    A scene reads only the files in its own folder (and below): a mesh, model or map it
+    names elsewhere (``../``, an absolute path, a link out) is refused unless it lies in
+    one of the folders ``allow_paths``."""
+    return _canopy.load_scene(str(scene), [str(p) for p in allow_paths])
 
 
+@naming_arguments
 def render(
     scene=None,
     *,
@@ -357,6 +364,7 @@ def render(
     samples: Optional[Tuple[int, int]] = None,
     camera: Optional[dict] = None,
     instances: Optional[dict] = None,
+    allow_paths: Sequence = (),
 ) -> np.ndarray:
     """Renders a scene (built-in name, scene file or mesh, or a :class:`Scene` built in
     Python) to a linear float32 image of shape (height, width, 3), exactly as
@@ -388,6 +396,9 @@ def render(
 
     ``schedule`` is the order the CPU traces paths in: ``"wavefront"`` (many at a time,
     stage by stage) or ``"depth"`` (one at a time); the image is the same bit for bit.
+
+    A scene file reads only the files in its own folder (and below); ``allow_paths``
+    lists further folders its meshes, models and maps may come from.
     """
     if size is not None:
         size = (int(size[0]), int(size[1]))
@@ -417,6 +428,7 @@ def render(
         samples=None if samples is None else (int(samples[0]), int(samples[1])),
         camera=None if camera is None else dict(camera),
         instances=None if instances is None else {int(k): _transform(v) for k, v in instances.items()},
+        allow_paths=[str(p) for p in allow_paths],
     )
 
 

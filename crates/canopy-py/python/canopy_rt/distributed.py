@@ -70,10 +70,10 @@ def tiles(width: int, height: int, tile: int) -> List[_Region]:
             for y in range(0, height, tile) for x in range(0, width, tile)]
 
 
-def _described(scene):
+def _described(scene, allow_paths: Sequence = ()):
     """The scene's description (``SceneInfo``); loading it raises, before any work,
     when the scene is bad."""
-    return scene.info() if isinstance(scene, Scene) else load_scene(str(scene))
+    return scene.info() if isinstance(scene, Scene) else load_scene(str(scene), allow_paths=allow_paths)
 
 
 def _bundle(scene, info=None) -> Tuple[object, Dict[str, bytes]]:
@@ -177,7 +177,13 @@ def render_tile(bundle, region: Optional[_Region], options: dict, version: str) 
     (callable directly too): the driver's canopy version must be this worker's."""
     _same_version(version)
     source, files = bundle
-    return render_locally(_materialize(source, files), region=region, **options)
+    scene = _materialize(source, files)
+    if files and options.get("allow_paths"):
+        # The allowed folders, as the scene's files were written on this worker.
+        root = _written_root(files)
+        mapped = [_under(root, path) for path in options["allow_paths"]]
+        options = dict(options, allow_paths=[path for path in mapped if os.path.isdir(path)])
+    return render_locally(scene, region=region, **options)
 
 
 def _node_version() -> Tuple[str, str]:
@@ -283,6 +289,7 @@ def render(
     address: Optional[str] = None,
     progress: Optional[Callable[[int, int], None]] = None,
     resume_dir=None,
+    allow_paths: Sequence = (),
 ) -> np.ndarray:
     """Renders ``scene`` on a Ray cluster: the same linear float32 (height, width, 3)
     image as :func:`canopy_rt.render` with the same settings, bit for bit. The image is
@@ -299,14 +306,19 @@ def render(
     the image then differs from the single-process one only by the rounding of the
     per-pixel sums (relative differences of about 1e-7 per sample), because those
     add each sample to a float32 sum in turn, which no split can repeat without
-    waiting for the previous range."""
+    waiting for the previous range.
+
+    A scene file reads only the files in its own folder; ``allow_paths`` names further
+    folders, as for :func:`canopy_rt.render` (their files the scene reads are shipped
+    to the workers with it)."""
     if int(tile) < 1:
         raise ValueError(f"tile must be at least 1 pixel, not {tile}")
     if samples_per_task is not None and int(samples_per_task) < 1:
         raise ValueError(f"samples_per_task must be at least 1, not {samples_per_task}")
     if int(threads_per_task) < 1:
         raise ValueError(f"threads_per_task must be at least 1, not {threads_per_task}")
-    info = _described(scene)
+    allow_paths = [os.path.abspath(p) for p in allow_paths]
+    info = _described(scene, allow_paths)
     bundle = _bundle(scene, info)
     settings = info.settings
     image_width, image_height = (int(size[0]), int(size[1])) if size else (settings["width"], settings["height"])
@@ -315,6 +327,8 @@ def render(
     options = dict(spp=spp, size=(image_width, image_height), seed=seed, max_depth=max_depth,
                    integrator=integrator, russian_roulette=russian_roulette, sampler=sampler, bvh=bvh,
                    width=width, threads=int(threads_per_task))
+    if allow_paths:
+        options["allow_paths"] = allow_paths
     if device == "gpu":
         options["device"] = "gpu"
 
@@ -433,6 +447,7 @@ def render_frames(
     threads_per_task: int = 1,
     address: Optional[str] = None,
     progress: Optional[Callable[[int, int], None]] = None,
+    allow_paths: Sequence = (),
 ) -> List[str]:
     """Renders an animation on a Ray cluster, one task per frame, and returns the files
     written. ``frames[i]`` changes the scene for frame ``i``: ``{"camera": {...},
@@ -444,8 +459,10 @@ def render_frames(
     (``.png`` or ``.exr``). Each frame is the image :func:`canopy_rt.render` gives with
     those changes, written atomically by the driver as it arrives; frames whose file
     is already there are skipped, so running again after a failure renders only the
-    rest. ``progress(done, total)`` is called as frames are written."""
-    info = _described(scene)
+    rest. ``progress(done, total)`` is called as frames are written. ``allow_paths``
+    is as for :func:`render`."""
+    allow_paths = [os.path.abspath(p) for p in allow_paths]
+    info = _described(scene, allow_paths)
     changes = [_frame_changes(i, f, info.counts["instances"]) for i, f in enumerate(frames)]
     try:
         paths = [str(output).format(frame=i) for i in range(len(changes))]
@@ -461,6 +478,8 @@ def render_frames(
     options = dict(spp=spp, size=size, seed=seed, max_depth=max_depth, integrator=integrator,
                    russian_roulette=russian_roulette, sampler=sampler, bvh=bvh, width=width,
                    threads=int(threads_per_task))
+    if allow_paths:
+        options["allow_paths"] = allow_paths
     if device == "gpu":
         options["device"] = "gpu"
     todo = [i for i, path in enumerate(paths) if not os.path.exists(path)]
@@ -628,6 +647,9 @@ def main(argv=None) -> int:
         command.add_argument("--threads-per-task", type=int, default=1)
         command.add_argument("--address", help="Ray cluster address ('auto': this machine's "
                              "cluster); none starts a local Ray")
+        command.add_argument("--allow-path", action="append", default=[], metavar="DIR",
+                             help="a folder the scene may also read files from (a scene reads "
+                             "only its own folder's files otherwise); repeat for several")
     image_command.add_argument("-o", "--output", required=True,
                                help=".png or .exr, written atomically")
     image_command.add_argument("--tile", type=int, default=64, help="tile size in pixels (64)")
@@ -656,7 +678,8 @@ def main(argv=None) -> int:
 
     common = dict(spp=args.spp, size=size, seed=args.seed, max_depth=args.max_depth,
                   integrator=args.integrator, device=args.device,
-                  threads_per_task=args.threads_per_task, address=args.address, progress=show)
+                  threads_per_task=args.threads_per_task, address=args.address, progress=show,
+                  allow_paths=args.allow_path)
     try:
         if args.command == "render":
             image = render(args.scene, tile=args.tile, samples_per_task=args.samples_per_task,

@@ -24,6 +24,7 @@ from typing import NamedTuple, Optional
 import numpy as np
 
 from . import _canopy
+from ._arguments import naming_arguments_of_methods
 from .scene import _transform
 
 EVERY_RAY = 0xFFFFFFFF
@@ -95,6 +96,7 @@ def _mask(mask) -> int:
     return mask
 
 
+@naming_arguments_of_methods
 class RayScene:
     """Triangle meshes, each stored and built once, placed by any number of instances
     (any invertible affine transform: rotations, mirrors, non-uniform scale), each with

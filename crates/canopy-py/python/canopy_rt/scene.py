@@ -26,6 +26,7 @@ from typing import Callable, List, Optional, Sequence, Tuple, Union
 import numpy as np
 
 from . import _canopy
+from ._arguments import naming_arguments_of_methods
 
 Material = Union[dict, int]
 """A material: a dict as a scene file writes it (see :func:`lambertian` and friends), or
@@ -100,8 +101,16 @@ def _vec3(value, name: str) -> Tuple[float, float, float]:
     return (float(v[0]), float(v[1]), float(v[2]))
 
 
-# The arguments of these native calls that name files, by position.
-_FILE_ARGUMENTS = {"set_environment": 0, "add_gltf": 0}
+# The arguments of these native calls that name files or folders (a path, or a list of
+# them), by position.
+_FILE_ARGUMENTS = {"set_environment": (0,), "add_gltf": (0, 2)}
+
+
+def _paths(value, change: Callable[[str], str]):
+    """``change`` applied to a path, or to each path of a list."""
+    if isinstance(value, (list, tuple)):
+        return [change(os.fspath(v)) for v in value]
+    return change(os.fspath(value))
 
 
 class _Recorder:
@@ -119,7 +128,8 @@ class _Recorder:
         def call(*args):
             if method in _FILE_ARGUMENTS:
                 args = list(args)
-                args[_FILE_ARGUMENTS[method]] = os.path.abspath(args[_FILE_ARGUMENTS[method]])
+                for i in _FILE_ARGUMENTS[method]:
+                    args[i] = _paths(args[i], os.path.abspath)
                 args = tuple(args)
             result = native_method(*args)
             if method.startswith(("set_", "add_")):
@@ -135,11 +145,13 @@ class _Recorder:
         for method, args in calls:
             if method in _FILE_ARGUMENTS:
                 args = list(args)
-                args[_FILE_ARGUMENTS[method]] = where(args[_FILE_ARGUMENTS[method]])
+                for i in _FILE_ARGUMENTS[method]:
+                    args[i] = _paths(args[i], where)
             getattr(recorder, method)(*args)
         return recorder
 
 
+@naming_arguments_of_methods
 class Scene:
     """A scene under construction. ``size`` is (width, height); the other settings are
     those of a scene file's ``[render]`` table."""
@@ -319,14 +331,18 @@ class Scene:
             material = self._mesh_materials[mesh]
         return self._native.add_instance(int(mesh), _transform(transform), self._material(material))
 
-    def add_gltf(self, path, transform=None) -> int:
+    def add_gltf(self, path, transform=None, *, allow_paths: Sequence = ()) -> int:
         """Adds the glTF 2.0 model at ``path`` (``.glb``, or ``.gltf`` with its buffers
         beside it), placed by ``transform`` (any invertible affine matrix; identity by
         default): its meshes, materials and node hierarchy, each mesh stored once.
         Returns how many instances it placed. What the model uses that canopy does not
         render yet (textures, alpha modes, punctual lights) is listed in
-        ``info().warnings``. The scene's camera is kept. A refused file changes nothing."""
-        return self._native.add_gltf(str(path), _transform(transform))
+        ``info().warnings``. The scene's camera is kept. A refused file changes nothing.
+
+        The model's buffers and images are read from its own folder only: a file it
+        names elsewhere (``../``, an absolute path, a link out) is refused unless it lies
+        in one of the folders ``allow_paths``."""
+        return self._native.add_gltf(str(path), _transform(transform), [str(p) for p in allow_paths])
 
     def info(self) -> "_canopy.SceneInfo":
         """The scene described: ``settings``, ``counts``, ``bounds``, ``warnings``."""

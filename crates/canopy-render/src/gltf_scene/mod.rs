@@ -95,18 +95,17 @@ pub fn add_gltf(
     }
     let roots: Vec<gltf::Node<'_>> = match document.default_scene().or(document.scenes().next()) {
         Some(scene) => scene.nodes().collect(),
-        // No scene: every node that is no other's child.
+        // No scene: every node that is no other's child (one pass over the links: a
+        // search of a list of children per node took 16 s for 300k nodes).
         None => {
-            let children: Vec<usize> = document
-                .nodes()
-                .flat_map(|n| n.children().map(|c| c.index()))
-                .collect();
-            document
-                .nodes()
-                .filter(|n| !children.contains(&n.index()))
-                .collect()
+            let mut is_child = vec![false; document.nodes().len()];
+            for child in document.nodes().flat_map(|n| n.children()) {
+                is_child[child.index()] = true;
+            }
+            document.nodes().filter(|n| !is_child[n.index()]).collect()
         }
     };
+    check_decoded_memory(&document, &buffers)?;
     let mut visited = vec![false; document.nodes().len()];
     for root in roots {
         loader.place(&root, to_world, 0, &mut visited)?;
@@ -115,6 +114,95 @@ pub fn add_gltf(
         return Err("the file places no triangles: nothing to render".into());
     }
     loader.camera.map(placed_camera).transpose()
+}
+
+/// What a canopy mesh is decoded from: a primitive's accessors, how they are assembled
+/// and whether its material needs tangents. Primitives with the same source (in one mesh
+/// or in many) become one mesh, stored once.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+struct MeshSource {
+    mode: u32,
+    positions: Option<usize>,
+    normals: Option<usize>,
+    uvs: Option<usize>,
+    indices: Option<usize>,
+    tangents: Option<usize>,
+    normal_mapped: bool,
+}
+
+impl MeshSource {
+    fn of(primitive: &gltf::Primitive<'_>) -> Self {
+        let accessor = |semantic| primitive.get(&semantic).map(|a| a.index());
+        Self {
+            mode: primitive.mode().as_gl_enum(),
+            positions: accessor(gltf::Semantic::Positions),
+            normals: accessor(gltf::Semantic::Normals),
+            uvs: accessor(gltf::Semantic::TexCoords(0)),
+            indices: primitive.indices().map(|a| a.index()),
+            tangents: accessor(gltf::Semantic::Tangents),
+            normal_mapped: primitive.material().normal_texture().is_some(),
+        }
+    }
+
+    /// Most bytes decoding this source allocates, with its share of the BVH: every
+    /// vertex attribute as floats (read, then kept), and every index with its triangle's
+    /// pack and nodes. An upper bound, so that the check before decoding never passes a
+    /// model that then runs out of memory.
+    fn bytes(&self, document: &gltf::Document) -> u64 {
+        let count = |a: Option<usize>| {
+            a.and_then(|i| document.accessors().nth(i))
+                .map_or(0, |a| a.count() as u64)
+        };
+        let vertices = count(self.positions);
+        let indices = match self.indices {
+            Some(_) => count(self.indices),
+            None => vertices,
+        };
+        // Position and normal twice (read, then the mesh's own), texture coordinates
+        // twice, tangents per triangle corner.
+        let per_vertex = 2 * (12 + 12 + 8);
+        // The index read, the triangle it makes (three) and the triangle's pack, node
+        // and bounds shares (at most one triangle per index of a fan or strip).
+        let per_index = 4 + 12 + 160 + if self.normal_mapped { 3 * 16 } else { 0 };
+        vertices * per_vertex + indices * per_index
+    }
+}
+
+/// Fails before any mesh is decoded when the model's distinct meshes (each decoded once,
+/// however many nodes and meshes share its accessors) need more memory than is available.
+/// A primitive whose accessors are broken is left to the walk that reads it, which names
+/// it in its error.
+fn check_decoded_memory(document: &gltf::Document, buffers: &Buffers) -> Result<(), String> {
+    let mut sources = std::collections::HashSet::new();
+    for mesh in document.nodes().filter_map(|n| n.mesh()) {
+        sources.extend(
+            mesh.primitives()
+                .filter(|p| accessors_hold_their_data(p, buffers))
+                .map(|p| MeshSource::of(&p)),
+        );
+    }
+    let needed: u64 = sources.iter().map(|s| s.bytes(document)).sum();
+    crate::files::check_memory(
+        needed,
+        crate::files::available_memory(),
+        &format!("decoding the model's {} distinct meshes", sources.len()),
+    )
+}
+
+/// Whether every accessor of `primitive` is of its kind and lies inside its buffer.
+fn accessors_hold_their_data(primitive: &gltf::Primitive<'_>, buffers: &Buffers) -> bool {
+    let semantic_ok = |semantic, expect| {
+        primitive
+            .get(&semantic)
+            .is_none_or(|a| check_accessor(&a, expect, buffers).is_ok())
+    };
+    semantic_ok(gltf::Semantic::Positions, &POSITIONS)
+        && semantic_ok(gltf::Semantic::Normals, &NORMALS)
+        && semantic_ok(gltf::Semantic::TexCoords(0), &TEXCOORDS)
+        && semantic_ok(gltf::Semantic::Tangents, &TANGENTS)
+        && primitive
+            .indices()
+            .is_none_or(|a| check_accessor(&a, &INDICES, buffers).is_ok())
 }
 
 /// The document and binary chunk of `bytes`, validated. gltf 1.4's validation indexes
@@ -180,8 +268,9 @@ struct Loader<'a, 's> {
     assets: &'a dyn Assets,
     images: textures::Images,
     scene: &'s mut Scene,
-    /// canopy's mesh of each (glTF mesh, primitive) already read.
-    meshes: HashMap<(usize, usize), Option<u32>>,
+    /// canopy's mesh of each set of accessors already read: primitives of different
+    /// meshes that share their accessors share one mesh (decoded once).
+    meshes: HashMap<MeshSource, Option<u32>>,
     /// canopy's material of each glTF material (`None`: the default material).
     materials: HashMap<Option<usize>, u32>,
     /// The first camera met, placed.
@@ -289,7 +378,7 @@ impl<'a> Loader<'a, '_> {
     /// Places every primitive of `mesh` by `world`.
     fn place_mesh(&mut self, mesh: &gltf::Mesh<'a>, world: Affine3A) -> Result<(), String> {
         for primitive in mesh.primitives() {
-            let key = (mesh.index(), primitive.index());
+            let key = MeshSource::of(&primitive);
             let index = match self.meshes.get(&key) {
                 Some(&index) => index,
                 None => {

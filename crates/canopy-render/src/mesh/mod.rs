@@ -50,8 +50,29 @@ impl MeshFormat {
     }
 }
 
+impl MeshFormat {
+    /// Most bytes of memory loading a file of this format takes per byte of it, at the
+    /// peak: the file's bytes, the parser's own records and the mesh it makes, for the
+    /// files that cost the most per byte (fans of one-character references; PLY
+    /// one-byte counts and indices). Measured by `tests/memory_bounds.rs`, with room.
+    pub fn load_bytes_per_file_byte(self) -> u64 {
+        match self {
+            // Measured: 27 (a fan), 22 (one-digit triangles), 15 (short vertices).
+            MeshFormat::Obj => 40,
+            // Measured: 18 (binary fans of one-byte indices), 13 (an ASCII fan).
+            MeshFormat::Ply => 28,
+        }
+    }
+}
+
 /// Parses a mesh from the bytes of a file and checks it.
 pub fn parse_mesh(bytes: &[u8], format: MeshFormat) -> Result<MeshData, MeshError> {
+    crate::files::check_memory(
+        (bytes.len() as u64).saturating_mul(format.load_bytes_per_file_byte()),
+        crate::files::available_memory(),
+        &format!("loading a mesh file of {} MiB", bytes.len() >> 20),
+    )
+    .map_err(MeshError::Invalid)?;
     let mesh = match format {
         MeshFormat::Obj => obj::parse(bytes)?,
         MeshFormat::Ply => ply::parse(bytes)?,

@@ -26,7 +26,7 @@ use super::{
 use crate::error::SceneError;
 use crate::geometry::Triangle;
 use crate::scene::{MeshInstance, SceneMesh};
-use canopy_bvh::{Instance, TriangleMesh};
+use canopy_bvh::TriangleMesh;
 use glam::{Affine3A, Vec3};
 use serde::Deserialize;
 use std::sync::Arc;
@@ -221,16 +221,10 @@ impl SceneBuilder<'_> {
         let local = self.scene.meshes[mesh as usize].mesh.bounding_box();
         for (name, moved) in moves {
             let to_world = moved * base;
-            let world = Instance::new(0, to_world).world_bounds(local);
-            if !local.is_empty()
-                && !in_range(&[world.min.to_array(), world.max.to_array()].concat())
-            {
+            if let Err(e) = crate::scene_build::check_placement(local, to_world) {
                 return self.cx.invalid(
                     doc.span(),
-                    format!(
-                        "instance {name} of `{}` reaches {} .. {}, beyond ±{MAX_COORDINATE:e}",
-                        d.geometry, world.min, world.max
-                    ),
+                    format!("instance {name} of `{}`: {e}", d.geometry),
                 );
             }
             self.scene.instances.push(MeshInstance {

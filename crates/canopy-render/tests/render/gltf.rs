@@ -180,6 +180,46 @@ fn a_hand_made_triangle_loads() {
         .any(|w| w.contains("mesh 0 (\"tri\") primitive 1: Lines are not rendered")));
 }
 
+/// Meshes (and primitives) that share their accessors are decoded once and stored
+/// once: 400 meshes over one accessor pair made 400 copies, 1.9 GB from 3.6 MB of files.
+/// A file without a scene places every node that is no other's child, found in one pass.
+#[test]
+fn meshes_sharing_accessors_are_decoded_once_and_sceneless_files_find_their_roots() {
+    let n = 400;
+    let meshes: Vec<String> = (0..n)
+        .map(|i| {
+            format!(r#"{{"name":"copy{i}","primitives":[{{"attributes":{{"POSITION":0}},"indices":1}},{{"attributes":{{"POSITION":0}},"indices":1}}]}}"#)
+        })
+        .collect();
+    // Node 0 is a parent of node 1; nodes 2.. are roots; no scene is listed.
+    let mut nodes = vec![r#"{"mesh":0,"children":[1]}"#.to_string()];
+    nodes.extend((1..n).map(|i| format!(r#"{{"mesh":{i},"translation":[{i},0,0]}}"#)));
+    let json = TRIANGLE
+        .replace(r#""scene":0,"scenes":[{"nodes":[0]}],"#, "")
+        .replace(
+            r#""nodes":[{"mesh":0}]"#,
+            &format!(r#""nodes":[{}]"#, nodes.join(",")),
+        )
+        .replace(
+            r#""meshes":[{"name":"tri","primitives":[{"attributes":{"POSITION":0},"indices":1}]}]"#,
+            &format!(r#""meshes":[{}]"#, meshes.join(",")),
+        );
+    let scene = parse_gltf(&glb(&json, &triangle_bin([0, 1, 2])), &NoFiles, "shared").unwrap();
+    assert_eq!(scene.meshes.len(), 1, "one mesh for one set of accessors");
+    assert_eq!(
+        scene.instances.len(),
+        2 * n,
+        "every primitive of every node placed"
+    );
+    // Node 1 is placed once, under node 0 (it is no root of its own).
+    let at_one = scene
+        .instances
+        .iter()
+        .filter(|i| i.to_world.translation.x == 1.0)
+        .count();
+    assert_eq!(at_one, 2);
+}
+
 #[test]
 fn hostile_files_are_errors_that_name_the_object() {
     let good = triangle_bin([0, 1, 2]);

@@ -226,7 +226,7 @@ fn a_bare_mesh_is_the_scene_file_that_places_it() {
         let mut written = canopy_render::scene_file::parse_scene(
             &source,
             "by-hand.toml",
-            &canopy_render::scene_file::DirAssets(meshes.clone()),
+            &canopy_render::scene_file::DirAssets::new(meshes.clone()),
         )
         .unwrap();
         written.camera = bare.camera;

@@ -71,7 +71,11 @@ proptest! {
 
     #[test]
     fn mutated_obj(edits in edits(), keep in any::<usize>()) {
-        let _ = parse_mesh(&mutate(OBJ, &edits, keep), MeshFormat::Obj);
+        // Every broken OBJ file is reported with its line, or as having no faces.
+        if let Err(e) = parse_mesh(&mutate(OBJ, &edits, keep), MeshFormat::Obj) {
+            let named = matches!(e, canopy_render::mesh::MeshError::AtLine { .. });
+            prop_assert!(named || e.to_string().contains("no faces"), "{e}");
+        }
     }
 
     #[test]
@@ -138,9 +142,15 @@ fn corpus_files_give_their_errors() {
         ("no-faces.ply", "needs both"),
         ("unknown-format.ply", "unknown PLY format"),
         ("empty.obj", "no faces"),
-        ("index-out-of-range.obj", "out of bounds"),
-        ("nan-vertex.obj", "non-finite coordinate"),
-        ("non-utf8.obj", ""),
+        (
+            "index-out-of-range.obj",
+            "line 4: vertex index 9 is out of bounds",
+        ),
+        (
+            "nan-vertex.obj",
+            "line 1: a vertex has a non-finite coordinate `nan`",
+        ),
+        ("non-utf8.obj", "not UTF-8"),
     ];
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/corpus");
     assert_eq!(
@@ -162,16 +172,25 @@ fn corpus_files_give_their_errors() {
 #[test]
 fn hostile_obj_files_are_errors() {
     let cases = [
-        ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 99\n", "out of bounds"),
-        ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf -5 1 2\n", "out of bounds"),
-        ("v 0 0 0\nf 0 0 0\n", "out of bounds"),
+        (
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 99\n",
+            "line 4: vertex index 99 is out of bounds",
+        ),
+        (
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nf -5 1 2\n",
+            "line 4: vertex index -5 is out of bounds",
+        ),
+        (
+            "v 0 0 0\nf 0 0 0\n",
+            "line 2: vertex index 0 is out of bounds",
+        ),
         (
             "v nan 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n",
-            "vertex 0 has a non-finite coordinate",
+            "line 1: a vertex has a non-finite coordinate",
         ),
         (
             "v 1e39 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n",
-            "vertex 0 has a non-finite coordinate",
+            "line 1: a vertex has a non-finite coordinate",
         ),
         (
             "f\n",

@@ -8,6 +8,7 @@ mod integrator;
 mod light_sampling;
 mod loaders_never_panic;
 mod mitsuba_ggx;
+mod pipeline;
 mod punctual;
 mod scale_invariance;
 mod schedules;
