@@ -3,10 +3,7 @@
 
 use crate::build_args::{builders_help, BuildArgs};
 use crate::limits;
-use crate::safety::{
-    check_checkpoint_slot, check_memory, check_writable_dir, file_stem_from_name, refuse_inputs,
-    same_file,
-};
+use crate::safety::{check_memory, check_output, file_stem_from_name, same_file, OutputKind};
 use crate::scene_facts::SceneFacts;
 use crate::signals;
 use crate::Interrupted;
@@ -15,8 +12,7 @@ use canopy_job::{CheckpointPolicy, Device, Observer, RenderJob, Schedule, Struct
 use canopy_render::camera::Camera;
 use canopy_render::visualize::{draw_bvh, render_heatmap, LevelRange};
 use canopy_render::{
-    output::image_format, write_image, AccelKind, Accumulator, BvhWidth, Integrator, Region,
-    Sampler, Scene,
+    write_image, AccelKind, Accumulator, BvhWidth, Integrator, Region, Sampler, Scene,
 };
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -232,10 +228,8 @@ fn plan_destinations(args: &RenderArgs, job: &Job) -> anyhow::Result<Destination
         Some(path) => path.clone(),
         None => default_output(args.scene.as_deref().unwrap_or("render"), &job.scene),
     };
-    image_format(&image)?;
     let inputs = &job.scene.inputs;
-    refuse_inputs(&image, inputs, "image")?;
-    check_writable_dir(&image, "image")?;
+    check_output(&image, "image", OutputKind::Image, inputs)?;
     if args.heatmap {
         return Ok(Destinations {
             on_interrupt: default_checkpoint(&image),
@@ -247,15 +241,13 @@ fn plan_destinations(args: &RenderArgs, job: &Job) -> anyhow::Result<Destination
     let on_interrupt = periodic
         .clone()
         .unwrap_or_else(|| default_checkpoint(&image));
-    refuse_inputs(&on_interrupt, inputs, "checkpoint")?;
     if same_file(&on_interrupt, &image) {
         bail!(
             "{}: the image and the checkpoint cannot be the same file",
             image.display()
         );
     }
-    check_checkpoint_slot(&on_interrupt)?;
-    check_writable_dir(&on_interrupt, "checkpoint")?;
+    check_output(&on_interrupt, "checkpoint", OutputKind::Checkpoint, inputs)?;
     Ok(Destinations {
         image,
         periodic,
@@ -378,20 +370,30 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         );
     }
     if let Err(e) = write_image(&film, &dest.image) {
-        // The samples are not lost with the image: keep them where a resume finds them.
+        // The samples are not lost with the image: keep them where a resume finds them,
+        // beside the image, else here, else in the temporary folder (a full disk takes
+        // the checkpoint beside the image with it).
         let saved = match &run.saved {
             Some(path) => Some(path.clone()),
-            None => prepared
-                .save_checkpoint(&run.accumulator, &dest.on_interrupt)
-                .ok()
-                .map(|()| dest.on_interrupt.clone()),
+            None => {
+                let name = default_checkpoint(&dest.image);
+                let name = name.file_name().unwrap_or_default().to_string_lossy();
+                std::iter::once(dest.on_interrupt.clone())
+                    .chain(canopy_render::output_policy::fallback_places(
+                        &dest.image,
+                        &name,
+                    ))
+                    .find(|place| prepared.save_checkpoint(&run.accumulator, place).is_ok())
+            }
         };
         return Err(match saved {
             Some(path) => anyhow::Error::from(e).context(format!(
-                "the image could not be written, but the render is saved: write it with `canopy render --resume {} -o OTHER.png`",
+                "the image could not be written, but the render is saved in {}: write it with `canopy render --resume {} -o OTHER.png`",
+                path.display(),
                 path.display()
             )),
-            None => e.into(),
+            None => anyhow::Error::from(e)
+                .context("the image could not be written, and neither could a checkpoint of its samples (beside it, here, or in the temporary folder)"),
         });
     }
 

@@ -139,7 +139,7 @@ fn check_checkpoint_path(
     scene: &canopy_render::Scene,
     owners: &[u64],
 ) -> Result<(), JobError> {
-    canopy_render::files::refuse_inputs(path, &scene.inputs, "checkpoint")
+    canopy_render::output_policy::check_not_an_input(path, "checkpoint", &scene.inputs)
         .map_err(JobError::Invalid)?;
     Checkpoint::check_owned_slot(path, owners).map_err(|e| match e {
         // A user's file there: the job itself is wrong, as with an input.

@@ -5,6 +5,7 @@
 mod arrays;
 mod bvh;
 mod contents;
+mod outputs;
 mod pools;
 mod ray_scene;
 mod render;
@@ -46,6 +47,8 @@ fn _canopy(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(render::load_scene, m)?)?;
     m.add_function(wrap_pyfunction!(render::read_image, m)?)?;
     m.add_function(wrap_pyfunction!(render::write_image, m)?)?;
+    m.add_function(wrap_pyfunction!(outputs::check_output, m)?)?;
+    m.add_function(wrap_pyfunction!(outputs::write_file, m)?)?;
     m.add_function(wrap_pyfunction!(render::load_mesh, m)?)?;
     m.add_function(wrap_pyfunction!(scene::eval_material, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;

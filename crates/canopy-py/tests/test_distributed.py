@@ -386,3 +386,54 @@ def test_a_worker_killed_mid_task_is_replaced_and_the_image_is_the_same():
     assert killed is not None, "no worker was seen rendering"
     assert not driver.is_alive() and "image" in result
     np.testing.assert_array_equal(result["image"], canopy.render("paper-3", **settings))
+
+
+def test_the_ray_renderer_follows_the_one_output_policy(tmp_path, monkeypatch):
+    """Outputs are checked before any tile renders, as `canopy render` checks `-o`:
+    not the scene's own files (its environment map, by a link too), not a missing
+    folder, not a render's checkpoint; resume folders hold a record or nothing, and
+    records are written through unpredictable temporary names (a planted link is
+    never followed)."""
+    import os
+
+    sky = np.ones((4, 8, 3), np.float32)
+    canopy.write_image(tmp_path / "sky.exr", sky)
+    scene = tmp_path / "lit.toml"
+    scene.write_text('background = { environment = "sky.exr" }\n'
+                     '[camera]\nlook_from = [0, 0, 3]\nlook_at = [0, 0, 0]\n'
+                     '[render]\nwidth = 8\nheight = 8\nspp = 1\n'
+                     '[[spheres]]\ncenter = [0, 0, 0]\nradius = 1\n'
+                     'material = { type = "lambertian", albedo = [0.5, 0.5, 0.5] }\n')
+    os.symlink(tmp_path / "sky.exr", tmp_path / "sky-link.exr")
+    started = []
+    monkeypatch.setattr(distributed, "_tasks", lambda *a, **k: started.append(1) or (_ for _ in ()).throw(AssertionError("work started")))
+    for output, words in [(tmp_path / "sky.exr", "over an input of the scene"),
+                          (tmp_path / "sky-link.exr", "over an input of the scene"),
+                          (tmp_path / "gone" / "x.png", "does not exist"),
+                          (tmp_path / "x.bmp", "unsupported image format")]:
+        with pytest.raises(ValueError, match=words):
+            distributed.render(scene, output=output)
+        assert distributed.main(["render", str(scene), "-o", str(output)]) == 1
+    assert started == [] and (tmp_path / "sky.exr").exists()
+    np.testing.assert_array_equal(canopy.read_image(tmp_path / "sky.exr"), sky)
+    # Another render's checkpoint, whatever its name, is its unfinished work.
+    with pytest.raises(KeyboardInterrupt):
+        canopy.render("paper-3", size=(8, 8), spp=4, checkpoint=tmp_path / "ck.png",
+                      progress=lambda done, total: (_ for _ in ()).throw(KeyboardInterrupt()))
+    with pytest.raises(ValueError, match="holds a canopy checkpoint"):
+        distributed.render("paper-3", output=tmp_path / "ck.png")
+    # Tiles without a record are refused; a link planted where an old driver put its
+    # temporary record is never written through.
+    orphans = tmp_path / "orphans"
+    orphans.mkdir()
+    (orphans / "tile-0-0.exr").write_bytes(b"someone's tile")
+    with pytest.raises(ValueError, match="no render.json"):
+        distributed.render("paper-3", resume_dir=orphans)
+    monkeypatch.undo()
+    store = tmp_path / "store"
+    store.mkdir()
+    victim = tmp_path / "victim.txt"
+    victim.write_text("mine")
+    os.symlink(victim, store / "render.json.tmp")
+    distributed.render("paper-3", size=(8, 8), spp=1, tile=8, resume_dir=store)
+    assert victim.read_text() == "mine" and (store / "render.json").is_file()

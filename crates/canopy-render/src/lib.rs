@@ -19,6 +19,7 @@ pub mod lights;
 pub mod material;
 pub mod mesh;
 pub mod output;
+pub mod output_policy;
 pub mod region;
 pub mod rng;
 pub mod sampling;

@@ -177,7 +177,7 @@ pub fn write_atomically(
 const TEMPORARY_TRIES: u32 = 16;
 
 /// A new, empty file beside `path` named `.<name>.<random>.tmp`, and its path.
-fn create_temporary_sibling(path: &Path) -> std::io::Result<(PathBuf, File)> {
+pub(crate) fn create_temporary_sibling(path: &Path) -> std::io::Result<(PathBuf, File)> {
     let name = path
         .file_name()
         .map(|n| n.to_string_lossy())

@@ -58,7 +58,7 @@ struct Row {
 pub fn run(args: &LightsArgs) -> anyhow::Result<()> {
     // Refuse an output that cannot be written before minutes of rendering.
     if let Some(out) = &args.out {
-        crate::safety::check_writable_dir(out, "table")?;
+        crate::safety::check_output(out, "table", crate::safety::OutputKind::Data, &[])?;
     }
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(args.threads.unwrap_or(0) as usize)

@@ -286,6 +286,15 @@ fn paper(args: &PaperArgs) -> anyhow::Result<()> {
         .context("cannot start the worker threads")?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
+    // Every file the run writes can be written: found now, not after the benchmark.
+    for name in OUTPUT_FILES.iter().chain(&["results.json"]) {
+        crate::safety::check_output(
+            &args.out.join(name),
+            "benchmark output",
+            crate::safety::OutputKind::Data,
+            &[],
+        )?;
+    }
 
     let total = (scene_numbers.len() * methods.len()) as u64 * runs as u64;
     let progress = ProgressBar::new(total).with_style(
@@ -336,10 +345,7 @@ fn paper(args: &PaperArgs) -> anyhow::Result<()> {
         },
         measurements,
     };
-    write_atomic(
-        &args.out.join("results.json"),
-        &serde_json::to_string_pretty(&record)?,
-    )?;
+    keep_results(&args.out, &serde_json::to_string_pretty(&record)?)?;
     if !args.json_only {
         pool.install(|| write_outputs(&record, &args.out, &params))?;
     }
@@ -438,6 +444,27 @@ fn measure(
         nodes_per_ray: per_ray(counted.traversal.nodes_visited),
         prims_per_ray: per_ray(counted.traversal.primitives_tested),
     }
+}
+
+/// Writes the run's `results.json` into `out`; when that fails (a full disk, a folder
+/// gone), the measurements are kept in the working directory or the temporary folder,
+/// and the error says where and how to make the tables from them.
+fn keep_results(out: &Path, json: &str) -> anyhow::Result<()> {
+    let target = out.join("results.json");
+    let Err(error) = write_atomic(&target, json) else {
+        return Ok(());
+    };
+    let kept = canopy_render::output_policy::fallback_places(&target, "canopy-results.json")
+        .into_iter()
+        .find(|place| write_atomic(place, json).is_ok());
+    Err(match kept {
+        Some(place) => error.context(format!(
+            "the measurements are kept in {}: make the tables with `canopy bench paper --from {} --out DIR`",
+            place.display(),
+            place.display()
+        )),
+        None => error.context("the measurements could not be kept anywhere"),
+    })
 }
 
 /// Writes a text file through a temporary sibling, so a failure leaves no partial file.

@@ -48,6 +48,7 @@ from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
+from . import _canopy
 from . import Scene, __version__, load_scene, read_image, scenes, write_image
 from .scene import _transform
 from . import render as render_locally
@@ -240,21 +241,27 @@ class _TileStore:
     """Finished tiles of one render kept in a directory: `render.json` says which
     render (scene file contents, settings, tiling), each tile is `tile-X-Y.exr`."""
 
-    def __init__(self, directory, record: dict):
+    def __init__(self, directory, record: dict, inputs: Sequence[str] = ()):
         self.directory = str(directory)
         os.makedirs(self.directory, exist_ok=True)
         path = os.path.join(self.directory, "render.json")
         if os.path.exists(path):
-            with open(path) as f:
-                found = json.load(f)
+            try:
+                with open(path) as f:
+                    found = json.load(f)
+            except (OSError, ValueError) as e:
+                raise ValueError(f"{path}: not the record of a canopy render ({e}): give an empty directory") from None
             if found != record:
                 raise ValueError(f"{self.directory} holds the tiles of another render "
                                  "(other scene, settings or tiling): give an empty directory")
         else:
-            temporary = path + ".tmp"
-            with open(temporary, "w") as f:
-                json.dump(record, f)
-            os.replace(temporary, path)
+            # Tiles without a record are of a render nobody can name: never mixed in.
+            if any(name.startswith("tile-") for name in os.listdir(self.directory)):
+                raise ValueError(f"{self.directory} holds tiles but no render.json saying which render "
+                                 "they belong to: give an empty directory")
+            _canopy.check_output(path, "resume record", "data", list(inputs))
+            _canopy.write_file(path, json.dumps(record).encode())
+        _canopy.check_output(self.path((0, 0, 1, 1)), "tile", "image", list(inputs))
 
     def path(self, region: _Region) -> str:
         return os.path.join(self.directory, f"tile-{region[0]}-{region[1]}.exr")
@@ -290,6 +297,7 @@ def render(
     progress: Optional[Callable[[int, int], None]] = None,
     resume_dir=None,
     allow_paths: Sequence = (),
+    output=None,
 ) -> np.ndarray:
     """Renders ``scene`` on a Ray cluster: the same linear float32 (height, width, 3)
     image as :func:`canopy_rt.render` with the same settings, bit for bit. The image is
@@ -310,7 +318,12 @@ def render(
 
     A scene file reads only the files in its own folder; ``allow_paths`` names further
     folders, as for :func:`canopy_rt.render` (their files the scene reads are shipped
-    to the workers with it)."""
+    to the workers with it).
+
+    With ``output=path`` the image is also written there (``.png`` or ``.exr``,
+    atomically), and the path is checked before any tile is rendered, as ``canopy
+    render`` checks its ``-o``: its format, its folder, that it is none of the scene's
+    files (links count) and holds no render's checkpoint."""
     if int(tile) < 1:
         raise ValueError(f"tile must be at least 1 pixel, not {tile}")
     if samples_per_task is not None and int(samples_per_task) < 1:
@@ -319,6 +332,9 @@ def render(
         raise ValueError(f"threads_per_task must be at least 1, not {threads_per_task}")
     allow_paths = [os.path.abspath(p) for p in allow_paths]
     info = _described(scene, allow_paths)
+    inputs = _inputs(scene, info)
+    if output is not None:
+        _canopy.check_output(str(output), "image", "image", inputs)
     bundle = _bundle(scene, info)
     settings = info.settings
     image_width, image_height = (int(size[0]), int(size[1])) if size else (settings["width"], settings["height"])
@@ -348,7 +364,7 @@ def render(
         record = dict(scene=source, files=digest.hexdigest(), tile=int(tile),
                       samples_per_task=step if len(ranges) > 1 else None,
                       version=__version__, **{k: v for k, v in options.items() if k != "threads"})
-        store = _TileStore(resume_dir, json.loads(json.dumps(record)))
+        store = _TileStore(resume_dir, json.loads(json.dumps(record)), inputs)
     todo = []
     for region in regions:
         kept = store.load(region) if store else None
@@ -361,7 +377,7 @@ def render(
     if progress is not None and done:
         progress(done, len(regions))
     if not todo:
-        return image
+        return _with_output(image, output)
 
     ray, task = _tasks(render_tile, address, threads_per_task, device)
     bundle_ref = ray.put(bundle)
@@ -398,6 +414,21 @@ def render(
             progress(done, len(regions))
 
     _as_they_finish(ray, pending, take)
+    return _with_output(image, output)
+
+
+def _inputs(scene, info) -> List[str]:
+    """Every file the scene reads, the scene file itself included: never an output."""
+    files = [str(p) for p in info.inputs]
+    if not isinstance(scene, Scene) and str(scene) not in scenes():
+        files.append(os.path.abspath(str(scene)))
+    return files
+
+
+def _with_output(image: np.ndarray, output) -> np.ndarray:
+    """``image``, written to ``output`` first where one is given."""
+    if output is not None:
+        write_image(output, image)
     return image
 
 
@@ -490,6 +521,9 @@ def render_frames(
         return paths
     for path in {os.path.dirname(os.path.abspath(paths[i])) for i in todo}:
         os.makedirs(path, exist_ok=True)
+    inputs = _inputs(scene, info)
+    for i in todo:
+        _canopy.check_output(paths[i], f"frame {i}", "image", inputs)
 
     # A frame is a whole image (no region) with its changes.
     ray, task = _tasks(render_tile, address, threads_per_task, device)
@@ -570,6 +604,9 @@ def bench_paper(
     if listing.returncode != 0:
         raise ValueError(f"{program} bench paper --methods {methods}: {listing.stderr.strip()}")
     labels = listing.stdout.splitlines()
+    os.makedirs(str(out), exist_ok=True)
+    record_path = os.path.join(str(out), "results.json")
+    _canopy.check_output(record_path, "benchmark results", "data")
     arguments = ["--size", f"{int(size[0])}x{int(size[1])}", "--spp", str(int(spp)),
                  "--integrator", str(integrator), "--threads", str(int(threads_per_task))]
 
@@ -611,16 +648,11 @@ def bench_paper(
                    "threads": int(threads_per_task)},
         "measurements": measurements,
     }
-    os.makedirs(str(out), exist_ok=True)
-    results = os.path.join(str(out), "results.json")
-    temporary = results + ".tmp"
-    with open(temporary, "w") as f:
-        json.dump(record, f, indent=2)
-    os.replace(temporary, results)
-    tables = subprocess.run([program, "bench", "paper", "--from", results, "--out", str(out)],
+    _canopy.write_file(record_path, json.dumps(record, indent=2).encode())
+    tables = subprocess.run([program, "bench", "paper", "--from", record_path, "--out", str(out)],
                             capture_output=True, text=True)
     if tables.returncode != 0:
-        raise RuntimeError(f"{program} bench paper --from {results}: {tables.stderr.strip()}")
+        raise RuntimeError(f"{program} bench paper --from {record_path}: {tables.stderr.strip()}")
     return os.path.join(str(out), "results.md")
 
 
@@ -682,9 +714,8 @@ def main(argv=None) -> int:
                   allow_paths=args.allow_path)
     try:
         if args.command == "render":
-            image = render(args.scene, tile=args.tile, samples_per_task=args.samples_per_task,
-                           resume_dir=args.resume_dir, **common)
-            write_image(args.output, image)
+            render(args.scene, tile=args.tile, samples_per_task=args.samples_per_task,
+                   resume_dir=args.resume_dir, output=args.output, **common)
             print(f"image       {args.output}", file=sys.stderr)
         else:
             try:
