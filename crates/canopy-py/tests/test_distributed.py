@@ -437,3 +437,24 @@ def test_the_ray_renderer_follows_the_one_output_policy(tmp_path, monkeypatch):
     os.symlink(victim, store / "render.json.tmp")
     distributed.render("paper-3", size=(8, 8), spp=1, tile=8, resume_dir=store)
     assert victim.read_text() == "mine" and (store / "render.json").is_file()
+
+
+def test_an_image_that_cannot_be_written_is_kept_elsewhere(tmp_path, monkeypatch):
+    """The driver's final write failing (a full disk) does not lose the render: the
+    image is kept beside the output, else here, else in the temporary folder."""
+    image = np.full((2, 3, 3), 0.25, np.float32)
+    real = distributed.write_image
+    full = str(tmp_path / "full")
+
+    def write(path, data):
+        if str(path).startswith(full):
+            raise OSError(f"{path}: cannot write the image: No space left on device")
+        real(path, data)
+
+    monkeypatch.setattr(distributed, "write_image", write)
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(OSError, match="No space left on device.*kept in") as e:
+        distributed._with_output(image, tmp_path / "full" / "out.png")
+    kept = tmp_path / "out.png.kept.exr"
+    assert str(kept) in str(e.value)
+    np.testing.assert_array_equal(canopy.read_image(kept), image)

@@ -27,9 +27,17 @@ pub fn write_image(film: &Film, path: &Path) -> Result<(), OutputError> {
     let format = image_format(path)?;
     let mut encode_error = None;
     let written = write_atomically(path, |w| {
-        encode(film, format, w).map_err(|e| match e {
-            image::ImageError::IoError(e) => e,
-            other => {
+        let mut recorded = Recording {
+            inner: w,
+            failed: None,
+        };
+        encode(film, format, &mut recorded).map_err(|e| match (e, recorded.failed.take()) {
+            (image::ImageError::IoError(e), _) => e,
+            // An encoder may wrap a failed write in an error of its own (the EXR one
+            // calls a full disk a "Format error decoding OpenExr"): the write's own
+            // error is what went wrong.
+            (_, Some(io)) => io,
+            (other, None) => {
                 encode_error = Some(other);
                 std::io::Error::other("encoding failed")
             }
@@ -48,11 +56,46 @@ pub fn write_image(film: &Film, path: &Path) -> Result<(), OutputError> {
     }
 }
 
+/// A writer that keeps the first error its file gave, whatever the encoder makes of it.
+struct Recording<'w> {
+    inner: &'w mut BufWriter<File>,
+    failed: Option<std::io::Error>,
+}
+
+impl Recording<'_> {
+    fn keep<T>(&mut self, result: std::io::Result<T>) -> std::io::Result<T> {
+        result.inspect_err(|e| {
+            if self.failed.is_none() {
+                self.failed = Some(std::io::Error::new(e.kind(), e.to_string()));
+            }
+        })
+    }
+}
+
+impl std::io::Write for Recording<'_> {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let result = self.inner.write(buf);
+        self.keep(result)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        let result = self.inner.flush();
+        self.keep(result)
+    }
+}
+
+impl std::io::Seek for Recording<'_> {
+    fn seek(&mut self, to: std::io::SeekFrom) -> std::io::Result<u64> {
+        let result = self.inner.seek(to);
+        self.keep(result)
+    }
+}
+
 /// Encodes the film as an image file into `out`.
 fn encode(
     film: &Film,
     format: ImageFormat,
-    out: &mut BufWriter<File>,
+    out: &mut Recording<'_>,
 ) -> Result<(), image::ImageError> {
     match format {
         ImageFormat::OpenExr => {
@@ -295,6 +338,27 @@ mod tests {
                 name.starts_with(".x.bin.") && name.ends_with(".tmp"),
                 "{name}"
             );
+        }
+        std::fs::remove_dir_all(dir).unwrap();
+    }
+
+    /// A full disk during an EXR write was reported as "Format error decoding OpenExr":
+    /// the file's own error is kept, whatever the encoder wraps it in. (Checked by hand
+    /// on a full tmpfs: "cannot write the image: No space left on device".)
+    #[test]
+    fn the_files_own_error_is_kept_through_the_encoder() {
+        let dir = temp_dir("recording");
+        let path = dir.join("read-only.exr");
+        std::fs::write(&path, b"").unwrap();
+        for format in [ImageFormat::OpenExr, ImageFormat::Png] {
+            // Opened for reading only: every write fails.
+            let mut file = BufWriter::with_capacity(0, File::open(&path).unwrap());
+            let mut recorded = Recording {
+                inner: &mut file,
+                failed: None,
+            };
+            assert!(encode(&film(), format, &mut recorded).is_err());
+            assert!(recorded.failed.is_some(), "{format:?}");
         }
         std::fs::remove_dir_all(dir).unwrap();
     }

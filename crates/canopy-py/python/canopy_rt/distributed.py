@@ -426,10 +426,27 @@ def _inputs(scene, info) -> List[str]:
 
 
 def _with_output(image: np.ndarray, output) -> np.ndarray:
-    """``image``, written to ``output`` first where one is given."""
-    if output is not None:
+    """``image``, written to ``output`` first where one is given. When that write fails
+    (a full disk, a folder gone), the rendered image is not lost: it is kept as a linear
+    EXR beside the output, else in the working directory, else in the temporary
+    folder, and the error says where."""
+    if output is None:
+        return image
+    try:
         write_image(output, image)
-    return image
+        return image
+    except OSError as error:
+        failure = error
+    kept_name = os.path.basename(str(output)) + ".kept.exr"
+    for folder in (os.path.dirname(os.path.abspath(str(output))), os.getcwd(), tempfile.gettempdir()):
+        place = os.path.join(folder, kept_name)
+        try:
+            write_image(place, image)
+        except OSError:
+            continue
+        raise OSError(f"{failure}; the rendered image is kept in {place} (linear EXR: "
+                      f"canopy_rt.read_image reads it)") from failure
+    raise failure
 
 
 _CAMERA_KEYS = {"look_from", "look_at", "up", "vfov", "aperture", "focus_distance", "ortho_height"}
