@@ -178,7 +178,9 @@ fn scene_from(name: &str, toml: &str) -> Scene {
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("scene.toml");
     std::fs::write(&path, toml).unwrap();
-    let mut scene = canopy_render::load_scene(path.to_str().unwrap()).unwrap();
+    // The scene (in a scratch folder) reads the project's meshes: allowed by name.
+    let meshes = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/meshes");
+    let mut scene = canopy_render::load_scene_allowing(path.to_str().unwrap(), &[meshes]).unwrap();
     std::fs::remove_dir_all(&dir).unwrap();
     scene.settings.integrator = Integrator::Bsdf;
     scene
