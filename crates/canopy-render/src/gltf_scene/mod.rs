@@ -148,16 +148,11 @@ impl MeshSource {
     /// vertex attribute as floats (read, then kept), and every index with its triangle's
     /// pack and nodes. An upper bound, so that the check before decoding never passes a
     /// model that then runs out of memory.
-    fn bytes(&self, document: &gltf::Document) -> u64 {
-        let count = |a: Option<usize>| {
-            a.and_then(|i| document.accessors().nth(i))
-                .map_or(0, |a| a.count() as u64)
-        };
-        let vertices = count(self.positions);
-        let indices = match self.indices {
-            Some(_) => count(self.indices),
-            None => vertices,
-        };
+    fn bytes(&self, primitive: &gltf::Primitive<'_>) -> u64 {
+        let vertices = primitive
+            .get(&gltf::Semantic::Positions)
+            .map_or(0, |a| a.count() as u64);
+        let indices = primitive.indices().map_or(vertices, |a| a.count() as u64);
         // Position and normal twice (read, then the mesh's own), texture coordinates
         // twice, tangents per triangle corner.
         let per_vertex = 2 * (12 + 12 + 8);
@@ -173,15 +168,16 @@ impl MeshSource {
 /// A primitive whose accessors are broken is left to the walk that reads it, which names
 /// it in its error.
 fn check_decoded_memory(document: &gltf::Document, buffers: &Buffers) -> Result<(), String> {
-    let mut sources = std::collections::HashSet::new();
+    let mut sources = HashMap::new();
     for mesh in document.nodes().filter_map(|n| n.mesh()) {
-        sources.extend(
-            mesh.primitives()
-                .filter(|p| accessors_hold_their_data(p, buffers))
-                .map(|p| MeshSource::of(&p)),
-        );
+        for primitive in mesh.primitives() {
+            if accessors_hold_their_data(&primitive, buffers) {
+                let source = MeshSource::of(&primitive);
+                sources.insert(source, source.bytes(&primitive));
+            }
+        }
     }
-    let needed: u64 = sources.iter().map(|s| s.bytes(document)).sum();
+    let needed: u64 = sources.values().sum();
     crate::files::check_memory(
         needed,
         crate::files::available_memory(),

@@ -54,10 +54,17 @@ fn check_lines(bytes: &[u8]) -> Result<(), MeshError> {
         let text = std::str::from_utf8(raw).map_err(|_| at("the line is not UTF-8 text".into()))?;
         let mut words = text.split_whitespace();
         match words.next() {
-            Some("v") => check_vertex(words).map_err(at)?,
-            Some("vn") => check_numbers(&mut words, 3, "a normal", "x y z").map_err(at)?,
+            Some("v") => {
+                check_vertex(words).map_err(at)?;
+                counts.read[0] += 1;
+            }
             Some("vt") => {
-                check_numbers(&mut words, 2, "a texture coordinate", "u v").map_err(at)?
+                check_numbers(&mut words, 2, "a texture coordinate", "u v").map_err(at)?;
+                counts.read[1] += 1;
+            }
+            Some("vn") => {
+                check_numbers(&mut words, 3, "a normal", "x y z").map_err(at)?;
+                counts.read[2] += 1;
             }
             Some("o" | "g") => counts.end_object()?,
             Some(kind @ ("f" | "l")) => {
@@ -82,7 +89,6 @@ fn check_lines(bytes: &[u8]) -> Result<(), MeshError> {
             }
             _ => {}
         }
-        counts.saw(text);
     }
     counts.end_object()
 }
@@ -172,15 +178,6 @@ struct Counts {
 const KINDS: [&str; 3] = ["vertex", "texture coordinate", "normal"];
 
 impl Counts {
-    fn saw(&mut self, text: &str) {
-        match text.split_whitespace().next() {
-            Some("v") => self.read[0] += 1,
-            Some("vt") => self.read[1] += 1,
-            Some("vn") => self.read[2] += 1,
-            _ => {}
-        }
-    }
-
     /// One `v`, `v/vt`, `v//vn` or `v/vt/vn` reference of a face on `line`.
     fn check_reference(&mut self, reference: &str, line: usize) -> Result<(), MeshError> {
         let at = |message: String| MeshError::AtLine { line, message };
