@@ -9,6 +9,7 @@
 # `canopy` binary the Python tests drive, and the wheel, which reuses the tests' crates.
 # The GPU tests need a Vulkan adapter: Mesa's software driver is installed when it is
 # missing and this user may install packages; otherwise they skip, and the summary says so.
+# Open Image Denoise is installed into target/oidn (scripts/oidn.sh) for the denoising tests.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 profile=test-opt
@@ -17,6 +18,15 @@ mkdir -p target
 
 scripts/install-vulkan.sh >target/install-vulkan.log 2>&1 ||
     echo "note: could not install Mesa's software Vulkan driver (target/install-vulkan.log)"
+
+# The denoiser's library (from PyPI's pyoidn wheel), so that the denoising tests run the
+# real one: they fail, rather than skip, when it is missing.
+scripts/oidn.sh target/oidn >target/oidn.log 2>&1 || {
+    cat target/oidn.log
+    echo "error: could not install Open Image Denoise (scripts/oidn.sh)" >&2
+    exit 1
+}
+export CANOPY_OIDN="$PWD/target/oidn" CANOPY_REQUIRE_OIDN=1
 
 # The Python packages download while the Rust tests compile and run.
 python_env() {

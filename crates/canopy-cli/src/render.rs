@@ -12,7 +12,8 @@ use canopy_job::{CheckpointPolicy, Device, Observer, RenderJob, Schedule, Struct
 use canopy_render::camera::Camera;
 use canopy_render::visualize::{draw_bvh, render_heatmap, LevelRange};
 use canopy_render::{
-    write_image, AccelKind, Accumulator, BvhWidth, Integrator, Region, Sampler, Scene,
+    write_image, write_image_with_aovs, AccelKind, Accumulator, AovSet, BvhWidth, Integrator,
+    Region, Sampler, Scene,
 };
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -105,6 +106,21 @@ pub struct RenderArgs {
     /// Continue the render saved in a checkpoint (scene and settings come from it).
     #[arg(long, value_name = "FILE", conflicts_with_all = ["scene", "size", "spp", "depth", "seed", "integrator", "no_roulette", "sampler", "heatmap"])]
     resume: Option<PathBuf>,
+    /// Also write these AOVs as layers of the (.exr) image: a comma-separated list of
+    /// albedo, normal (what a denoiser takes: the first surface past mirrors and glass),
+    /// depth, position and id (instance and primitive; these three of each pixel's first
+    /// sample). Channels are named `albedo.R`, `normal.X`, `depth.Z`, `id.instance`, ...
+    #[arg(long, value_name = "LIST", value_parser = parse_aovs, conflicts_with = "heatmap")]
+    aov: Option<AovSet>,
+    /// Denoise the image with Open Image Denoise 2 (installed by `scripts/oidn.sh`),
+    /// guided by the albedo and normal AOVs it renders for it: the image written is the
+    /// denoised one. Fails before rendering when OIDN is missing.
+    #[arg(long, conflicts_with = "heatmap")]
+    denoise: bool,
+    /// Write the denoised image to FILE as well (.png or .exr), keeping the noisy render
+    /// in the output image; implies --denoise.
+    #[arg(long, value_name = "FILE", conflicts_with = "heatmap")]
+    denoised_output: Option<PathBuf>,
     /// A folder the scene may also read files from (meshes, models, maps). A scene reads
     /// only files in its own folder unless this allows more; repeat it for several.
     #[arg(long, value_name = "DIR")]
@@ -115,6 +131,10 @@ pub struct RenderArgs {
 }
 
 fn parse_device(s: &str) -> Result<Device, String> {
+    s.parse()
+}
+
+fn parse_aovs(s: &str) -> Result<AovSet, String> {
     s.parse()
 }
 
@@ -150,6 +170,11 @@ struct Summary {
     shadow_rays: u64,
     mrays_per_second: f64,
     image: String,
+    /// The AOV layers written into the image, comma-separated.
+    aovs: Option<String>,
+    /// The denoised image, when written apart from the image.
+    denoised_image: Option<String>,
+    denoise_seconds: Option<f64>,
     /// Where the render's state was saved, when it was interrupted.
     checkpoint: Option<String>,
     interrupted: bool,
@@ -217,6 +242,8 @@ fn load_job(args: &RenderArgs) -> anyhow::Result<Job> {
 /// checkpoint, and both directories must be writable.
 struct Destinations {
     image: PathBuf,
+    /// The denoised image, when written apart.
+    denoised: Option<PathBuf>,
     /// Saved periodically when asked (`--checkpoint`, or the resumed file).
     periodic: Option<PathBuf>,
     /// Where an interrupted render saves its state.
@@ -230,12 +257,28 @@ fn plan_destinations(args: &RenderArgs, job: &Job) -> anyhow::Result<Destination
     };
     let inputs = &job.scene.inputs;
     check_output(&image, "image", OutputKind::Image, inputs)?;
+    if args.aov.is_some_and(|set| !set.is_empty())
+        && canopy_render::output::image_format(&image)? != image::ImageFormat::OpenExr
+    {
+        return Err(canopy_render::OutputError::LayersNeedExr { path: image }.into());
+    }
     if args.heatmap {
         return Ok(Destinations {
             on_interrupt: default_checkpoint(&image),
             image,
+            denoised: None,
             periodic: None,
         });
+    }
+    let denoised = args.denoised_output.clone();
+    if let Some(path) = &denoised {
+        check_output(path, "denoised image", OutputKind::Image, inputs)?;
+        if same_file(path, &image) {
+            bail!(
+                "{}: the image and the denoised image cannot be the same file",
+                path.display()
+            );
+        }
     }
     let periodic = args.checkpoint.clone().or_else(|| job.resumed_from.clone());
     let on_interrupt = periodic
@@ -248,8 +291,18 @@ fn plan_destinations(args: &RenderArgs, job: &Job) -> anyhow::Result<Destination
         );
     }
     check_output(&on_interrupt, "checkpoint", OutputKind::Checkpoint, inputs)?;
+    if denoised
+        .as_ref()
+        .is_some_and(|d| same_file(&on_interrupt, d))
+    {
+        bail!(
+            "{}: the denoised image and the checkpoint cannot be the same file",
+            on_interrupt.display()
+        );
+    }
     Ok(Destinations {
         image,
+        denoised,
         periodic,
         on_interrupt,
     })
@@ -268,8 +321,26 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     region
         .check_within(settings.width, settings.height)
         .map_err(|e| anyhow::anyhow!("--region: {e}"))?;
+    let denoise = args.denoise || args.denoised_output.is_some();
+    let written_aovs = args.aov.unwrap_or_default();
+    let aovs = match &job.accumulator {
+        // A resumed render goes on with the layers it has.
+        Some(resumed) if !resumed.aovs.set.includes(written_aovs) => bail!(
+            "--aov: the render to resume holds the AOVs [{}], not all of [{written_aovs}]",
+            resumed.aovs.set
+        ),
+        Some(resumed) => resumed.aovs.set,
+        None if denoise => written_aovs.union(AovSet::DENOISING),
+        None => written_aovs,
+    };
+    // Before any work: a denoise that cannot happen is said now, not after the render.
+    let oidn = denoise.then(|| canopy_job::Oidn::load(&[])).transpose()?;
+    let aov_bytes = match aovs.is_empty() {
+        true => 0,
+        false => canopy_job::AOV_BYTES_PER_PIXEL,
+    };
     check_memory(
-        region.pixels() as u64 * limits::BYTES_PER_PIXEL,
+        region.pixels() as u64 * (limits::BYTES_PER_PIXEL + aov_bytes),
         &format!("a {}x{} image", region.width, region.height),
     )?;
     if let AccelKind::Bvh(builder) = args.bvh {
@@ -296,6 +367,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         schedule: args.schedule,
         threads: Some(args.threads.unwrap_or(0) as usize).filter(|&n| n > 0),
         region,
+        aovs,
         checkpoint: CheckpointPolicy {
             periodic: dest.periodic.clone(),
             every: args.every,
@@ -359,7 +431,30 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
             Interrupted("interrupted before the first sample; nothing was written".into()).into(),
         );
     }
-    let mut film = run.accumulator.film();
+    let threads = Some(prepared.threads());
+    let aov_images = run.accumulator.aov_images();
+    let noisy = run.accumulator.film();
+    let denoised = match &oidn {
+        Some(oidn) => {
+            let start = std::time::Instant::now();
+            match canopy_job::denoise_film(oidn, &noisy, &aov_images, threads) {
+                Ok(film) => {
+                    summary.denoise_seconds = Some(start.elapsed().as_secs_f64());
+                    Some(film)
+                }
+                Err(e) => {
+                    let saved = keep_samples(&prepared, &run, &dest);
+                    return Err(samples_kept(anyhow::Error::from(e), saved));
+                }
+            }
+        }
+        None => None,
+    };
+    // The denoised image goes to its own file when one is named, else it is the image.
+    let (mut film, apart) = match (&dest.denoised, denoised) {
+        (Some(path), Some(denoised)) => (noisy, Some((path, denoised))),
+        (_, denoised) => (denoised.unwrap_or(noisy), None),
+    };
     if let (true, Some(tree)) = (args.show_bvh, accel.tree()) {
         let camera = Camera::new(&scene.camera, settings.width, settings.height);
         let drawn = draw_bvh(&mut film, &camera, tree, args.levels);
@@ -369,34 +464,19 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
             describe_levels(args.levels)
         );
     }
-    if let Err(e) = write_image(&film, &dest.image) {
-        // The samples are not lost with the image: keep them where a resume finds them,
-        // beside the image, else here, else in the temporary folder (a full disk takes
-        // the checkpoint beside the image with it).
-        let saved = match &run.saved {
-            Some(path) => Some(path.clone()),
-            None => {
-                let name = default_checkpoint(&dest.image);
-                let name = name.file_name().unwrap_or_default().to_string_lossy();
-                std::iter::once(dest.on_interrupt.clone())
-                    .chain(canopy_render::output_policy::fallback_places(
-                        &dest.image,
-                        &name,
-                    ))
-                    .find(|place| prepared.save_checkpoint(&run.accumulator, place).is_ok())
-            }
-        };
-        return Err(match saved {
-            Some(path) => anyhow::Error::from(e).context(format!(
-                "the image could not be written, but the render is saved in {}: write it with `canopy render --resume {} -o OTHER.png`",
-                path.display(),
-                path.display()
-            )),
-            None => anyhow::Error::from(e)
-                .context("the image could not be written, and neither could a checkpoint of its samples (beside it, here, or in the temporary folder)"),
-        });
+    let layers = aov_images.only(written_aovs);
+    let mut written = write_image_with_aovs(&film, &layers, &dest.image);
+    if let (Ok(()), Some((path, denoised))) = (&written, &apart) {
+        written = write_image(denoised, path);
+        summary.denoised_image = Some(path.display().to_string());
     }
-
+    if let Err(e) = written {
+        let saved = keep_samples(&prepared, &run, &dest);
+        return Err(samples_kept(anyhow::Error::from(e), saved));
+    }
+    if !layers.set.is_empty() {
+        summary.aovs = Some(layers.set.to_string());
+    }
     let stats = run.stats;
     summary.samples = run.accumulator.samples;
     summary.render_seconds = stats.elapsed.as_secs_f64();
@@ -424,6 +504,12 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         summary.mrays_per_second,
         stats.shadow_rays
     );
+    if let Some(seconds) = summary.denoise_seconds {
+        say!(args.json, "denoise     {seconds:.3} s (Open Image Denoise)");
+    }
+    if let Some(path) = &summary.denoised_image {
+        say!(args.json, "denoised    {path}");
+    }
     if run.accumulator.invalid_samples > 0 {
         summary.warn(format!(
             "{} samples with NaN/inf radiance were dropped",
@@ -456,6 +542,40 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         .into());
     }
     finish(&summary, args.json)
+}
+
+/// Keeps the samples of `run`, whose images could not be made or written, where a resume
+/// finds them: its own checkpoint if it saved one, else beside the image, here, or in
+/// the temporary folder (a full disk takes the place beside the image with it). Returns
+/// where, if anywhere.
+fn keep_samples(
+    prepared: &canopy_job::Prepared,
+    run: &canopy_job::Outcome,
+    dest: &Destinations,
+) -> Option<PathBuf> {
+    if let Some(path) = &run.saved {
+        return Some(path.clone());
+    }
+    let name = default_checkpoint(&dest.image);
+    let name = name.file_name().unwrap_or_default().to_string_lossy();
+    std::iter::once(dest.on_interrupt.clone())
+        .chain(canopy_render::output_policy::fallback_places(
+            &dest.image,
+            &name,
+        ))
+        .find(|place| prepared.save_checkpoint(&run.accumulator, place).is_ok())
+}
+
+/// `error`, telling where the samples were kept ([`keep_samples`]).
+fn samples_kept(error: anyhow::Error, saved: Option<PathBuf>) -> anyhow::Error {
+    match saved {
+        Some(path) => error.context(format!(
+            "the image could not be written, but the render is saved in {}: write it with `canopy render --resume {} -o OTHER.png`",
+            path.display(),
+            path.display()
+        )),
+        None => error.context("the image could not be written, and neither could a checkpoint of its samples (beside it, here, or in the temporary folder)"),
+    }
 }
 
 /// Prints the image line, or the whole summary as JSON.

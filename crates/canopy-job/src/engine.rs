@@ -2,7 +2,9 @@
 
 use crate::observer::Observer;
 use crate::JobError;
-use canopy_render::{render_samples_with, Accel, Accumulator, RenderStats, Scene, Schedule};
+use canopy_render::{
+    render_aov_samples, render_samples_with, Accel, Accumulator, RenderStats, Scene, Schedule,
+};
 
 /// A device ready to add samples to an accumulator.
 pub(crate) enum Engine<'a> {
@@ -11,7 +13,12 @@ pub(crate) enum Engine<'a> {
         accel: &'a Accel,
         schedule: Schedule,
     },
-    Gpu(Box<canopy_gpu::Renderer<'a>>),
+    Gpu {
+        renderer: Box<canopy_gpu::Renderer<'a>>,
+        /// Where the accumulator has AOV layers: the scene and the CPU's structure that
+        /// trace them.
+        aovs: Option<(&'a Scene, &'a Accel)>,
+    },
 }
 
 impl Engine<'_> {
@@ -34,11 +41,16 @@ impl Engine<'_> {
                 *schedule,
                 &|| observer.rows_done(1),
             )),
-            Engine::Gpu(renderer) => {
+            Engine::Gpu { renderer, aovs } => {
+                // The AOVs of the GPU's samples: the same camera rays, traced on the CPU.
+                let aov_rays = match aovs {
+                    Some((scene, accel)) => render_aov_samples(scene, accel, accumulator, 1),
+                    None => 0,
+                };
                 let done = renderer.render_samples(accumulator, 1)?;
                 observer.rows_done(accumulator.region.height as u64);
                 Ok(RenderStats {
-                    rays: done.rays,
+                    rays: done.rays + aov_rays,
                     shadow_rays: done.shadow_rays,
                     invalid_samples: done.invalid_samples,
                     elapsed: done.elapsed,

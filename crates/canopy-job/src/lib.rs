@@ -17,19 +17,22 @@
 //! # Ok(()) }
 //! ```
 
+mod denoise;
 mod engine;
 mod observer;
 mod prepared;
 mod resume;
 
+pub use canopy_denoise::{DenoiseError, Oidn};
+pub use denoise::denoise_film;
 pub use observer::Observer;
-pub use prepared::{Outcome, Prepared, BYTES_PER_PIXEL, MAX_THREADS};
+pub use prepared::{Outcome, Prepared, AOV_BYTES_PER_PIXEL, BYTES_PER_PIXEL, MAX_THREADS};
 pub use resume::Resumed;
 
 use canopy_bvh::{BuildParams, OptimizeBudget};
 use canopy_render::checkpoint::CheckpointError;
 pub use canopy_render::Schedule;
-use canopy_render::{AccelKind, Accumulator, BvhWidth, Region, Scene};
+use canopy_render::{AccelKind, Accumulator, AovSet, BvhWidth, Region, Scene};
 use std::fmt;
 use std::path::PathBuf;
 use std::str::FromStr;
@@ -127,6 +130,9 @@ pub struct RenderJob<'s> {
     pub threads: Option<usize>,
     /// The pixels to render; the whole image by default.
     pub region: Region,
+    /// The AOV layers to accumulate with the samples (none by default); a resumed
+    /// render's must be the same.
+    pub aovs: AovSet,
     pub checkpoint: CheckpointPolicy,
     /// Samples already rendered (a checkpoint's), to continue from; its region replaces
     /// [`region`](Self::region).
@@ -151,6 +157,7 @@ impl<'s> RenderJob<'s> {
             schedule: Schedule::default(),
             threads: None,
             region: Region::full(s.width, s.height),
+            aovs: AovSet::NONE,
             checkpoint: CheckpointPolicy::default(),
             resume: None,
             resume_owner: None,

@@ -16,6 +16,10 @@ pub const MAX_THREADS: usize = 1024;
 /// encoded image.
 pub const BYTES_PER_PIXEL: u64 = 64;
 
+/// Peak bytes per pixel that AOV layers add, at most: the layers, their images and the
+/// encoded file's copy.
+pub const AOV_BYTES_PER_PIXEL: u64 = 3 * 48;
+
 /// A job with its acceleration structure built and its device open.
 pub struct Prepared<'j> {
     job: &'j RenderJob<'j>,
@@ -52,8 +56,12 @@ impl<'s> RenderJob<'s> {
             .check_within(settings.width, settings.height)
             .map_err(JobError::Invalid)?;
         let region = self.region();
+        let aov_bytes = match self.aovs.is_empty() {
+            true => 0,
+            false => AOV_BYTES_PER_PIXEL,
+        };
         canopy_render::files::check_memory(
-            region.pixels() as u64 * BYTES_PER_PIXEL,
+            region.pixels() as u64 * (BYTES_PER_PIXEL + aov_bytes),
             canopy_render::files::available_memory(),
             &format!("a {}x{} image", region.width, region.height),
         )
@@ -68,6 +76,12 @@ impl<'s> RenderJob<'s> {
             check_checkpoint_path(path, self.scene, &owners)?;
         }
         if let Some(resumed) = &self.resume {
+            if resumed.aovs.set != self.aovs {
+                return Err(JobError::Invalid(format!(
+                    "the render to resume has the AOVs [{}], not the [{}] asked for",
+                    resumed.aovs.set, self.aovs
+                )));
+            }
             if resumed.samples > settings.spp {
                 return Err(JobError::Invalid(format!(
                     "the render to resume has {} samples per pixel, more than the {} asked for",
@@ -215,16 +229,15 @@ impl Prepared<'_> {
             },
             // Mesh instances in two levels, as on the CPU (the structures are binary
             // trees: built with width 2 above).
-            Some(gpu) => Engine::Gpu(Box::new(canopy_gpu::Renderer::for_accel(
-                gpu,
-                scene,
-                &self.accel,
-            )?)),
+            Some(gpu) => Engine::Gpu {
+                renderer: Box::new(canopy_gpu::Renderer::for_accel(gpu, scene, &self.accel)?),
+                aovs: (!job.aovs.is_empty()).then_some((scene, &self.accel)),
+            },
         };
         let mut accumulator = job
             .resume
             .clone()
-            .unwrap_or_else(|| Accumulator::for_region(job.region));
+            .unwrap_or_else(|| Accumulator::for_region(job.region).with_aovs(job.aovs));
         let spp = scene.settings.spp;
         let policy = &job.checkpoint;
         let mut stats = RenderStats::default();

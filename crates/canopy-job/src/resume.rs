@@ -66,6 +66,7 @@ impl Resumed {
     pub fn job(&self) -> RenderJob<'_> {
         let mut job = RenderJob::new(&self.scene, self.source.clone());
         job.region = self.accumulator.region;
+        job.aovs = self.accumulator.aovs.set;
         job.resume = Some(self.accumulator.clone());
         job.resume_owner = Some(self.owner);
         job.checkpoint.periodic = Some(self.path.clone());

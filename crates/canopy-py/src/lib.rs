@@ -5,6 +5,7 @@
 mod arrays;
 mod bvh;
 mod contents;
+mod denoise;
 mod outputs;
 mod pools;
 mod ray_scene;
@@ -44,6 +45,7 @@ fn _canopy(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(scenes, m)?)?;
     m.add_function(wrap_pyfunction!(devices, m)?)?;
     m.add_function(wrap_pyfunction!(render::render, m)?)?;
+    m.add_function(wrap_pyfunction!(denoise::denoise, m)?)?;
     m.add_function(wrap_pyfunction!(render::load_scene, m)?)?;
     m.add_function(wrap_pyfunction!(render::read_image, m)?)?;
     m.add_function(wrap_pyfunction!(render::write_image, m)?)?;

@@ -7,7 +7,7 @@ use canopy_job::{
     CheckpointPolicy, Device, JobError, Observer, RenderJob, Resumed, Schedule, Structure,
 };
 use canopy_render::mesh::{parse_mesh, MeshFormat};
-use canopy_render::{load_scene_allowing as load, AccelKind, Accumulator, Region, Scene};
+use canopy_render::{load_scene_allowing as load, AccelKind, Accumulator, AovSet, Region, Scene};
 use numpy::ndarray::Array2;
 use numpy::{IntoPyArray, PyArray2, PyArray3, PyReadonlyArray2, ToPyArray};
 use pyo3::exceptions::{PyOSError, PyRuntimeError, PyValueError};
@@ -157,7 +157,8 @@ pub fn load_scene(py: Python<'_>, scene: &str, allow_paths: Vec<PathBuf>) -> PyR
 #[pyo3(signature = (scene=None, spp=None, size=None, seed=None, max_depth=None, integrator=None,
     russian_roulette=None, sampler=None, device="cpu", bvh="binned-sah", width=8, threads=None, progress=None,
     region=None, checkpoint=None, checkpoint_every=60.0, resume=None, schedule="wavefront",
-    samples=None, camera=None, instances=None, allow_paths=Vec::new()))]
+    samples=None, camera=None, instances=None, allow_paths=Vec::new(), aovs=None, denoise=false,
+    oidn_paths=Vec::new()))]
 #[allow(clippy::too_many_arguments)]
 pub fn render<'py>(
     py: Python<'py>,
@@ -183,7 +184,24 @@ pub fn render<'py>(
     camera: Option<Bound<'py, PyDict>>,
     instances: Option<std::collections::HashMap<u32, PyReadonlyArray2<'py, f32>>>,
     allow_paths: Vec<PathBuf>,
-) -> PyResult<Bound<'py, PyArray3<f32>>> {
+    aovs: Option<String>,
+    denoise: bool,
+    oidn_paths: Vec<PathBuf>,
+) -> PyResult<Bound<'py, PyAny>> {
+    let asked_aovs: Option<AovSet> = aovs
+        .as_deref()
+        .map(str::parse)
+        .transpose()
+        .map_err(PyValueError::new_err)?;
+    if (asked_aovs.is_some() || denoise) && samples.is_some() {
+        return Err(PyValueError::new_err(
+            "aovs= and denoise= take a whole render's samples: drop samples=",
+        ));
+    }
+    // Before any work: a denoise that cannot happen is said now.
+    let oidn = denoise
+        .then(|| crate::denoise::load_oidn(&oidn_paths))
+        .transpose()?;
     let device: Device = device.parse().map_err(PyValueError::new_err)?;
     let schedule: Schedule = schedule.parse().map_err(PyValueError::new_err)?;
     let kind: AccelKind = bvh
@@ -309,6 +327,18 @@ pub fn render<'py>(
             height,
         };
     }
+    let written_aovs = asked_aovs.unwrap_or_default();
+    job.aovs = match &resumed {
+        Some((held, _)) if !held.aovs.set.includes(written_aovs) => {
+            return Err(PyValueError::new_err(format!(
+                "aovs: the render to resume holds the AOVs [{}], not all of [{written_aovs}]",
+                held.aovs.set
+            )))
+        }
+        Some((held, _)) => held.aovs.set,
+        None if denoise => written_aovs.union(AovSet::DENOISING),
+        None => written_aovs,
+    };
     (job.resume, job.resume_owner) = resumed.unzip();
     if let Some((first, _)) = samples {
         // Samples before `first` count as done: the job adds the rest, from `first` on.
@@ -337,13 +367,32 @@ pub fn render<'py>(
     let done = &outcome.accumulator;
     // The mean of the samples rendered here (all of them, or the range asked for).
     let n = samples.map_or(done.samples, |(_, count)| count).max(1) as f32;
-    let pixels: Vec<f32> = done.sums.iter().flat_map(|s| (*s / n).to_array()).collect();
+    let mut film = canopy_render::Film {
+        width: done.region.width,
+        height: done.region.height,
+        pixels: done.sums.iter().map(|s| *s / n).collect(),
+    };
+    let aov_images = done.aov_images();
+    if let Some(oidn) = &oidn {
+        film = py
+            .detach(|| canopy_job::denoise_film(oidn, &film, &aov_images, threads))
+            .map_err(crate::denoise::denoise_error)?;
+    }
+    let pixels: Vec<f32> = film.pixels.iter().flat_map(|p| p.to_array()).collect();
     let image = numpy::ndarray::Array3::from_shape_vec(
         (done.region.height as usize, done.region.width as usize, 3),
         pixels,
     )
-    .expect("height x width x 3 values");
-    Ok(image.to_pyarray(py))
+    .expect("height x width x 3 values")
+    .to_pyarray(py)
+    .into_any();
+    match asked_aovs {
+        None => Ok(image),
+        Some(set) => {
+            let layers = crate::denoise::aov_arrays(py, &aov_images.only(set), done.region)?;
+            Ok((image, layers).into_pyobject(py)?.into_any())
+        }
+    }
 }
 
 /// `camera` with the entries of `changes` (look_from, look_at, up, vfov, aperture,

@@ -10,7 +10,10 @@
 //! integrator u32 (0 path, 1 bsdf) | russian_roulette u32 (0 or 1) |
 //! sampler u32 (0 sobol, 1 independent; from version 7 on, before it independent) |
 //! region: x u32 | y u32 | width u32 | height u32 |
-//! samples u32 | rays u64 | invalid u64 | sums: region pixels * 3 f32 | checksum u64
+//! samples u32 | rays u64 | invalid u64 | sums: region pixels * 3 f32 |
+//! AOVs (from version 8 on): set u32 | its layers, each region pixels long, in the order
+//! albedo 3 f32, normal 3 f32, depth f32, position 3 f32, instance u32, primitive u32 |
+//! checksum u64
 //! ```
 //!
 //! The checksum (FNV-1a over everything before it) catches truncated or damaged files;
@@ -22,6 +25,7 @@
 //! ([`Checkpoint::save_owned`], [`Checkpoint::remove_owned`]): two renders given one
 //! path never destroy each other's work.
 
+use crate::aov::{Aov, AovBuffers, AovSet};
 use crate::files::{read_prefix, read_regular_file};
 use crate::geometry::Shape;
 use crate::integrator::Accumulator;
@@ -43,12 +47,14 @@ const MAGIC: &[u8; 8] = b"CANOPYCK";
 /// whole image).
 /// Version 6: the owner, the identity of the render that wrote the file (files of
 /// versions 4 and 5, still read, have owner 0: no render's).
-const VERSION: u32 = 7;
+/// Version 7: the sampler.
+/// Version 8: the AOV layers.
+const VERSION: u32 = 8;
 /// The oldest version whose samples this canopy can continue.
 const OLDEST_READ: u32 = 4;
 
-/// Largest checkpoint read: the header and the largest film allowed.
-const MAX_CHECKPOINT_BYTES: u64 = 1024 * 1024 + RenderSettings::MAX_PIXELS * 12;
+/// Largest checkpoint read: the header, the largest film allowed and every AOV layer.
+const MAX_CHECKPOINT_BYTES: u64 = 1024 * 1024 + RenderSettings::MAX_PIXELS * (12 + 48);
 
 #[derive(Debug, Error)]
 pub enum CheckpointError {
@@ -214,6 +220,7 @@ impl Checkpoint {
                 out.extend(c.to_le_bytes());
             }
         }
+        write_aovs(&a.aovs, &mut out);
         let checksum = fnv1a(&out, FNV_OFFSET);
         out.extend(checksum.to_le_bytes());
         out
@@ -299,12 +306,18 @@ impl Checkpoint {
         region.check_within(settings.width, settings.height)?;
         let (samples, rays, invalid_samples) = (r.u32()?, r.u64()?, r.u64()?);
         let pixels = region.pixels();
-        if r.bytes.len() - r.pos != pixels * 12 {
+        // Checked before reading: a damaged size must not allocate.
+        if r.bytes.len() - r.pos < pixels * 12 {
             return Err("pixel data does not match the region's size".into());
         }
-        let sums = (0..pixels)
-            .map(|_| Ok(Vec3::new(r.f32()?, r.f32()?, r.f32()?)))
-            .collect::<Result<Vec<_>, String>>()?;
+        let sums = r.vec3s(pixels)?;
+        let aovs = match version {
+            ..8 => AovBuffers::default(),
+            _ => read_aovs(&mut r, pixels)?,
+        };
+        if r.pos != r.bytes.len() {
+            return Err("pixel data does not match the region's size".into());
+        }
         Ok(Self {
             scene,
             settings,
@@ -316,6 +329,7 @@ impl Checkpoint {
                 samples,
                 rays,
                 invalid_samples,
+                aovs,
             },
         })
     }
@@ -435,6 +449,62 @@ fn describe_header(path: &Path) -> Option<(String, u32)> {
     Some((scene, r.u32().ok()?))
 }
 
+/// Appends the layers of `aovs` in the checkpoint's layout.
+fn write_aovs(aovs: &AovBuffers, out: &mut Vec<u8>) {
+    out.extend(aovs.set.bits().to_le_bytes());
+    let vec3s = aovs.albedo.iter().chain(&aovs.normal);
+    out.extend(vec3s.flat_map(|v| v.to_array()).flat_map(f32::to_le_bytes));
+    out.extend(aovs.depth.iter().flat_map(|d| d.to_le_bytes()));
+    out.extend(
+        aovs.position
+            .iter()
+            .flat_map(|v| v.to_array())
+            .flat_map(f32::to_le_bytes),
+    );
+    for id in aovs.instance.iter().chain(&aovs.primitive) {
+        out.extend(id.to_le_bytes());
+    }
+}
+
+/// The AOV layers as [`write_aovs`] wrote them for `pixels` pixels.
+fn read_aovs(r: &mut Reader, pixels: usize) -> Result<AovBuffers, String> {
+    let set = AovSet::from_bits(r.u32()?)?;
+    let layer_words = [
+        (Aov::Albedo, 3),
+        (Aov::Normal, 3),
+        (Aov::Depth, 1),
+        (Aov::Position, 3),
+        (Aov::Id, 2),
+    ];
+    let words: usize = layer_words
+        .iter()
+        .filter(|(a, _)| set.contains(*a))
+        .map(|(_, w)| w)
+        .sum();
+    if r.bytes.len() - r.pos != pixels * words * 4 {
+        return Err("the AOV layers do not match the region's size".into());
+    }
+    let mut aovs = AovBuffers::new(set, pixels);
+    let has = |aov| set.contains(aov);
+    if has(Aov::Albedo) {
+        aovs.albedo = r.vec3s(pixels)?;
+    }
+    if has(Aov::Normal) {
+        aovs.normal = r.vec3s(pixels)?;
+    }
+    if has(Aov::Depth) {
+        aovs.depth = (0..pixels).map(|_| r.f32()).collect::<Result<_, _>>()?;
+    }
+    if has(Aov::Position) {
+        aovs.position = r.vec3s(pixels)?;
+    }
+    if has(Aov::Id) {
+        aovs.instance = (0..pixels).map(|_| r.u32()).collect::<Result<_, _>>()?;
+        aovs.primitive = (0..pixels).map(|_| r.u32()).collect::<Result<_, _>>()?;
+    }
+    Ok(aovs)
+}
+
 struct Reader<'a> {
     bytes: &'a [u8],
     pos: usize,
@@ -468,6 +538,12 @@ impl Reader<'_> {
         Ok(f32::from_le_bytes(
             self.take(4)?.try_into().expect("4 bytes"),
         ))
+    }
+
+    fn vec3s(&mut self, n: usize) -> Result<Vec<Vec3>, String> {
+        (0..n)
+            .map(|_| Ok(Vec3::new(self.f32()?, self.f32()?, self.f32()?)))
+            .collect()
     }
 }
 
@@ -504,11 +580,32 @@ mod tests {
         assert!(back.matches(&scene, Path::new("x")).is_err());
     }
 
-    /// The bytes of `checkpoint` as version 4 wrote them: no region (the whole image),
-    /// no sampler (independent numbers).
+    #[test]
+    fn aov_layers_round_trip_exactly() {
+        let (_, mut checkpoint) = sample();
+        let set = AovSet::of(&Aov::ALL);
+        let acc = &mut checkpoint.accumulator;
+        acc.aovs = AovBuffers::new(set, acc.region.pixels());
+        acc.aovs.albedo[1] = Vec3::new(0.25, 0.5, 1.0);
+        acc.aovs.normal[2] = Vec3::new(-0.0, 1.0, 0.0);
+        acc.aovs.depth[3] = f32::INFINITY;
+        acc.aovs.position[4] = Vec3::new(1e-30, 3.0, -2.0);
+        (acc.aovs.instance[5], acc.aovs.primitive[6]) = (7, 123_456_789);
+        let bytes = checkpoint.to_bytes();
+        assert_eq!(Checkpoint::from_bytes(&bytes).unwrap(), checkpoint);
+        // Only the albedo: the layers' sizes follow the set.
+        let acc = &mut checkpoint.accumulator;
+        acc.aovs = AovBuffers::new(AovSet::of(&[Aov::Albedo]), acc.region.pixels());
+        let smaller = checkpoint.to_bytes();
+        assert_eq!(bytes.len() - smaller.len(), 12 * (3 + 1 + 3 + 2) * 4);
+        assert_eq!(Checkpoint::from_bytes(&smaller).unwrap(), checkpoint);
+    }
+
+    /// The bytes of `checkpoint` (without AOVs) as version 4 wrote them: no region (the
+    /// whole image), no sampler (independent numbers), no AOV set.
     fn version_4_bytes(checkpoint: &Checkpoint) -> Vec<u8> {
         let mut bytes = checkpoint.to_bytes();
-        bytes.truncate(bytes.len() - 8);
+        bytes.truncate(bytes.len() - 8 - 4);
         bytes[8..12].copy_from_slice(&4u32.to_le_bytes());
         let sampler_at = 8 + 4 + 8 + 8 + 4 + checkpoint.scene.len() + 4 * 4 + 8 + 4 + 4;
         bytes.drain(sampler_at..sampler_at + 4 + 16);

@@ -79,6 +79,8 @@ pub enum OutputError {
         path: PathBuf,
         cause: std::io::Error,
     },
+    #[error("{}: AOVs are written as layers of an OpenEXR image; name an .exr output", path.display())]
+    LayersNeedExr { path: PathBuf },
     #[error("{}: cannot encode the image: {cause}", path.display())]
     Encode {
         path: PathBuf,

@@ -5,11 +5,13 @@
 //! [`Film`] -> image file.
 
 pub mod accel;
+pub mod aov;
 pub mod background;
 pub mod builtin;
 pub mod camera;
 pub mod checkpoint;
 pub mod error;
+pub mod exr_layers;
 pub mod files;
 pub mod film;
 pub mod geometry;
@@ -30,15 +32,17 @@ pub mod texture;
 pub mod visualize;
 
 pub use accel::{clipper, Accel, AccelKind};
+pub use aov::{Aov, AovBuffers, AovSet};
 pub use background::{Background, EnvironmentMap};
 pub use builtin::{BuiltinScene, BUILTIN_SCENES};
 pub use canopy_bvh::{BvhWidth, RayQuery};
 pub use error::{OutputError, SceneError};
 pub use film::Film;
 pub use integrator::{
-    render, render_counted, render_samples, render_samples_with, Accumulator, RenderStats, Schedule,
+    render, render_aov_samples, render_counted, render_samples, render_samples_with, Accumulator,
+    RenderStats, Schedule,
 };
-pub use output::write_image;
+pub use output::{write_image, write_image_with_aovs};
 pub use region::Region;
 pub use rng::Sampler;
 pub use scene::{Integrator, MeshInstance, RenderSettings, Scene, SceneMesh};

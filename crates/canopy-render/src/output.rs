@@ -2,6 +2,7 @@
 //! written to a temporary file and renamed into place so that a failed or interrupted
 //! write never leaves a broken image behind.
 
+use crate::aov::AovBuffers;
 use crate::error::OutputError;
 use crate::film::Film;
 use image::{ImageBuffer, ImageFormat, Rgb};
@@ -25,13 +26,41 @@ pub fn image_format(path: &Path) -> Result<ImageFormat, OutputError> {
 /// Writes the film to `path` atomically, encoding straight into the temporary file.
 pub fn write_image(film: &Film, path: &Path) -> Result<(), OutputError> {
     let format = image_format(path)?;
+    write_encoded(path, |out| encode(film, format, out))
+}
+
+/// Writes the film and the AOV layers of `aovs` (as images: see
+/// [`AovBuffers::resolved`]) to `path` atomically: an OpenEXR image whose channels are
+/// the film's `R`, `G`, `B` and each AOV's named ones ([`exr_layers`]). Without AOVs,
+/// [`write_image`].
+pub fn write_image_with_aovs(
+    film: &Film,
+    aovs: &AovBuffers,
+    path: &Path,
+) -> Result<(), OutputError> {
+    if aovs.set.is_empty() {
+        return write_image(film, path);
+    }
+    if image_format(path)? != ImageFormat::OpenExr {
+        return Err(OutputError::LayersNeedExr {
+            path: path.to_owned(),
+        });
+    }
+    write_encoded(path, |out| crate::exr_layers::encode(film, aovs, out))
+}
+
+/// Writes `path` atomically by `encode`, telling a failed write from a failed encoding.
+fn write_encoded(
+    path: &Path,
+    encode: impl FnOnce(&mut Recording<'_>) -> Result<(), image::ImageError>,
+) -> Result<(), OutputError> {
     let mut encode_error = None;
     let written = write_atomically(path, |w| {
         let mut recorded = Recording {
             inner: w,
             failed: None,
         };
-        encode(film, format, &mut recorded).map_err(|e| match (e, recorded.failed.take()) {
+        encode(&mut recorded).map_err(|e| match (e, recorded.failed.take()) {
             (image::ImageError::IoError(e), _) => e,
             // An encoder may wrap a failed write in an error of its own (the EXR one
             // calls a full disk a "Format error decoding OpenExr"): the write's own
@@ -57,7 +86,7 @@ pub fn write_image(film: &Film, path: &Path) -> Result<(), OutputError> {
 }
 
 /// A writer that keeps the first error its file gave, whatever the encoder makes of it.
-struct Recording<'w> {
+pub(crate) struct Recording<'w> {
     inner: &'w mut BufWriter<File>,
     failed: Option<std::io::Error>,
 }

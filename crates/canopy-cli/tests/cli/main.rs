@@ -4,5 +4,6 @@
 
 mod cli;
 mod common;
+mod denoise;
 mod limits;
 mod safety;

@@ -415,3 +415,67 @@ fn a_crafted_checkpoint_never_shows_the_file_it_names() {
     }
     std::fs::remove_dir_all(dir).unwrap();
 }
+
+#[test]
+fn aovs_survive_a_checkpoint_and_resume_bit_for_bit() {
+    let dir = temp_dir("aovs");
+    let checkpoint = dir.join("aovs.checkpoint");
+    let scene = small("paper-3", 18, 12, 4);
+    let all = canopy_render::AovSet::of(&canopy_render::Aov::ALL);
+    let mut whole = RenderJob::new(&scene, "paper-3");
+    whole.aovs = all;
+    let uninterrupted = whole.prepare().unwrap().run(&mut ()).unwrap().accumulator;
+    assert_eq!(uninterrupted.aovs.set, all);
+
+    let mut job = RenderJob::new(&scene, "paper-3");
+    job.aovs = all;
+    job.checkpoint.on_interrupt = Some(checkpoint.clone());
+    let mut stopper = Recorder {
+        stop_after: Some(1),
+        ..Recorder::default()
+    };
+    let stopped = job.prepare().unwrap().run(&mut stopper).unwrap();
+    assert_eq!(stopped.accumulator.samples, 1);
+    let resumed = Resumed::load(&checkpoint, &[]).unwrap();
+    let done = resumed.job().prepare().unwrap().run(&mut ()).unwrap();
+    assert_eq!(done.accumulator, uninterrupted);
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+#[test]
+fn a_resumed_render_must_ask_for_the_aovs_it_holds() {
+    let scene = small("paper-1", 8, 6, 3);
+    let mut held =
+        Accumulator::for_region(Region::full(8, 6)).with_aovs(canopy_render::AovSet::DENOISING);
+    held.samples = 1;
+    let mut job = RenderJob::new(&scene, "paper-1");
+    job.resume = Some(held);
+    let Err(JobError::Invalid(message)) = job.prepare().map(|_| ()) else {
+        panic!("a resume without the AOVs it holds was accepted");
+    };
+    assert!(message.contains("[albedo,normal]"), "{message}");
+}
+
+#[test]
+fn on_the_gpu_aovs_are_the_cpus() {
+    let scene = small("cornell", 16, 12, 2);
+    let mut gpu = RenderJob::new(&scene, "cornell");
+    gpu.device = Device::Gpu;
+    gpu.aovs = canopy_render::AovSet::of(&canopy_render::Aov::ALL);
+    let prepared = match gpu.prepare() {
+        Ok(prepared) => prepared,
+        Err(JobError::Gpu(e @ canopy_gpu::GpuError::NoAdapter(_))) => {
+            eprintln!("SKIPPED: no GPU adapter: {e}");
+            return;
+        }
+        Err(e) => panic!("{e}"),
+    };
+    let on_gpu = prepared.run(&mut ()).unwrap().accumulator;
+    let mut cpu = RenderJob::new(&scene, "cornell");
+    cpu.aovs = gpu.aovs;
+    // The same binary tree the GPU walks.
+    cpu.structure.width = canopy_render::BvhWidth::Two;
+    let on_cpu = cpu.prepare().unwrap().run(&mut ()).unwrap().accumulator;
+    assert_eq!(on_gpu.aovs, on_cpu.aovs);
+    assert!(on_gpu.aovs.albedo.iter().any(|a| a.length() > 0.0));
+}

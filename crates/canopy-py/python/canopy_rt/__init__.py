@@ -18,6 +18,7 @@ int64 indices) and checked: a wrong shape, a NaN, an index past the vertex count
 
 from __future__ import annotations
 
+import os
 from typing import Callable, List, NamedTuple, Optional, Sequence, Tuple, Union
 
 import numpy as np
@@ -52,6 +53,7 @@ __all__ = [
     "load_scene",
     "read_image",
     "render",
+    "denoise",
     "__version__",
     "write_image",
 ]
@@ -365,7 +367,9 @@ def render(
     camera: Optional[dict] = None,
     instances: Optional[dict] = None,
     allow_paths: Sequence = (),
-) -> np.ndarray:
+    aovs: Optional[Sequence[str]] = None,
+    denoise: bool = False,
+):
     """Renders a scene (built-in name, scene file or mesh, or a :class:`Scene` built in
     Python) to a linear float32 image of shape (height, width, 3), exactly as
     ``canopy render`` does (the same pixels as its EXR output). Settings left as None
@@ -399,6 +403,18 @@ def render(
 
     A scene file reads only the files in its own folder (and below); ``allow_paths``
     lists further folders its meshes, models and maps may come from.
+
+    ``aovs`` (any of ``"albedo"``, ``"normal"``, ``"depth"``, ``"position"``, ``"id"``)
+    also renders those images of the surfaces seen, and the call returns ``(image,
+    {name: array})``: ``albedo``, ``normal`` and ``position`` of shape (height, width,
+    3), ``depth`` (height, width), and for ``id`` the uint32 ``instance`` and
+    ``primitive`` (height, width; 4294967295 where nothing is hit). Albedo and normal
+    are those a denoiser takes (the first surface past mirrors and glass, averaged over
+    the pixel's samples); depth, position and ids are of each pixel's first sample.
+
+    ``denoise=True`` returns the image denoised by Open Image Denoise (see
+    :func:`denoise`), guided by the albedo and normal it renders for it; it fails before
+    rendering when OIDN is not installed.
     """
     if size is not None:
         size = (int(size[0]), int(size[1]))
@@ -429,7 +445,54 @@ def render(
         camera=None if camera is None else dict(camera),
         instances=None if instances is None else {int(k): _transform(v) for k, v in instances.items()},
         allow_paths=[str(p) for p in allow_paths],
+        aovs=None if aovs is None else ",".join(_aov_names(aovs)),
+        denoise=bool(denoise),
+        oidn_paths=_oidn_paths() if denoise else [],
     )
+
+
+def _aov_names(aovs) -> List[str]:
+    if isinstance(aovs, str):
+        raise TypeError(f"aovs must be a list of names, such as ['albedo', 'normal'], not {aovs!r}")
+    return [str(a) for a in aovs]
+
+
+def _oidn_paths() -> List[str]:
+    """The folder of Open Image Denoise's libraries in an installed ``pyoidn`` package
+    (PyPI's wheel ships them), found without importing it; empty when there is none."""
+    import importlib.util
+
+    try:
+        spec = importlib.util.find_spec("pyoidn")
+    except (ImportError, ValueError):
+        return []
+    if spec is None or not spec.submodule_search_locations:
+        return []
+    return [os.path.join(folder, "oidn", "lib") for folder in spec.submodule_search_locations]
+
+
+@naming_arguments
+def denoise(
+    color,
+    albedo=None,
+    normal=None,
+    *,
+    threads: Optional[int] = None,
+    prefilter: bool = True,
+) -> np.ndarray:
+    """A noisy linear float32 (height, width, 3) image denoised by Intel Open Image
+    Denoise 2, guided by the ``albedo`` and ``normal`` images (same shape; a normal
+    needs an albedo) where given, as :func:`render` returns them with ``aovs=``.
+
+    ``prefilter`` denoises the albedo and normal first and then uses them as clean
+    guides (OIDN's advice for final frames). OIDN is found through ``CANOPY_OIDN``, an
+    installed ``pyoidn`` package, canopy's folder (``scripts/oidn.sh`` installs it
+    there) or the system; when it is missing, a RuntimeError says how to install it."""
+    color = _array(color, "color", np.float32, 3, "(height, width, 3)")
+    albedo = None if albedo is None else _array(albedo, "albedo", np.float32, 3, "(height, width, 3)")
+    normal = None if normal is None else _array(normal, "normal", np.float32, 3, "(height, width, 3)")
+    return _canopy.denoise(color, albedo, normal, threads=threads, prefilter=bool(prefilter),
+                           oidn_paths=_oidn_paths())
 
 
 def write_image(path, image) -> None:

@@ -38,6 +38,18 @@ def render(
     camera: Optional[dict] = ...,
     instances: Optional[dict] = ...,
     allow_paths: List[str] = ...,
+    aovs: Optional[str] = ...,
+    denoise: bool = ...,
+    oidn_paths: List[str] = ...,
+) -> Union[np.ndarray, Tuple[np.ndarray, dict]]: ...
+
+def denoise(
+    color: np.ndarray,
+    albedo: Optional[np.ndarray] = ...,
+    normal: Optional[np.ndarray] = ...,
+    threads: Optional[int] = ...,
+    prefilter: bool = ...,
+    oidn_paths: List[str] = ...,
 ) -> np.ndarray: ...
 
 class Scene:

@@ -1,6 +1,7 @@
 //! Unidirectional path tracing over image rows, in parallel with rayon. The estimators
 //! of one sample are in [`path`].
 
+mod aov;
 mod camera_rays;
 mod path;
 mod scatter;
@@ -9,6 +10,7 @@ mod wavefront;
 pub use wavefront::STREAM_PATHS;
 
 use crate::accel::Accel;
+use crate::aov::{AovBuffers, AovSample, AovSet};
 use crate::camera::Camera;
 use crate::film::Film;
 use crate::lights::Lights;
@@ -200,6 +202,8 @@ pub struct Accumulator {
     /// Ray segments traced and samples dropped as NaN/inf, over all passes.
     pub rays: u64,
     pub invalid_samples: u64,
+    /// The AOV layers accumulated with the samples (none unless asked for).
+    pub aovs: AovBuffers,
 }
 
 impl Accumulator {
@@ -216,7 +220,20 @@ impl Accumulator {
             samples: 0,
             rays: 0,
             invalid_samples: 0,
+            aovs: AovBuffers::default(),
         }
+    }
+
+    /// This accumulator, also accumulating the AOVs of `set` (from its next sample on:
+    /// call it on an empty one).
+    pub fn with_aovs(mut self, set: AovSet) -> Self {
+        self.aovs = AovBuffers::new(set, self.region.pixels());
+        self
+    }
+
+    /// The AOV layers as images of the samples so far.
+    pub fn aov_images(&self) -> AovBuffers {
+        self.aovs.resolved(self.samples)
     }
 
     /// The mean of the samples so far: an image of the region's size.
@@ -332,11 +349,79 @@ fn accumulate<P: Probe>(
             totals.add(&work, invalid, row_start.elapsed());
             on_row_done();
         });
+    if !accumulator.aovs.set.is_empty() {
+        let samples = first_sample..first_sample + count;
+        add_aovs(&tracer, &camera, streams, accumulator, samples, &totals);
+    }
     accumulator.samples += count;
     let stats = totals.stats(start.elapsed());
     accumulator.rays += stats.rays;
     accumulator.invalid_samples += stats.invalid_samples;
     stats
+}
+
+/// Adds the AOVs of the next `count` samples (indices `samples .. samples + count`) to
+/// `accumulator`, and nothing else: for a device that renders the radiance itself (the
+/// GPU), whose AOVs the CPU traces through `accel`. Call it before the device adds its
+/// samples. Returns the rays traced.
+pub fn render_aov_samples(
+    scene: &Scene,
+    accel: &Accel,
+    accumulator: &mut Accumulator,
+    count: u32,
+) -> u64 {
+    let settings = scene.settings;
+    let camera = Camera::new(&scene.camera, settings.width, settings.height);
+    let lights = Lights::new(scene);
+    let tracer = Tracer::new(scene, accel, &lights);
+    let streams = Streams {
+        sampler: settings.sampler,
+        seed: settings.seed,
+    };
+    let totals = Totals::default();
+    let samples = accumulator.samples..accumulator.samples + count;
+    add_aovs(&tracer, &camera, streams, accumulator, samples, &totals);
+    totals.rays.into_inner()
+}
+
+/// Adds the AOV samples `samples` of every pixel of `accumulator`'s region, row by row
+/// in parallel, each pixel's in sample order (deterministic like the radiance).
+fn add_aovs(
+    tracer: &Tracer,
+    camera: &Camera,
+    streams: Streams,
+    accumulator: &mut Accumulator,
+    samples: std::ops::Range<u32>,
+    totals: &Totals,
+) {
+    let region = accumulator.region;
+    let settings = tracer.scene.settings;
+    let size = (settings.width, settings.height);
+    let rows: Vec<Vec<AovSample>> = (0..region.height)
+        .into_par_iter()
+        .map(|row| {
+            let row_start = Instant::now();
+            let mut work = Work::<()>::default();
+            let y = region.y + row;
+            let mut seen = Vec::with_capacity(region.width as usize * samples.len());
+            for x in region.x..region.x + region.width {
+                for sample in samples.clone() {
+                    let (ray, mut rng) = camera_sample(camera, size, streams, (x, y), sample);
+                    seen.push(tracer.aov_sample(ray, &mut rng, &mut work));
+                }
+            }
+            totals.add(&work, 0, row_start.elapsed());
+            seen
+        })
+        .collect();
+    let has_first = samples.start == 0;
+    let per_pixel = samples.len().max(1);
+    for (row, seen) in rows.iter().enumerate() {
+        for (x, pixel_samples) in seen.chunks(per_pixel).enumerate() {
+            let pixel = row * region.width as usize + x;
+            accumulator.aovs.add(pixel, pixel_samples, has_first);
+        }
+    }
 }
 
 /// Sums of the workers' counts, added once per row.

@@ -405,7 +405,7 @@ fn offset_origin(surface: &Surface, direction: Vec3) -> Vec3 {
 }
 
 #[inline]
-fn spawn_ray(surface: &Surface, direction: Vec3) -> Ray {
+pub(super) fn spawn_ray(surface: &Surface, direction: Vec3) -> Ray {
     Ray::new(
         offset_origin(surface, direction),
         direction,
