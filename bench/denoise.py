@@ -66,6 +66,23 @@ def reference(scene: str, label: str, size, spp: int, cache: Path) -> np.ndarray
     return image
 
 
+def samples_to_match(scene, size, spp: int, target: float, ref: np.ndarray, noisy_error: float) -> str:
+    """The samples per pixel an undenoised render needs for the error `target`: renders
+    at twice, four times ... `spp` until one is at or below it, then interpolated in
+    log-log between the two around it. "<= spp" where `spp` already does."""
+    if noisy_error <= target:
+        return f"<= {spp}"
+    low, low_error = spp, noisy_error
+    high = spp * 2
+    while high <= 1 << 16:
+        error = relative_mse(canopy.render(scene, size=size, spp=high), ref)
+        if error <= target:
+            t = (np.log(low_error) - np.log(target)) / (np.log(low_error) - np.log(error))
+            return str(round(float(np.exp(np.log(low) + t * (np.log(high) - np.log(low))))))
+        low, low_error, high = high, error, high * 2
+    return f"> {1 << 16}"
+
+
 def timed(function):
     start = time.perf_counter()
     result = function()
@@ -101,6 +118,8 @@ def main() -> None:
     parser.add_argument("--spp", default="4,16,64", help="sample counts to denoise")
     parser.add_argument("--runs", type=int, default=3, help="timings are the best of this many")
     parser.add_argument("--out", default=str(ROOT / "target" / "bench-denoise"))
+    parser.add_argument("--prefilter-guides", action="store_true",
+                        help="denoise the albedo and normal first (OIDN's cleanAux mode)")
     args = parser.parse_args()
     size = tuple(int(v) for v in args.size.split("x"))
     counts = [int(v) for v in args.spp.split(",")]
@@ -117,7 +136,10 @@ def main() -> None:
                 args.runs, lambda: canopy.render(scene, size=size, spp=spp, aovs=["albedo", "normal"])
             )
             plain_s = best_of(args.runs, lambda: canopy.render(scene, size=size, spp=spp))[1]
-            clean, denoise_s = best_of(args.runs, lambda: canopy.denoise(noisy, aovs["albedo"], aovs["normal"]))
+            clean, denoise_s = best_of(
+                args.runs,
+                lambda: canopy.denoise(noisy, aovs["albedo"], aovs["normal"], prefilter=args.prefilter_guides),
+            )
             # Equal time: the undenoised render gets the AOVs' and the denoiser's time as
             # samples.
             equal_spp = max(spp, round(spp * (render_s + denoise_s) / plain_s))
@@ -133,9 +155,7 @@ def main() -> None:
                 "equal_time_spp": equal_spp,
                 "equal_time_relmse": relative_mse(equal, ref),
                 "equal_time_flip": flip(equal, ref),
-                # Monte Carlo error falls as 1/spp: the samples the noisy render needs
-                # for the denoised error (an estimate, from this spp's noisy error).
-                "spp_to_match_denoised": round(spp * noisy_err / clean_err),
+                "spp_to_match_denoised": samples_to_match(scene, size, spp, clean_err, ref, noisy_err),
                 "render_s": render_s,
                 "render_without_aovs_s": plain_s,
                 "denoise_s": denoise_s,
@@ -145,30 +165,34 @@ def main() -> None:
                 f"  {label:12} {spp:3} spp: relMSE {noisy_err:.5f} -> {clean_err:.5f} denoised, "
                 f"{row['equal_time_relmse']:.5f} at equal time ({equal_spp} spp); FLIP "
                 f"{row['noisy_flip']:.4f} -> {row['denoised_flip']:.4f}; "
-                f"~{row['spp_to_match_denoised']} spp to match",
+                f"{row['spp_to_match_denoised']} spp to match",
                 flush=True,
             )
     per_mp = denoiser_time_per_megapixel(args.runs)
 
     print()
-    print(f"CPU: {cpu_model()}, {threads} threads. {size[0]}x{size[1]} pixels, reference {args.reference_spp} spp.")
+    guides = "prefiltered" if args.prefilter_guides else "raw"
+    print(f"CPU: {cpu_model()}, {threads} threads. {size[0]}x{size[1]} pixels, reference {args.reference_spp} spp, "
+          f"{guides} guides.")
     print()
     print("| scene | spp | relMSE noisy | denoised | undenoised at equal time (spp) | FLIP noisy | denoised "
-          "| at equal time | spp the noisy render needs |")
+          "| at equal time | spp an undenoised render needs for the denoised relMSE |")
     print("|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         print(
             f"| {r['scene']} | {r['spp']} | {r['noisy_relmse']:.5f} | {r['denoised_relmse']:.5f} "
             f"| {r['equal_time_relmse']:.5f} ({r['equal_time_spp']}) | {r['noisy_flip']:.4f} "
-            f"| {r['denoised_flip']:.4f} | {r['equal_time_flip']:.4f} | ~{r['spp_to_match_denoised']} |"
+            f"| {r['denoised_flip']:.4f} | {r['equal_time_flip']:.4f} | {r['spp_to_match_denoised']} |"
         )
     print()
     print("Denoiser time per megapixel (1024x1024, albedo and normal): "
           + ", ".join(f"{k} {v:.2f} s" for k, v in per_mp.items()))
-    record = {"cpu": cpu_model(), "threads": threads, "size": size, "reference_spp": args.reference_spp,
+    record = {"cpu": cpu_model(), "threads": threads, "prefiltered_guides": args.prefilter_guides,
+              "size": size, "reference_spp": args.reference_spp,
               "rows": rows, "denoise_seconds_per_megapixel": per_mp}
-    (out / "results.json").write_text(json.dumps(record, indent=2))
-    print(f"results: {out / 'results.json'}")
+    results = out / ("results-prefiltered-guides.json" if args.prefilter_guides else "results.json")
+    results.write_text(json.dumps(record, indent=2))
+    print(f"results: {results}")
 
 
 if __name__ == "__main__":

@@ -121,6 +121,10 @@ pub struct RenderArgs {
     /// in the output image; implies --denoise.
     #[arg(long, value_name = "FILE", conflicts_with = "heatmap")]
     denoised_output: Option<PathBuf>,
+    /// Denoise the albedo and normal before the image and use them as clean guides
+    /// (OIDN's advice where they are noisy: depth of field, glass); several times slower.
+    #[arg(long)]
+    prefilter_guides: bool,
     /// A folder the scene may also read files from (meshes, models, maps). A scene reads
     /// only files in its own folder unless this allows more; repeat it for several.
     #[arg(long, value_name = "DIR")]
@@ -321,7 +325,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     region
         .check_within(settings.width, settings.height)
         .map_err(|e| anyhow::anyhow!("--region: {e}"))?;
-    let denoise = args.denoise || args.denoised_output.is_some();
+    let denoise = args.denoise || args.denoised_output.is_some() || args.prefilter_guides;
     let written_aovs = args.aov.unwrap_or_default();
     let aovs = match &job.accumulator {
         // A resumed render goes on with the layers it has.
@@ -437,7 +441,11 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     let denoised = match &oidn {
         Some(oidn) => {
             let start = std::time::Instant::now();
-            match canopy_job::denoise_film(oidn, &noisy, &aov_images, threads) {
+            let options = canopy_job::DenoiseOptions {
+                threads,
+                prefilter: args.prefilter_guides,
+            };
+            match canopy_job::denoise_film(oidn, &noisy, &aov_images, &options) {
                 Ok(film) => {
                     summary.denoise_seconds = Some(start.elapsed().as_secs_f64());
                     Some(film)

@@ -48,24 +48,17 @@ pub struct Images<'a> {
     pub normal: Option<&'a [f32]>,
 }
 
-/// How a denoise runs.
-#[derive(Clone, Copy, Debug)]
+/// How a denoise runs; by default on all cores, the guides as they are.
+#[derive(Clone, Copy, Debug, Default)]
 pub struct Options {
     /// Worker threads; `None`: all cores.
     pub threads: Option<usize>,
     /// Denoise the albedo and normal first, then the colour with them as noise-free
-    /// guides (OIDN's recommendation for final frames: its `cleanAux` mode). Slower
-    /// (three filters), sharper where the guides are noisy (depth of field, glass).
+    /// guides (OIDN's `cleanAux` mode, its advice where the guides are noisy: depth of
+    /// field, glass). Off by default: it took 6.7x the time (10.4 s against 1.56 s a
+    /// megapixel on 2 cores of an Intel Xeon) for about the same error where the guides
+    /// are clean (`bench/denoise.sh`, docs/denoising.md).
     pub prefilter: bool,
-}
-
-impl Default for Options {
-    fn default() -> Self {
-        Self {
-            threads: None,
-            prefilter: true,
-        }
-    }
 }
 
 /// A loaded Open Image Denoise library.

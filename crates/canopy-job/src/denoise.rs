@@ -6,13 +6,12 @@ use canopy_render::{Aov, AovBuffers, Film};
 use glam::Vec3;
 
 /// `film` denoised, guided by the albedo and normal of `aovs` (images of the same size,
-/// as [`AovBuffers::resolved`] gives them) where present, on `threads` threads (`None`:
-/// all cores).
+/// as [`AovBuffers::resolved`] gives them) where present, as `options` say.
 pub fn denoise_film(
     oidn: &Oidn,
     film: &Film,
     aovs: &AovBuffers,
-    threads: Option<usize>,
+    options: &Options,
 ) -> Result<Film, DenoiseError> {
     let flat = |v: &[Vec3]| -> Vec<f32> { v.iter().flat_map(|p| p.to_array()).collect() };
     let color = flat(&film.pixels);
@@ -26,11 +25,7 @@ pub fn denoise_film(
         albedo: albedo.as_deref(),
         normal: normal.as_deref(),
     };
-    let options = Options {
-        threads,
-        ..Options::default()
-    };
-    let denoised = oidn.denoise(&images, &options)?;
+    let denoised = oidn.denoise(&images, options)?;
     Ok(Film {
         width: film.width,
         height: film.height,

@@ -23,7 +23,7 @@ mod observer;
 mod prepared;
 mod resume;
 
-pub use canopy_denoise::{DenoiseError, Oidn};
+pub use canopy_denoise::{DenoiseError, Oidn, Options as DenoiseOptions};
 pub use denoise::denoise_film;
 pub use observer::Observer;
 pub use prepared::{Outcome, Prepared, AOV_BYTES_PER_PIXEL, BYTES_PER_PIXEL, MAX_THREADS};

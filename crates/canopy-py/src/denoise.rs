@@ -26,7 +26,7 @@ pub fn denoise_error(e: DenoiseError) -> PyErr {
 /// The denoised `color` (float32 (height, width, 3)), guided by `albedo` and `normal` of
 /// the same shape where given (a normal needs an albedo).
 #[pyfunction]
-#[pyo3(signature = (color, albedo=None, normal=None, threads=None, prefilter=true, oidn_paths=Vec::new()))]
+#[pyo3(signature = (color, albedo=None, normal=None, threads=None, prefilter=false, oidn_paths=Vec::new()))]
 pub fn denoise<'py>(
     py: Python<'py>,
     color: PyReadonlyArray3<'py, f32>,

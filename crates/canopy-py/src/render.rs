@@ -375,7 +375,13 @@ pub fn render<'py>(
     let aov_images = done.aov_images();
     if let Some(oidn) = &oidn {
         film = py
-            .detach(|| canopy_job::denoise_film(oidn, &film, &aov_images, threads))
+            .detach(|| {
+                let options = canopy_job::DenoiseOptions {
+                    threads,
+                    prefilter: false,
+                };
+                canopy_job::denoise_film(oidn, &film, &aov_images, &options)
+            })
             .map_err(crate::denoise::denoise_error)?;
     }
     let pixels: Vec<f32> = film.pixels.iter().flat_map(|p| p.to_array()).collect();

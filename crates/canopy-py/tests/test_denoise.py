@@ -85,13 +85,14 @@ def test_a_missing_denoiser_is_said_before_rendering(tmp_path, monkeypatch):
 def test_a_denoised_render_is_closer_to_the_reference():
     if not _has_oidn():
         pytest.skip("Open Image Denoise is not installed (scripts/oidn.sh)")
-    reference = canopy.render("cornell", size=(40, 40), spp=512)
-    noisy, aovs = canopy.render("cornell", size=(40, 40), spp=16, aovs=["albedo", "normal"])
-    clean = canopy.render("cornell", size=(40, 40), spp=16, denoise=True)
+    reference = canopy.render("cornell", size=(64, 64), spp=512)
+    noisy, aovs = canopy.render("cornell", size=(64, 64), spp=16, aovs=["albedo", "normal"])
+    clean = canopy.render("cornell", size=(64, 64), spp=16, denoise=True)
     by_hand = canopy.denoise(noisy, aovs["albedo"], aovs["normal"])
     np.testing.assert_array_equal(clean, by_hand)
 
     def relative_mse(image):
         return float(np.mean((image - reference) ** 2 / (reference**2 + 1e-2)))
 
-    assert relative_mse(clean) < relative_mse(noisy) / 2, (relative_mse(noisy), relative_mse(clean))
+    # Measured on an Intel Xeon: 0.0132 noisy, 0.0023 denoised.
+    assert relative_mse(clean) < relative_mse(noisy) / 3, (relative_mse(noisy), relative_mse(clean))

@@ -458,3 +458,25 @@ def test_an_image_that_cannot_be_written_is_kept_elsewhere(tmp_path, monkeypatch
     kept = tmp_path / "out.png.kept.exr"
     assert str(kept) in str(e.value)
     np.testing.assert_array_equal(canopy.read_image(kept), image)
+
+
+def test_a_denoised_render_is_the_single_process_one_and_resumes(tmp_path):
+    try:
+        canopy.denoise(np.zeros((1, 1, 3), np.float32))
+    except RuntimeError:
+        if __import__("os").environ.get("CANOPY_REQUIRE_OIDN"):
+            raise
+        pytest.skip("Open Image Denoise is not installed (scripts/oidn.sh)")
+    settings = dict(size=(40, 28), spp=4, seed=9)
+    expected = canopy.render("cornell", denoise=True, **settings)
+    store = tmp_path / "tiles"
+    image = distributed.render("cornell", tile=16, denoise=True, resume_dir=store, **settings)
+    np.testing.assert_array_equal(image, expected)
+    kept = sorted(p.name for p in store.iterdir())
+    assert "tile-16-0.albedo.exr" in kept and "tile-16-0.normal.exr" in kept, kept
+    # A driver started again takes the tiles and their guides from the folder.
+    (store / "tile-0-0.exr").unlink()
+    again = distributed.render("cornell", tile=16, denoise=True, resume_dir=store, **settings)
+    np.testing.assert_array_equal(again, expected)
+    with pytest.raises(ValueError, match="samples_per_task"):
+        distributed.render("cornell", denoise=True, samples_per_task=2, **settings)

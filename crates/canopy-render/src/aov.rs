@@ -199,34 +199,51 @@ impl AovBuffers {
         }
     }
 
-    /// Adds the samples of one pixel: `samples` in order, the pixel's first sample among
-    /// them where `has_first`.
-    pub fn add(&mut self, pixel: usize, samples: &[AovSample], has_first: bool) {
-        let set = self.set;
-        let finite_or_zero = |v: Vec3| if v.is_finite() { v } else { Vec3::ZERO };
-        if set.contains(Aov::Albedo) {
-            for s in samples {
-                self.albedo[pixel] += finite_or_zero(s.albedo);
+    /// Adds one sample of pixel `pixel` (its first sample where `first`).
+    pub fn add(&mut self, pixel: usize, sample: &AovSample, first: bool) {
+        let pixels = self.pixels();
+        self.rows_mut(pixels)[0].add(pixel, sample, first);
+    }
+
+    /// Pixels the layers hold (0 without any).
+    fn pixels(&self) -> usize {
+        [
+            self.albedo.len(),
+            self.normal.len(),
+            self.depth.len(),
+            self.position.len(),
+        ]
+        .into_iter()
+        .chain([self.instance.len()])
+        .max()
+        .unwrap_or(0)
+    }
+
+    /// The layers cut into rows of `width` pixels, to fill in parallel.
+    pub fn rows_mut(&mut self, width: usize) -> Vec<AovRow<'_>> {
+        fn rows<T>(layer: &mut [T], width: usize, count: usize) -> Vec<&mut [T]> {
+            match layer.is_empty() {
+                true => (0..count).map(|_| <&mut [T]>::default()).collect(),
+                false => layer.chunks_mut(width).collect(),
             }
         }
-        if set.contains(Aov::Normal) {
-            for s in samples {
-                self.normal[pixel] += finite_or_zero(s.normal);
-            }
-        }
-        let (Some(first), true) = (samples.first(), has_first) else {
-            return;
-        };
-        if set.contains(Aov::Depth) {
-            self.depth[pixel] = first.depth;
-        }
-        if set.contains(Aov::Position) {
-            self.position[pixel] = first.position;
-        }
-        if set.contains(Aov::Id) {
-            self.instance[pixel] = first.instance;
-            self.primitive[pixel] = first.primitive;
-        }
+        let count = self.pixels().div_ceil(width.max(1));
+        let mut albedo = rows(&mut self.albedo, width, count).into_iter();
+        let mut normal = rows(&mut self.normal, width, count).into_iter();
+        let mut depth = rows(&mut self.depth, width, count).into_iter();
+        let mut position = rows(&mut self.position, width, count).into_iter();
+        let mut instance = rows(&mut self.instance, width, count).into_iter();
+        let mut primitive = rows(&mut self.primitive, width, count).into_iter();
+        (0..count)
+            .map(|_| AovRow {
+                albedo: albedo.next().expect("a row each"),
+                normal: normal.next().expect("a row each"),
+                depth: depth.next().expect("a row each"),
+                position: position.next().expect("a row each"),
+                instance: instance.next().expect("a row each"),
+                primitive: primitive.next().expect("a row each"),
+            })
+            .collect()
     }
 
     /// Only the layers of `set` (those of them this holds).
@@ -268,6 +285,45 @@ impl AovBuffers {
     }
 }
 
+/// One row of [`AovBuffers`], borrowed to be filled (layers not held are empty).
+pub struct AovRow<'a> {
+    albedo: &'a mut [Vec3],
+    normal: &'a mut [Vec3],
+    depth: &'a mut [f32],
+    position: &'a mut [Vec3],
+    instance: &'a mut [u32],
+    primitive: &'a mut [u32],
+}
+
+impl AovRow<'_> {
+    /// Adds one sample of the row's pixel `x`: albedo and normal to their sums (a
+    /// non-finite value as zero), the rest set from the pixel's `first` sample.
+    #[inline]
+    pub fn add(&mut self, x: usize, sample: &AovSample, first: bool) {
+        let finite_or_zero = |v: Vec3| if v.is_finite() { v } else { Vec3::ZERO };
+        if let Some(sum) = self.albedo.get_mut(x) {
+            *sum += finite_or_zero(sample.albedo);
+        }
+        if let Some(sum) = self.normal.get_mut(x) {
+            *sum += finite_or_zero(sample.normal);
+        }
+        if !first {
+            return;
+        }
+        if let Some(depth) = self.depth.get_mut(x) {
+            *depth = sample.depth;
+        }
+        if let Some(position) = self.position.get_mut(x) {
+            *position = sample.position;
+        }
+        if let (Some(instance), Some(primitive)) =
+            (self.instance.get_mut(x), self.primitive.get_mut(x))
+        {
+            (*instance, *primitive) = (sample.instance, sample.primitive);
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -300,8 +356,9 @@ mod tests {
             instance: 3,
             primitive: 4,
         };
-        buffers.add(1, &[hit, AovSample::escaped(Vec3::ONE)], true);
-        buffers.add(1, &[AovSample::escaped(Vec3::ONE)], false);
+        buffers.add(1, &hit, true);
+        buffers.add(1, &AovSample::escaped(Vec3::ONE), false);
+        buffers.add(1, &AovSample::escaped(Vec3::ONE), false);
         let image = buffers.resolved(3);
         assert_eq!(image.albedo[1], Vec3::splat(2.5 / 3.0));
         assert_eq!(image.normal[1], Vec3::Z / 3.0);

@@ -109,8 +109,8 @@ mod tests {
             instance: 8,
             primitive: 9,
         };
-        aovs.add(0, &[hit], true);
-        aovs.add(1, &[AovSample::escaped(Vec3::ONE)], true);
+        aovs.add(0, &hit, true);
+        aovs.add(1, &AovSample::escaped(Vec3::ONE), true);
         let mut bytes = std::io::Cursor::new(Vec::new());
         encode(&film, &aovs.resolved(1), &mut bytes).unwrap();
         let image = read()

@@ -2,6 +2,7 @@
 //! machine — every reference scene rendered with the report's methods and canopy's other
 //! builders at every width, repeated, timed and tabulated.
 
+mod denoise;
 mod gpu;
 mod lights;
 mod plots;
@@ -36,6 +37,9 @@ enum BenchCommand {
     Lights(lights::LightsArgs),
     /// The same renders on the CPU and on the GPU: seconds, Mrays/s, speed-up.
     Gpu(gpu::GpuArgs),
+    /// Error of renders denoised by Open Image Denoise against undenoised ones at equal
+    /// time, and the denoiser's time.
+    Denoise(denoise::DenoiseArgs),
 }
 
 #[derive(Args)]
@@ -208,6 +212,7 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
         BenchCommand::Paper(args) => paper(args),
         BenchCommand::Lights(args) => lights::run(args),
         BenchCommand::Gpu(args) => gpu::run(args),
+        BenchCommand::Denoise(args) => denoise::run(args),
     }
 }
 

@@ -230,10 +230,10 @@ fn a_denoised_cornell_at_16_spp_is_much_closer_to_the_reference() {
         return;
     }
     let dir = scratch("denoise");
-    let size = ["--size", "48x48"];
+    let size = ["--size", "64x64"];
     let out = canopy(
         &[
-            &["render", "cornell", "--spp", "1024", "-o", "ref.exr"][..],
+            &["render", "cornell", "--spp", "512", "-o", "ref.exr"][..],
             &size,
         ]
         .concat(),
@@ -264,9 +264,58 @@ fn a_denoised_cornell_at_16_spp_is_much_closer_to_the_reference() {
     let reference = rgb(&dir.join("ref.exr"));
     let noisy = relative_mse(&rgb(&dir.join("noisy.exr")), &reference);
     let clean = relative_mse(&rgb(&dir.join("clean.exr")), &reference);
-    eprintln!("relative MSE against 1024 spp: noisy {noisy:.5}, denoised {clean:.5}");
-    // The margin: at most half the noisy image's error (measured: 0.0130 and 0.0053 on
-    // an Intel Xeon with AVX-512; most of what is left is the lamp's edge).
-    assert!(clean < noisy / 2.0, "noisy {noisy}, denoised {clean}");
+    eprintln!("relative MSE against 512 spp: noisy {noisy:.5}, denoised {clean:.5}");
+    // The margin: at most a third of the noisy image's error (measured on an Intel Xeon
+    // with AVX-512: 0.0132 noisy, 0.0023 denoised; most of what is left is the lamp's
+    // edge, which a denoiser bleeds into the ceiling).
+    assert!(clean < noisy / 3.0, "noisy {noisy}, denoised {clean}");
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+#[test]
+fn bench_denoise_tables_noisy_denoised_and_equal_time_errors() {
+    let dir = scratch("bench-denoise");
+    let out = canopy(
+        &[
+            "bench",
+            "denoise",
+            "cornell",
+            "--size",
+            "32x32",
+            "--spp",
+            "2,16",
+            "--reference-spp",
+            "256",
+            "--out",
+            "denoise.md",
+        ],
+        &dir,
+    );
+    if !out.status.success() && canopy_job::Oidn::load(&[]).is_err() {
+        assert!(stderr(&out).contains("scripts/oidn.sh"), "{}", stderr(&out));
+        assert!(
+            std::env::var_os("CANOPY_REQUIRE_OIDN").is_none(),
+            "{}",
+            stderr(&out)
+        );
+        return;
+    }
+    assert!(out.status.success(), "{}", stderr(&out));
+    let table = std::fs::read_to_string(dir.join("denoise.md")).unwrap();
+    let rows: Vec<&str> = table
+        .lines()
+        .filter(|l| l.starts_with("| cornell |"))
+        .collect();
+    assert_eq!(rows.len(), 2, "{table}");
+    let errors: Vec<(f64, f64)> = rows
+        .iter()
+        .map(|row| {
+            let cells: Vec<&str> = row.split('|').map(str::trim).collect();
+            (cells[3].parse().unwrap(), cells[4].parse().unwrap())
+        })
+        .collect();
+    assert!(errors.iter().all(|&(n, d)| n > 0.0 && d > 0.0), "{table}");
+    // At 2 samples a tiny image may denoise worse (the lamp bleeds); at 16 it is better.
+    assert!(errors[1].1 < errors[1].0, "{table}");
     std::fs::remove_dir_all(dir).unwrap();
 }

@@ -478,14 +478,15 @@ def denoise(
     normal=None,
     *,
     threads: Optional[int] = None,
-    prefilter: bool = True,
+    prefilter: bool = False,
 ) -> np.ndarray:
     """A noisy linear float32 (height, width, 3) image denoised by Intel Open Image
     Denoise 2, guided by the ``albedo`` and ``normal`` images (same shape; a normal
     needs an albedo) where given, as :func:`render` returns them with ``aovs=``.
 
     ``prefilter`` denoises the albedo and normal first and then uses them as clean
-    guides (OIDN's advice for final frames). OIDN is found through ``CANOPY_OIDN``, an
+    guides (OIDN's advice where they are noisy: depth of field, glass; several times
+    slower). OIDN is found through ``CANOPY_OIDN``, an
     installed ``pyoidn`` package, canopy's folder (``scripts/oidn.sh`` installs it
     there) or the system; when it is missing, a RuntimeError says how to install it."""
     color = _array(color, "color", np.float32, 3, "(height, width, 3)")

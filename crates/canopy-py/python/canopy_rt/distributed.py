@@ -51,6 +51,7 @@ import numpy as np
 from . import _canopy
 from . import Scene, __version__, load_scene, read_image, scenes, write_image
 from .scene import _transform
+from . import denoise as denoise_image
 from . import render as render_locally
 
 _Region = Tuple[int, int, int, int]
@@ -173,9 +174,10 @@ def _as_they_finish(ray, pending: dict, take: Callable[[object, object], None]) 
             ray.cancel(ref)
 
 
-def render_tile(bundle, region: Optional[_Region], options: dict, version: str) -> np.ndarray:
+def render_tile(bundle, region: Optional[_Region], options: dict, version: str):
     """One tile (or with ``region`` None, a whole frame), as a Ray task runs it
-    (callable directly too): the driver's canopy version must be this worker's."""
+    (callable directly too), with its AOVs where ``options`` asks for them: the
+    driver's canopy version must be this worker's."""
     _same_version(version)
     source, files = bundle
     scene = _materialize(source, files)
@@ -263,18 +265,26 @@ class _TileStore:
             _canopy.write_file(path, json.dumps(record).encode())
         _canopy.check_output(self.path((0, 0, 1, 1)), "tile", "image", list(inputs))
 
-    def path(self, region: _Region) -> str:
-        return os.path.join(self.directory, f"tile-{region[0]}-{region[1]}.exr")
+    def path(self, region: _Region, layer: Optional[str] = None) -> str:
+        name = f"tile-{region[0]}-{region[1]}" + (f".{layer}" if layer else "")
+        return os.path.join(self.directory, name + ".exr")
 
-    def load(self, region: _Region) -> Optional[np.ndarray]:
-        path = self.path(region)
-        if not os.path.exists(path):
+    def load(self, region: _Region, layers: Sequence[str] = ()) -> Optional[Tuple[np.ndarray, dict]]:
+        """The tile and its AOV `layers` (each `tile-X-Y.LAYER.exr`), if all are kept."""
+        paths = [self.path(region)] + [self.path(region, layer) for layer in layers]
+        if not all(os.path.exists(path) for path in paths):
             return None
-        tile = read_image(path)
-        return tile if tile.shape == (region[3], region[2], 3) else None
+        images = [read_image(path) for path in paths]
+        if any(image.shape != (region[3], region[2], 3) for image in images):
+            return None
+        return images[0], dict(zip(layers, images[1:]))
 
-    def keep(self, region: _Region, tile: np.ndarray) -> None:
-        write_image(self.path(region), tile)  # atomic: a killed driver leaves no half tile
+    def keep(self, region: _Region, tile: np.ndarray, aovs: Optional[dict] = None) -> None:
+        # The layers first: a tile file says the whole tile is kept. Each write is
+        # atomic: a killed driver leaves no half tile.
+        for layer, image in (aovs or {}).items():
+            write_image(self.path(region, layer), image)
+        write_image(self.path(region), tile)
 
 
 def render(
@@ -298,6 +308,7 @@ def render(
     resume_dir=None,
     allow_paths: Sequence = (),
     output=None,
+    denoise: bool = False,
 ) -> np.ndarray:
     """Renders ``scene`` on a Ray cluster: the same linear float32 (height, width, 3)
     image as :func:`canopy_rt.render` with the same settings, bit for bit. The image is
@@ -323,7 +334,13 @@ def render(
     With ``output=path`` the image is also written there (``.png`` or ``.exr``,
     atomically), and the path is checked before any tile is rendered, as ``canopy
     render`` checks its ``-o``: its format, its folder, that it is none of the scene's
-    files (links count) and holds no render's checkpoint."""
+    files (links count) and holds no render's checkpoint.
+
+    ``denoise=True`` has every tile render its albedo and normal too, and denoises the
+    whole image on the driver once the tiles are in (a tile denoised alone would show
+    seams): the image :func:`canopy_rt.render` gives with ``denoise=True``. Open Image
+    Denoise must be found on the driver (checked before any tile); tiles cannot be split
+    into sample ranges then."""
     if int(tile) < 1:
         raise ValueError(f"tile must be at least 1 pixel, not {tile}")
     if samples_per_task is not None and int(samples_per_task) < 1:
@@ -351,8 +368,16 @@ def render(
     total_spp = int(spp) if spp is not None else settings["spp"]
     step = int(samples_per_task) if samples_per_task else total_spp
     ranges = [(first, min(step, total_spp - first)) for first in range(0, total_spp, step)]
+    layers = []
+    if denoise:
+        if len(ranges) > 1:
+            raise ValueError("denoise=True renders whole tiles: drop samples_per_task")
+        denoise_image(np.zeros((1, 1, 3), np.float32))  # OIDN found, or the error now
+        layers = ["albedo", "normal"]
+        options["aovs"] = layers
     regions = tiles(image_width, image_height, int(tile))
     image = np.zeros((image_height, image_width, 3), np.float32)
+    guides = {layer: np.zeros_like(image) for layer in layers}
     store = None
     if resume_dir is not None:
         digest = hashlib.sha256()
@@ -367,17 +392,24 @@ def render(
         store = _TileStore(resume_dir, json.loads(json.dumps(record)), inputs)
     todo = []
     for region in regions:
-        kept = store.load(region) if store else None
+        kept = store.load(region, layers) if store else None
         if kept is None:
             todo.append(region)
         else:
             x, y, w, h = region
-            image[y:y + h, x:x + w] = kept
+            image[y:y + h, x:x + w] = kept[0]
+            for layer, part in kept[1].items():
+                guides[layer][y:y + h, x:x + w] = part
     done = len(regions) - len(todo)
     if progress is not None and done:
         progress(done, len(regions))
+
+    def finished() -> np.ndarray:
+        final = denoise_image(image, guides["albedo"], guides["normal"]) if denoise else image
+        return _with_output(final, output)
+
     if not todo:
-        return _with_output(image, output)
+        return finished()
 
     ray, task = _tasks(render_tile, address, threads_per_task, device)
     bundle_ref = ray.put(bundle)
@@ -391,9 +423,13 @@ def render(
                for region in todo for k, part in enumerate(ranges)}
     parts: Dict[_Region, Dict[int, np.ndarray]] = {}
 
-    def take(key, mean: np.ndarray) -> None:
+    def take(key, result) -> None:
         nonlocal done
         region, k = key
+        mean, aovs = result if layers else (result, {})
+        x, y, w, h = region
+        for layer in layers:
+            guides[layer][y:y + h, x:x + w] = aovs[layer]
         parts.setdefault(region, {})[k] = mean
         if len(parts[region]) < len(ranges):
             return
@@ -405,16 +441,15 @@ def render(
             for j, (_, count) in enumerate(ranges):
                 total += count * means[j].astype(np.float64)
             merged = (total / total_spp).astype(np.float32)
-        x, y, w, h = region
         image[y:y + h, x:x + w] = merged
         if store:
-            store.keep(region, merged)
+            store.keep(region, merged, aovs)
         done += 1
         if progress is not None:
             progress(done, len(regions))
 
     _as_they_finish(ray, pending, take)
-    return _with_output(image, output)
+    return finished()
 
 
 def _inputs(scene, info) -> List[str]:
@@ -706,6 +741,8 @@ def main(argv=None) -> int:
                                help="split each tile's samples into tasks of this many too")
     image_command.add_argument("--resume-dir", help="keep finished tiles here; run again with "
                                "the same arguments to render only the missing ones")
+    image_command.add_argument("--denoise", action="store_true",
+                               help="denoise the whole image with Open Image Denoise once the tiles are in")
     frames_command.add_argument("--frames", required=True,
                                 help='JSON list of frames: [{"camera": {"look_from": [x, y, z]}, '
                                 '"instances": {"0": 4x4 matrix}}, ...]')
@@ -732,7 +769,7 @@ def main(argv=None) -> int:
     try:
         if args.command == "render":
             render(args.scene, tile=args.tile, samples_per_task=args.samples_per_task,
-                   resume_dir=args.resume_dir, output=args.output, **common)
+                   resume_dir=args.resume_dir, output=args.output, denoise=args.denoise, **common)
             print(f"image       {args.output}", file=sys.stderr)
         else:
             try:

@@ -10,12 +10,13 @@ mod wavefront;
 pub use wavefront::STREAM_PATHS;
 
 use crate::accel::Accel;
-use crate::aov::{AovBuffers, AovSample, AovSet};
+use crate::aov::{AovBuffers, AovRow, AovSet};
 use crate::camera::Camera;
 use crate::film::Film;
 use crate::lights::Lights;
 use crate::region::Region;
 use crate::scene::Scene;
+use aov::AovTrack;
 use camera_rays::{camera_sample, Streams};
 use canopy_bvh::{TraversalCounter, TraversalStats};
 use glam::Vec3;
@@ -303,11 +304,23 @@ fn accumulate<P: Probe>(
         sampler: settings.sampler,
         seed: settings.seed,
     };
+    let width = region.width as usize;
+    // The AOV layers row by row beside the sums (none when not asked for).
+    let mut aov_rows: Vec<Option<AovRow>> = match accumulator.aovs.set.is_empty() {
+        true => (0..region.height).map(|_| None).collect(),
+        false => accumulator
+            .aovs
+            .rows_mut(width)
+            .into_iter()
+            .map(Some)
+            .collect(),
+    };
     accumulator
         .sums
-        .par_chunks_mut(region.width as usize)
+        .par_chunks_mut(width)
+        .zip(aov_rows.par_iter_mut())
         .enumerate()
-        .for_each(|(row_in_region, row)| {
+        .for_each(|(row_in_region, (row, aovs))| {
             let row_start = Instant::now();
             let mut work = Work::<P>::default();
             let y = region.y as usize + row_in_region;
@@ -319,11 +332,15 @@ fn accumulate<P: Probe>(
                         for sample in first_sample..first_sample + count {
                             let (ray, mut rng) =
                                 camera_sample(&camera, size, streams, pixel, sample);
-                            let l = tracer.radiance(ray, &mut rng, &mut work);
+                            let mut track = aovs.is_some().then(AovTrack::default);
+                            let l = tracer.radiance(ray, &mut rng, &mut work, track.as_mut());
                             if l.is_finite() {
                                 *sum += l;
                             } else {
                                 invalid += 1;
+                            }
+                            if let (Some(aovs), Some(track)) = (aovs.as_mut(), track) {
+                                aovs.add(x_in_region, &track.sample, sample == 0);
                             }
                         }
                     }
@@ -340,6 +357,7 @@ fn accumulate<P: Probe>(
                         &tracer,
                         &camera,
                         block,
+                        aovs.as_mut(),
                         samples,
                         STREAM_PATHS,
                         &mut work,
@@ -349,10 +367,6 @@ fn accumulate<P: Probe>(
             totals.add(&work, invalid, row_start.elapsed());
             on_row_done();
         });
-    if !accumulator.aovs.set.is_empty() {
-        let samples = first_sample..first_sample + count;
-        add_aovs(&tracer, &camera, streams, accumulator, samples, &totals);
-    }
     accumulator.samples += count;
     let stats = totals.stats(start.elapsed());
     accumulator.rays += stats.rays;
@@ -384,8 +398,8 @@ pub fn render_aov_samples(
     totals.rays.into_inner()
 }
 
-/// Adds the AOV samples `samples` of every pixel of `accumulator`'s region, row by row
-/// in parallel, each pixel's in sample order (deterministic like the radiance).
+/// Adds the AOVs of samples `samples` of every pixel of `accumulator`'s region, traced
+/// alone ([`Tracer::aov_sample`]), row by row in parallel, each pixel's in sample order.
 fn add_aovs(
     tracer: &Tracer,
     camera: &Camera,
@@ -397,31 +411,20 @@ fn add_aovs(
     let region = accumulator.region;
     let settings = tracer.scene.settings;
     let size = (settings.width, settings.height);
-    let rows: Vec<Vec<AovSample>> = (0..region.height)
-        .into_par_iter()
-        .map(|row| {
-            let row_start = Instant::now();
-            let mut work = Work::<()>::default();
-            let y = region.y + row;
-            let mut seen = Vec::with_capacity(region.width as usize * samples.len());
-            for x in region.x..region.x + region.width {
-                for sample in samples.clone() {
-                    let (ray, mut rng) = camera_sample(camera, size, streams, (x, y), sample);
-                    seen.push(tracer.aov_sample(ray, &mut rng, &mut work));
-                }
+    let mut rows = accumulator.aovs.rows_mut(region.width as usize);
+    rows.par_iter_mut().enumerate().for_each(|(row, aovs)| {
+        let row_start = Instant::now();
+        let mut work = Work::<()>::default();
+        let y = region.y + row as u32;
+        for (x_in_region, x) in (region.x..region.x + region.width).enumerate() {
+            for sample in samples.clone() {
+                let (ray, mut rng) = camera_sample(camera, size, streams, (x, y), sample);
+                let seen = tracer.aov_sample(ray, &mut rng, &mut work);
+                aovs.add(x_in_region, &seen, sample == 0);
             }
-            totals.add(&work, 0, row_start.elapsed());
-            seen
-        })
-        .collect();
-    let has_first = samples.start == 0;
-    let per_pixel = samples.len().max(1);
-    for (row, seen) in rows.iter().enumerate() {
-        for (x, pixel_samples) in seen.chunks(per_pixel).enumerate() {
-            let pixel = row * region.width as usize + x;
-            accumulator.aovs.add(pixel, pixel_samples, has_first);
         }
-    }
+        totals.add(&work, 0, row_start.elapsed());
+    });
 }
 
 /// Sums of the workers' counts, added once per row.

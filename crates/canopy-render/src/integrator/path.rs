@@ -3,6 +3,7 @@
 //! the lights (and an environment map) at every vertex and weights both strategies by
 //! multiple importance sampling (Veach 1997, power heuristic).
 
+use super::aov::AovTrack;
 use super::Probe;
 use crate::accel::Accel;
 use crate::geometry::Surface;
@@ -141,13 +142,20 @@ pub(super) struct Scattering {
 
 impl Tracer<'_> {
     /// One sample of the radiance arriving along the camera ray `ray`, traced depth
-    /// first: each segment and its shadow rays in turn.
-    pub fn radiance<P: Probe>(&self, ray: Ray, rng: &mut Rng, work: &mut Work<P>) -> Vec3 {
+    /// first: each segment and its shadow rays in turn; what it sees for the AOVs goes
+    /// into `track` where given.
+    pub fn radiance<P: Probe>(
+        &self,
+        ray: Ray,
+        rng: &mut Rng,
+        work: &mut Work<P>,
+        mut track: Option<&mut AovTrack>,
+    ) -> Vec3 {
         let mut path = PathState::new(ray);
         loop {
             work.rays += 1;
             let hit = self.intersect(&path.ray, rng, work);
-            let vertex = self.vertex(&mut path, hit, rng);
+            let vertex = self.vertex(&mut path, hit, rng, track.as_deref_mut());
             if let Some(direct) = vertex.direct {
                 path.radiance += direct.arriving(|shadow| self.occluded(shadow, rng, work));
             }
@@ -161,12 +169,18 @@ impl Tracer<'_> {
     /// Randomness is drawn in one order for both schedules: light samples, then the
     /// BSDF sample and roulette, then (for see-through surfaces) the shadow rays.
     #[inline(always)]
-    pub fn vertex(&self, path: &mut PathState, hit: Option<Hit>, rng: &mut Rng) -> Vertex {
+    pub fn vertex(
+        &self,
+        path: &mut PathState,
+        hit: Option<Hit>,
+        rng: &mut Rng,
+        track: Option<&mut AovTrack>,
+    ) -> Vertex {
         let Some(Scattering {
             surface,
             material,
             direct,
-        }) = self.vertex_head(path, hit, rng)
+        }) = self.vertex_head(path, hit, rng, track)
         else {
             return Vertex {
                 direct: None,
@@ -181,17 +195,19 @@ impl Tracer<'_> {
     }
 
     /// The vertex up to its BSDF sample: the emission found is added and the lights
-    /// sampled; `None` where the path ends here.
+    /// sampled (and the AOVs' `track` told what the segment found); `None` where the
+    /// path ends here.
     #[inline(always)]
     pub fn vertex_head(
         &self,
         path: &mut PathState,
         hit: Option<Hit>,
         rng: &mut Rng,
+        track: Option<&mut AovTrack>,
     ) -> Option<Scattering> {
         match self.scene.settings.integrator {
-            Integrator::Path => self.path_head(path, hit, rng),
-            Integrator::Bsdf => self.bsdf_head(path, hit),
+            Integrator::Path => self.path_head(path, hit, rng, track),
+            Integrator::Bsdf => self.bsdf_head(path, hit, track),
         }
     }
 
@@ -215,12 +231,8 @@ impl Tracer<'_> {
                 p: surface.p,
                 pdf: sample.pdf,
             });
-            if settings.russian_roulette && path.segments >= ROULETTE_AFTER {
-                let survival = path.throughput.max_element().min(ROULETTE_MAX_SURVIVAL);
-                if rng.next_f32() >= survival {
-                    return false;
-                }
-                path.throughput /= survival;
+            if !self.survives_roulette(&mut path.throughput, path.segments, rng) {
+                return false;
             }
         }
         if path.throughput == Vec3::ZERO {
@@ -231,16 +243,45 @@ impl Tracer<'_> {
         true
     }
 
+    /// Whether a path of `segments` segments and `throughput` goes on past Russian
+    /// roulette (path integrator), its throughput scaled up if so to keep it unbiased.
+    #[inline(always)]
+    pub fn survives_roulette(&self, throughput: &mut Vec3, segments: u32, rng: &mut Rng) -> bool {
+        let settings = self.scene.settings;
+        let plays = settings.integrator == Integrator::Path && settings.russian_roulette;
+        if !plays || segments < ROULETTE_AFTER {
+            return true;
+        }
+        let survival = throughput.max_element().min(ROULETTE_MAX_SURVIVAL);
+        if rng.next_f32() >= survival {
+            return false;
+        }
+        *throughput /= survival;
+        true
+    }
+
     /// The report's estimator: at most `max_depth` segments, light only where a path
     /// happens to end on an emitter or in the background.
     #[inline(always)]
-    fn bsdf_head(&self, path: &mut PathState, hit: Option<Hit>) -> Option<Scattering> {
+    fn bsdf_head(
+        &self,
+        path: &mut PathState,
+        hit: Option<Hit>,
+        track: Option<&mut AovTrack>,
+    ) -> Option<Scattering> {
         let scene = self.scene;
         let Some(hit) = hit else {
-            path.radiance += path.throughput * scene.background.radiance(path.ray.dir);
+            let background = scene.background.radiance(path.ray.dir);
+            if let Some(track) = track {
+                track.escaped(background);
+            }
+            path.radiance += path.throughput * background;
             return None;
         };
         let (surface, material) = scene.shade(&path.ray, &hit);
+        if let Some(track) = track {
+            track.hit(&path.ray, &hit, &surface, &material, path.segments == 1);
+        }
         path.radiance += path.throughput * material.emitted();
         if path.segments == scene.settings.max_depth {
             return None;
@@ -263,10 +304,14 @@ impl Tracer<'_> {
         path: &mut PathState,
         hit: Option<Hit>,
         rng: &mut Rng,
+        track: Option<&mut AovTrack>,
     ) -> Option<Scattering> {
         let scene = self.scene;
         let settings = scene.settings;
         let Some(hit) = hit else {
+            if let Some(track) = track {
+                track.escaped(scene.background.radiance(path.ray.dir));
+            }
             let weight = match path.previous {
                 Some(v) if scene.background.is_sampled() => {
                     power_heuristic(v.pdf, scene.background.pdf(path.ray.dir))
@@ -277,6 +322,9 @@ impl Tracer<'_> {
             return None;
         };
         let (surface, material) = scene.shade(&path.ray, &hit);
+        if let Some(track) = track {
+            track.hit(&path.ray, &hit, &surface, &material, path.segments == 1);
+        }
         let emitted = material.emitted();
         if emitted != Vec3::ZERO {
             let weight = match path.previous {

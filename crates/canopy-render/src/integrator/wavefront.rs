@@ -9,10 +9,12 @@
 //! The arithmetic is the depth-first schedule's ([`super::path`]) and each path draws
 //! from its own random stream in the same order, so the image is the same bit for bit.
 
+use super::aov::AovTrack;
 use super::camera_rays::{camera_rays, PassSamples, Streams};
 use super::path::{DirectLight, PathState, Scattering, Tracer, Work};
 use super::scatter::Scatters;
 use super::Probe;
+use crate::aov::AovRow;
 use crate::camera::Camera;
 use crate::rng::Rng;
 use canopy_bvh::{Hit, Ray, RayQuery, ALL_MASKS};
@@ -47,6 +49,7 @@ pub(super) fn render_block<P: Probe>(
     tracer: &Tracer,
     camera: &Camera,
     block: Block,
+    aovs: Option<&mut AovRow>,
     samples: Range<u32>,
     stream_paths: usize,
     work: &mut Work<P>,
@@ -56,7 +59,7 @@ pub(super) fn render_block<P: Probe>(
     // Each worker keeps its stream's buffers from block to block: a block is often one
     // row of one sample, and allocating them anew cost as much as tracing short paths.
     STREAM.with_borrow_mut(|stream| {
-        render_passes(tracer, camera, block, samples, per_pass, stream, work)
+        render_passes(tracer, camera, block, aovs, samples, per_pass, stream, work)
     })
 }
 
@@ -64,10 +67,12 @@ thread_local! {
     static STREAM: RefCell<Stream> = RefCell::new(Stream::default());
 }
 
+#[allow(clippy::too_many_arguments)]
 fn render_passes<P: Probe>(
     tracer: &Tracer,
     camera: &Camera,
     block: Block,
+    mut aovs: Option<&mut AovRow>,
     samples: Range<u32>,
     per_pass: u32,
     stream: &mut Stream,
@@ -79,7 +84,7 @@ fn render_passes<P: Probe>(
     let mut start = samples.start;
     while start < samples.end {
         let samples = per_pass.min(samples.end - start);
-        stream.clear_results(pixels * samples as usize);
+        stream.clear_results(pixels * samples as usize, aovs.is_some());
         let pass = PassSamples {
             width: settings.width,
             height: settings.height,
@@ -112,6 +117,14 @@ fn render_passes<P: Probe>(
                 }
             }
         }
+        if let Some(row) = aovs.as_deref_mut() {
+            let per_pixel = stream.tracks.chunks(samples as usize);
+            for (i, tracks) in per_pixel.enumerate() {
+                for (k, track) in tracks.iter().enumerate() {
+                    row.add(i, &track.sample, start + k as u32 == 0);
+                }
+            }
+        }
         start += samples;
     }
     invalid
@@ -133,12 +146,18 @@ struct Stream {
     blocked: Vec<bool>,
     /// Each finished path's radiance, by slot.
     results: Vec<Vec3>,
+    /// What each path saw for the AOVs, by slot (empty when they are not asked for).
+    tracks: Vec<AovTrack>,
 }
 
 impl Stream {
-    fn clear_results(&mut self, slots: usize) {
+    fn clear_results(&mut self, slots: usize, track_aovs: bool) {
         self.results.clear();
         self.results.resize(slots, Vec3::ZERO);
+        self.tracks.clear();
+        if track_aovs {
+            self.tracks.resize(slots, AovTrack::default());
+        }
     }
 
     /// Traces every path of the stream to its end.
@@ -180,7 +199,8 @@ impl Stream {
     fn vertices(&mut self, tracer: &Tracer) {
         self.scatters.clear();
         for (i, (p, hit)) in self.paths.iter_mut().zip(&self.hits).enumerate() {
-            let goes_on = match tracer.vertex_head(&mut p.path, *hit, &mut p.rng) {
+            let track = self.tracks.get_mut(p.slot as usize);
+            let goes_on = match tracer.vertex_head(&mut p.path, *hit, &mut p.rng, track) {
                 None => false,
                 Some(Scattering {
                     surface,
@@ -304,7 +324,15 @@ mod tests {
                 sums: &mut sums,
             };
             let mut work = Work::<()>::default();
-            render_block(&tracer, &camera, block, 3..10, stream_paths, &mut work);
+            render_block(
+                &tracer,
+                &camera,
+                block,
+                None,
+                3..10,
+                stream_paths,
+                &mut work,
+            );
             (sums, work.rays)
         };
         let reference = row(STREAM_PATHS);

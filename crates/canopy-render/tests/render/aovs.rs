@@ -225,3 +225,26 @@ fn aovs_are_the_same_in_a_region_across_a_split_and_in_both_schedules() {
         }
     }
 }
+
+/// The AOVs traced alone (what a GPU render gets) are those the paths saw, bit for bit,
+/// through glass and mirrors (paper-3's glass and metal spheres) and with both estimators.
+#[test]
+fn aovs_traced_alone_are_the_paths_own() {
+    for integrator in [
+        canopy_render::Integrator::Path,
+        canopy_render::Integrator::Bsdf,
+    ] {
+        let mut scene = BuiltinScene::find("paper-3").unwrap().load().unwrap();
+        (scene.settings.width, scene.settings.height) = (24, 16);
+        scene.settings.integrator = integrator;
+        let full = Region::full(24, 16);
+        let with_paths = render(&scene, full, 0, 4, Schedule::Wavefront);
+        let accel = accel_of(&scene);
+        let mut alone = Accumulator::for_region(full).with_aovs(AovSet::of(&Aov::ALL));
+        for _ in 0..4 {
+            canopy_render::render_aov_samples(&scene, &accel, &mut alone, 1);
+            alone.samples += 1;
+        }
+        assert_eq!(alone.aovs, with_paths.aovs, "{integrator}");
+    }
+}

@@ -1,0 +1,194 @@
+//! `canopy bench denoise`: what denoising buys at equal time. Each scene is rendered at a
+//! few sample counts with the albedo and normal, denoised by Open Image Denoise, and
+//! compared with a high-sample reference (another seed): the relative MSE of the noisy and
+//! the denoised image, of an undenoised render given the AOVs' and the denoiser's time as
+//! extra samples, and the samples the undenoised render would need for the denoised error.
+//! (`bench/denoise.py` adds FLIP and a glTF model.)
+
+use crate::limits;
+use anyhow::Context;
+use canopy_bvh::BuildParams;
+use canopy_job::{denoise_film, DenoiseOptions, Oidn};
+use canopy_render::{
+    load_scene_allowing, render, render_samples, Accel, AccelKind, Accumulator, AovSet, BvhWidth,
+    Film, Scene,
+};
+use clap::Args;
+use std::fmt::Write as _;
+use std::io::Write as _;
+use std::path::PathBuf;
+use std::time::Instant;
+
+#[derive(Args)]
+pub struct DenoiseArgs {
+    /// Scenes: built-in names or scene files [default: cornell paper-3].
+    scenes: Vec<String>,
+    /// Image size WIDTHxHEIGHT, each 1 to 65536.
+    #[arg(long, default_value = "128x128", value_parser = limits::size)]
+    size: (u32, u32),
+    /// Sample counts to denoise, comma-separated.
+    #[arg(long, default_value = "4,16,64", value_delimiter = ',', value_parser = limits::spp())]
+    spp: Vec<u32>,
+    /// Samples per pixel of the reference image.
+    #[arg(long, default_value = "4096", value_parser = limits::spp())]
+    reference_spp: u32,
+    /// Worker threads, 1 to 1024 [default: all cores].
+    #[arg(long, value_parser = limits::threads())]
+    threads: Option<u32>,
+    /// Write the table (Markdown) here too.
+    #[arg(short, long)]
+    out: Option<PathBuf>,
+    /// A folder the scenes may also read files from (see `canopy render --allow-path`).
+    #[arg(long, value_name = "DIR")]
+    allow_path: Vec<PathBuf>,
+}
+
+/// One scene at one sample count.
+struct Row {
+    scene: String,
+    spp: u32,
+    noisy: f64,
+    denoised: f64,
+    equal_time_spp: u32,
+    equal_time: f64,
+    render_seconds: f64,
+    denoise_seconds: f64,
+}
+
+pub fn run(args: &DenoiseArgs) -> anyhow::Result<()> {
+    if let Some(out) = &args.out {
+        crate::safety::check_output(out, "table", crate::safety::OutputKind::Data, &[])?;
+    }
+    // Before minutes of references: the denoiser must be there.
+    let oidn = Oidn::load(&[])?;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(args.threads.unwrap_or(0) as usize)
+        .build()
+        .context("cannot start the worker threads")?;
+    let threads = pool.current_num_threads();
+    let scenes = match args.scenes.is_empty() {
+        true => vec!["cornell".to_string(), "paper-3".to_string()],
+        false => args.scenes.clone(),
+    };
+    let mut rows = Vec::new();
+    for name in &scenes {
+        let mut scene = load_scene_allowing(name, &args.allow_path)?;
+        if let Some(out) = &args.out {
+            crate::safety::refuse_inputs(out, &scene.inputs, "table")?;
+        }
+        (scene.settings.width, scene.settings.height) = args.size;
+        let accel = Accel::for_scene(
+            &scene,
+            AccelKind::default(),
+            BvhWidth::Eight,
+            &BuildParams::default(),
+            None,
+        );
+        eprintln!("{name}: reference at {} spp", args.reference_spp);
+        let reference = pool.install(|| {
+            let mut s = scene.clone();
+            s.settings.spp = args.reference_spp;
+            s.settings.seed = 1_000_003;
+            render(&s, &accel, &|| {}).0
+        });
+        for &spp in &args.spp {
+            let row = pool.install(|| measure(name, &scene, spp, &accel, &oidn, &reference))?;
+            eprintln!(
+                "{name} {spp} spp: relative MSE {:.5} noisy, {:.5} denoised, {:.5} at equal time",
+                row.noisy, row.denoised, row.equal_time
+            );
+            rows.push(row);
+        }
+    }
+    let table = markdown(&rows, args, threads);
+    outln!("{table}");
+    if let Some(out) = &args.out {
+        canopy_render::output::write_atomically(out, |w| w.write_all(table.as_bytes()))
+            .with_context(|| format!("cannot write {}", out.display()))?;
+    }
+    Ok(())
+}
+
+fn measure(
+    name: &str,
+    scene: &Scene,
+    spp: u32,
+    accel: &Accel,
+    oidn: &Oidn,
+    reference: &Film,
+) -> anyhow::Result<Row> {
+    let mut s = scene.clone();
+    s.settings.spp = spp;
+    let start = Instant::now();
+    let (w, h) = (s.settings.width, s.settings.height);
+    let mut accumulator = Accumulator::new(w, h).with_aovs(AovSet::DENOISING);
+    render_samples(&s, accel, &mut accumulator, spp, &|| {});
+    let render_seconds = start.elapsed().as_secs_f64();
+    let noisy = accumulator.film();
+    let start = Instant::now();
+    let options = DenoiseOptions::default();
+    let denoised = denoise_film(oidn, &noisy, &accumulator.aov_images(), &options)?;
+    let denoise_seconds = start.elapsed().as_secs_f64();
+    // Equal time: the undenoised render's samples in the AOVs' and the denoiser's time too.
+    let start = Instant::now();
+    render(&s, accel, &|| {});
+    let plain_seconds = start.elapsed().as_secs_f64().max(1e-9);
+    let ratio = (render_seconds + denoise_seconds) / plain_seconds;
+    s.settings.spp = ((spp as f64 * ratio).round() as u32).max(spp);
+    let equal = render(&s, accel, &|| {}).0;
+    Ok(Row {
+        scene: name.to_string(),
+        spp,
+        noisy: relative_mse(&noisy, reference),
+        denoised: relative_mse(&denoised, reference),
+        equal_time_spp: s.settings.spp,
+        equal_time: relative_mse(&equal, reference),
+        render_seconds,
+        denoise_seconds,
+    })
+}
+
+/// Mean over pixels and channels of (image - reference)² / (reference² + 0.01): an error
+/// that weighs dark and bright regions alike.
+fn relative_mse(film: &Film, reference: &Film) -> f64 {
+    let sum: f64 = film
+        .pixels
+        .iter()
+        .zip(&reference.pixels)
+        .flat_map(|(p, q)| (0..3).map(move |c| (p[c] as f64, q[c] as f64)))
+        .map(|(a, b)| (a - b).powi(2) / (b * b + 1e-2))
+        .sum();
+    sum / (3 * film.pixels.len()) as f64
+}
+
+fn markdown(rows: &[Row], args: &DenoiseArgs, threads: usize) -> String {
+    let mut t = String::new();
+    let _ = writeln!(
+        t,
+        "Denoising (Open Image Denoise, guided by the albedo and normal): {}x{}, reference {} spp (another seed), {threads} threads. Relative MSE: mean of (image - reference)² / (reference² + 0.01).\n",
+        args.size.0, args.size.1, args.reference_spp
+    );
+    let _ = writeln!(
+        t,
+        "| scene | spp | noisy | denoised | undenoised at equal time (spp) | samples the undenoised render needs (1/spp law) | render with AOVs (s) | denoise (s) | denoise per megapixel (s) |"
+    );
+    let _ = writeln!(t, "|---|---:|---:|---:|---:|---:|---:|---:|---:|");
+    let megapixels = (args.size.0 as f64 * args.size.1 as f64) / 1e6;
+    for r in rows {
+        let needed = (r.spp as f64 * r.noisy / r.denoised.max(1e-12)).round();
+        let _ = writeln!(
+            t,
+            "| {} | {} | {:.5} | {:.5} | {:.5} ({}) | ~{needed} | {:.3} | {:.3} | {:.2} |",
+            r.scene,
+            r.spp,
+            r.noisy,
+            r.denoised,
+            r.equal_time,
+            r.equal_time_spp,
+            r.render_seconds,
+            r.denoise_seconds,
+            r.denoise_seconds / megapixels
+        );
+    }
+    t
+}
