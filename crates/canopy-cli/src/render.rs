@@ -435,26 +435,22 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
             Interrupted("interrupted before the first sample; nothing was written".into()).into(),
         );
     }
-    let threads = Some(prepared.threads());
     let aov_images = run.accumulator.aov_images();
     let noisy = run.accumulator.film();
     let denoised = match &oidn {
         Some(oidn) => {
             let start = std::time::Instant::now();
             let options = canopy_job::DenoiseOptions {
-                threads,
+                threads: Some(prepared.threads()),
                 prefilter: args.prefilter_guides,
             };
-            match canopy_job::denoise_film(oidn, &noisy, &aov_images, &options) {
-                Ok(film) => {
-                    summary.denoise_seconds = Some(start.elapsed().as_secs_f64());
-                    Some(film)
-                }
-                Err(e) => {
+            let denoised =
+                canopy_job::denoise_film(oidn, &noisy, &aov_images, &options).map_err(|e| {
                     let saved = keep_samples(&prepared, &run, &dest);
-                    return Err(samples_kept(anyhow::Error::from(e), saved));
-                }
-            }
+                    samples_kept(e.into(), "denoised", saved)
+                })?;
+            summary.denoise_seconds = Some(start.elapsed().as_secs_f64());
+            Some(denoised)
         }
         None => None,
     };
@@ -480,7 +476,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     }
     if let Err(e) = written {
         let saved = keep_samples(&prepared, &run, &dest);
-        return Err(samples_kept(anyhow::Error::from(e), saved));
+        return Err(samples_kept(anyhow::Error::from(e), "written", saved));
     }
     if !layers.set.is_empty() {
         summary.aovs = Some(layers.set.to_string());
@@ -574,15 +570,16 @@ fn keep_samples(
         .find(|place| prepared.save_checkpoint(&run.accumulator, place).is_ok())
 }
 
-/// `error`, telling where the samples were kept ([`keep_samples`]).
-fn samples_kept(error: anyhow::Error, saved: Option<PathBuf>) -> anyhow::Error {
+/// `error` (the image could not be `what`: written, denoised), telling where the samples
+/// were kept ([`keep_samples`]).
+fn samples_kept(error: anyhow::Error, what: &str, saved: Option<PathBuf>) -> anyhow::Error {
     match saved {
         Some(path) => error.context(format!(
-            "the image could not be written, but the render is saved in {}: write it with `canopy render --resume {} -o OTHER.png`",
+            "the image could not be {what}, but the render is saved in {}: write it with `canopy render --resume {} -o OTHER.png`",
             path.display(),
             path.display()
         )),
-        None => error.context("the image could not be written, and neither could a checkpoint of its samples (beside it, here, or in the temporary folder)"),
+        None => error.context(format!("the image could not be {what}, and neither could a checkpoint of its samples be written (beside it, here, or in the temporary folder)")),
     }
 }
 
