@@ -54,8 +54,7 @@ impl Gpu {
     }
 
     async fn open() -> Result<Self, GpuError> {
-        let instance =
-            wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+        let instance = new_instance();
         let adapter = instance
             .request_adapter(&wgpu::RequestAdapterOptions {
                 power_preference: wgpu::PowerPreference::HighPerformance,
@@ -243,14 +242,38 @@ impl Gpu {
     }
 }
 
+/// A wgpu instance for compute, which needs no display.
+fn new_instance() -> wgpu::Instance {
+    quiet_headless_device_selection();
+    wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env())
+}
+
+/// Mesa's implicit Vulkan layer `VK_LAYER_MESA_device_select` picks the GPU that drives
+/// the display, and on a machine without one (no `WAYLAND_DISPLAY`, no `DISPLAY`: a
+/// server, CI, a Ray worker) it prints "error: XDG_RUNTIME_DIR is invalid or not set"
+/// to stderr when it tries to connect, once per instance. A library must not print, and
+/// there is no display to select by: the layer is switched off (`NODEVICE_SELECT=1`,
+/// its own switch) before the first instance, unless the user set it either way.
+fn quiet_headless_device_selection() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| {
+        let set = |name: &str| std::env::var_os(name).is_some_and(|v| !v.is_empty());
+        let headless = !set("WAYLAND_DISPLAY") && !set("DISPLAY");
+        if headless && std::env::var_os("NODEVICE_SELECT").is_none() {
+            // Before wgpu starts the Vulkan loader (which reads it); canopy reads no
+            // environment from other threads meanwhile.
+            std::env::set_var("NODEVICE_SELECT", "1");
+        }
+    });
+}
+
 fn describe(info: &wgpu::AdapterInfo) -> String {
     format!("{} ({:?}, {:?})", info.name, info.backend, info.device_type)
 }
 
 /// Every adapter wgpu finds, described in one line each (`canopy devices`).
 pub fn adapters() -> Vec<String> {
-    let instance =
-        wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+    let instance = new_instance();
     pollster::block_on(instance.enumerate_adapters(wgpu::Backends::all()))
         .iter()
         .map(|a| describe(&a.get_info()))

@@ -244,3 +244,16 @@ def test_negative_and_huge_integers_name_their_argument(call, words):
     with pytest.raises(ValueError) as e:
         call()
     assert words in str(e.value), str(e.value)
+
+
+def test_probing_gpus_prints_nothing_on_a_machine_without_a_display():
+    # Mesa's device-selection layer printed "XDG_RUNTIME_DIR is invalid" twice per probe.
+    import os
+    import subprocess
+    import sys
+
+    env = {k: v for k, v in os.environ.items() if k not in ("XDG_RUNTIME_DIR", "DISPLAY", "WAYLAND_DISPLAY")}
+    probe = "import canopy_rt; canopy_rt.devices(); canopy_rt.devices()"
+    done = subprocess.run([sys.executable, "-c", probe], env=env, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert done.stderr == "", done.stderr
