@@ -24,7 +24,13 @@ if [ -f "$lib/.pyoidn-$version" ]; then
 fi
 work="$(mktemp -d)"
 trap 'rm -rf "$work"' EXIT
-python3 -m pip download --quiet --disable-pip-version-check --no-deps --only-binary=:all: \
+# pip only downloads the wheel; a Python without pip gets one in a throwaway venv.
+pip=(python3 -m pip)
+if ! python3 -m pip --version >/dev/null 2>&1; then
+    python3 -m venv "$work/venv"
+    pip=("$work/venv/bin/python" -m pip)
+fi
+"${pip[@]}" download --quiet --disable-pip-version-check --no-deps --only-binary=:all: \
     --platform manylinux2014_x86_64 --python-version 3.11 --dest "$work" "pyoidn==$version"
 echo "$sha256  $work/$wheel" | sha256sum --check --quiet
 mkdir -p "$lib"
