@@ -2,7 +2,8 @@
 //! few sample counts with the albedo and normal, denoised by Open Image Denoise, and
 //! compared with a high-sample reference (another seed): the relative MSE of the noisy and
 //! the denoised image, of an undenoised render given the AOVs' and the denoiser's time as
-//! extra samples, and the samples the undenoised render would need for the denoised error.
+//! extra samples, and the samples an undenoised render needs for the denoised error
+//! (measured by doubling).
 //! (`bench/denoise.py` adds FLIP and a glTF model.)
 
 use crate::limits;
@@ -51,6 +52,8 @@ struct Row {
     denoised: f64,
     equal_time_spp: u32,
     equal_time: f64,
+    /// Samples an undenoised render needs for the denoised error (measured).
+    to_match: String,
     render_seconds: f64,
     denoise_seconds: f64,
 }
@@ -92,7 +95,16 @@ pub fn run(args: &DenoiseArgs) -> anyhow::Result<()> {
             render(&s, &accel, &|| {}).0
         });
         for &spp in &args.spp {
-            let row = pool.install(|| measure(name, &scene, spp, &accel, &oidn, &reference))?;
+            let row = pool.install(|| {
+                measure(
+                    name,
+                    &scene,
+                    spp,
+                    &accel,
+                    &oidn,
+                    (&reference, args.reference_spp),
+                )
+            })?;
             eprintln!(
                 "{name} {spp} spp: relative MSE {:.5} noisy, {:.5} denoised, {:.5} at equal time",
                 row.noisy, row.denoised, row.equal_time
@@ -115,7 +127,7 @@ fn measure(
     spp: u32,
     accel: &Accel,
     oidn: &Oidn,
-    reference: &Film,
+    (reference, reference_spp): (&Film, u32),
 ) -> anyhow::Result<Row> {
     let mut s = scene.clone();
     s.settings.spp = spp;
@@ -136,16 +148,64 @@ fn measure(
     let ratio = (render_seconds + denoise_seconds) / plain_seconds;
     s.settings.spp = ((spp as f64 * ratio).round() as u32).max(spp);
     let equal = render(&s, accel, &|| {}).0;
+    let (noisy, denoised) = (
+        relative_mse(&noisy, reference),
+        relative_mse(&denoised, reference),
+    );
     Ok(Row {
         scene: name.to_string(),
         spp,
-        noisy: relative_mse(&noisy, reference),
-        denoised: relative_mse(&denoised, reference),
+        noisy,
+        denoised,
         equal_time_spp: s.settings.spp,
         equal_time: relative_mse(&equal, reference),
+        to_match: samples_to_match(
+            scene,
+            accel,
+            (reference, reference_spp),
+            spp,
+            noisy,
+            denoised,
+        ),
         render_seconds,
         denoise_seconds,
     })
+}
+
+/// The samples per pixel an undenoised render needs for the error `target`: renders at
+/// twice, four times ... `spp` (error `noisy` at `spp`) until one is at or below it,
+/// interpolated in log-log between the two around it; "<= spp" where `spp` already does,
+/// "> N" where the reference's own `reference_spp` do not (beyond them the comparison
+/// measures the reference's noise).
+fn samples_to_match(
+    scene: &Scene,
+    accel: &Accel,
+    (reference, reference_spp): (&Film, u32),
+    spp: u32,
+    noisy: f64,
+    target: f64,
+) -> String {
+    if noisy <= target {
+        return format!("<= {spp}");
+    }
+    let mut s = scene.clone();
+    let (mut low, mut low_error) = (spp as f64, noisy);
+    let mut high = spp.saturating_mul(2);
+    while high <= reference_spp {
+        s.settings.spp = high;
+        let error = relative_mse(&render(&s, accel, &|| {}).0, reference);
+        if error <= target {
+            let t = (low_error.ln() - target.ln()) / (low_error.ln() - error.ln());
+            return format!(
+                "{}",
+                (low.ln() + t * ((high as f64).ln() - low.ln()))
+                    .exp()
+                    .round()
+            );
+        }
+        (low, low_error, high) = (high as f64, error, high.saturating_mul(2));
+    }
+    format!("> {reference_spp}")
 }
 
 /// Mean over pixels and channels of (image - reference)² / (reference² + 0.01): an error
@@ -170,21 +230,21 @@ fn markdown(rows: &[Row], args: &DenoiseArgs, threads: usize) -> String {
     );
     let _ = writeln!(
         t,
-        "| scene | spp | noisy | denoised | undenoised at equal time (spp) | samples the undenoised render needs (1/spp law) | render with AOVs (s) | denoise (s) | denoise per megapixel (s) |"
+        "| scene | spp | noisy | denoised | undenoised at equal time (spp) | samples an undenoised render needs for the denoised error | render with AOVs (s) | denoise (s) | denoise per megapixel (s) |"
     );
     let _ = writeln!(t, "|---|---:|---:|---:|---:|---:|---:|---:|---:|");
     let megapixels = (args.size.0 as f64 * args.size.1 as f64) / 1e6;
     for r in rows {
-        let needed = (r.spp as f64 * r.noisy / r.denoised.max(1e-12)).round();
         let _ = writeln!(
             t,
-            "| {} | {} | {:.5} | {:.5} | {:.5} ({}) | ~{needed} | {:.3} | {:.3} | {:.2} |",
+            "| {} | {} | {:.5} | {:.5} | {:.5} ({}) | {} | {:.3} | {:.3} | {:.2} |",
             r.scene,
             r.spp,
             r.noisy,
             r.denoised,
             r.equal_time,
             r.equal_time_spp,
+            r.to_match,
             r.render_seconds,
             r.denoise_seconds,
             r.denoise_seconds / megapixels
