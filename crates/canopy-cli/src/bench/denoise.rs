@@ -6,17 +6,12 @@
 //! (measured by doubling).
 //! (`bench/denoise.py` adds FLIP and a glTF model.)
 
+use super::equal_time;
 use crate::limits;
-use anyhow::Context;
-use canopy_bvh::BuildParams;
 use canopy_job::{denoise_film, DenoiseOptions, Oidn};
-use canopy_render::{
-    load_scene_allowing, render, render_samples, Accel, AccelKind, Accumulator, AovSet, BvhWidth,
-    Film, Scene,
-};
+use canopy_render::{render, render_samples, Accel, Accumulator, AovSet, Film, Scene};
 use clap::Args;
 use std::fmt::Write as _;
-use std::io::Write as _;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -59,51 +54,24 @@ struct Row {
 }
 
 pub fn run(args: &DenoiseArgs) -> anyhow::Result<()> {
-    if let Some(out) = &args.out {
-        crate::safety::check_output(out, "table", crate::safety::OutputKind::Data, &[])?;
-    }
+    let out = args.out.as_deref();
+    equal_time::check_table(out)?;
     // Before minutes of references: the denoiser must be there.
     let oidn = Oidn::load(&[])?;
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(args.threads.unwrap_or(0) as usize)
-        .build()
-        .context("cannot start the worker threads")?;
-    let threads = pool.current_num_threads();
+    let pool = equal_time::worker_pool(args.threads)?;
     let scenes = match args.scenes.is_empty() {
         true => vec!["cornell".to_string(), "paper-3".to_string()],
         false => args.scenes.clone(),
     };
     let mut rows = Vec::new();
     for name in &scenes {
-        let mut scene = load_scene_allowing(name, &args.allow_path)?;
-        if let Some(out) = &args.out {
-            crate::safety::refuse_inputs(out, &scene.inputs, "table")?;
-        }
-        (scene.settings.width, scene.settings.height) = args.size;
-        let accel = Accel::for_scene(
-            &scene,
-            AccelKind::default(),
-            BvhWidth::Eight,
-            &BuildParams::default(),
-            None,
-        );
+        let (scene, accel) = equal_time::load(name, args.size, &args.allow_path, out)?;
         eprintln!("{name}: reference at {} spp", args.reference_spp);
-        let reference = pool.install(|| {
-            let mut s = scene.clone();
-            s.settings.spp = args.reference_spp;
-            s.settings.seed = 1_000_003;
-            render(&s, &accel, &|| {}).0
-        });
+        let reference = equal_time::reference(&pool, (&scene, &accel), args.reference_spp, |_| {});
         for &spp in &args.spp {
             let row = pool.install(|| {
-                measure(
-                    name,
-                    &scene,
-                    spp,
-                    &accel,
-                    &oidn,
-                    (&reference, args.reference_spp),
-                )
+                let reference = (&reference, args.reference_spp);
+                measure(name, &scene, spp, &accel, &oidn, reference)
             })?;
             eprintln!(
                 "{name} {spp} spp: relative MSE {:.5} noisy, {:.5} denoised, {:.5} at equal time",
@@ -112,13 +80,7 @@ pub fn run(args: &DenoiseArgs) -> anyhow::Result<()> {
             rows.push(row);
         }
     }
-    let table = markdown(&rows, args, threads);
-    outln!("{table}");
-    if let Some(out) = &args.out {
-        canopy_render::output::write_atomically(out, |w| w.write_all(table.as_bytes()))
-            .with_context(|| format!("cannot write {}", out.display()))?;
-    }
-    Ok(())
+    equal_time::emit_table(&markdown(&rows, args, pool.current_num_threads()), out)
 }
 
 fn measure(

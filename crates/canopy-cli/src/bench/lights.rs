@@ -3,17 +3,12 @@
 //! integrator, another seed): RMSE of the displayed image and the ratio, plus the share
 //! of render time the shadow rays take.
 
+use super::equal_time;
 use crate::limits;
-use anyhow::Context;
-use canopy_bvh::BuildParams;
-use canopy_render::{
-    load_scene_allowing, render, render_counted, Accel, AccelKind, BvhWidth, Film, Integrator,
-    Scene,
-};
+use canopy_render::{render, render_counted, Accel, Film, Integrator, Scene};
 use clap::Args;
 use glam::Vec3;
 use std::fmt::Write as _;
-use std::io::Write as _;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -56,14 +51,9 @@ struct Row {
 }
 
 pub fn run(args: &LightsArgs) -> anyhow::Result<()> {
-    // Refuse an output that cannot be written before minutes of rendering.
-    if let Some(out) = &args.out {
-        crate::safety::check_output(out, "table", crate::safety::OutputKind::Data, &[])?;
-    }
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(args.threads.unwrap_or(0) as usize)
-        .build()
-        .context("cannot start the worker threads")?;
+    let out = args.out.as_deref();
+    equal_time::check_table(out)?;
+    let pool = equal_time::worker_pool(args.threads)?;
     let scenes = if args.scenes.is_empty() {
         vec!["cornell".to_string()]
     } else {
@@ -71,31 +61,16 @@ pub fn run(args: &LightsArgs) -> anyhow::Result<()> {
     };
     let mut rows = Vec::new();
     for name in &scenes {
-        let mut scene = load_scene_allowing(name, &args.allow_path)?;
-        if let Some(out) = &args.out {
-            crate::safety::refuse_inputs(out, &scene.inputs, "table")?;
-        }
+        let (scene, accel) = equal_time::load(name, args.size, &args.allow_path, out)?;
         let name = if scene.name.is_empty() {
             name.clone()
         } else {
             scene.name.clone()
         };
         let name = &name;
-        (scene.settings.width, scene.settings.height) = args.size;
-        let accel = Accel::for_scene(
-            &scene,
-            AccelKind::default(),
-            BvhWidth::Eight,
-            &BuildParams::default(),
-            None,
-        );
         eprintln!("{name}: reference at {} spp", args.reference_spp);
-        let reference = pool.install(|| {
-            let mut s = scene.clone();
-            s.settings.integrator = Integrator::Path;
-            s.settings.spp = args.reference_spp;
-            s.settings.seed = 1_000_003;
-            render(&s, &accel, &|| {}).0
+        let reference = equal_time::reference(&pool, (&scene, &accel), args.reference_spp, |s| {
+            s.settings.integrator = Integrator::Path
         });
         for integrator in [Integrator::Bsdf, Integrator::Path] {
             let row = pool
@@ -107,13 +82,7 @@ pub fn run(args: &LightsArgs) -> anyhow::Result<()> {
             rows.push(row);
         }
     }
-    let table = markdown(&rows, args, pool.current_num_threads());
-    outln!("{table}");
-    if let Some(out) = &args.out {
-        canopy_render::output::write_atomically(out, |w| w.write_all(table.as_bytes()))
-            .with_context(|| format!("cannot write {}", out.display()))?;
-    }
-    Ok(())
+    equal_time::emit_table(&markdown(&rows, args, pool.current_num_threads()), out)
 }
 
 fn measure(

@@ -3,6 +3,7 @@
 //! builders at every width, repeated, timed and tabulated.
 
 mod denoise;
+mod equal_time;
 mod gpu;
 mod lights;
 mod plots;
