@@ -18,7 +18,9 @@ embreex calls rtcIntersect1/rtcOccluded1 in a loop over numpy arrays and builds 
 outputs; that loop costs tens of ns per ray on its own. So Embree is also called from C
 (`bench/embree_native.c`, compiled here against the libembree4 that embreex ships, loaded
 with ctypes): the same library, per-ray calls, the same rays and threads, no Python loop.
-That is the "Embree kernel" figure the `ratio` lines compare against. Where no C compiler
+That is the "Embree kernel" figure the `ratio` lines compare against; the `ratio-robust`
+lines compare against the same library in its watertight mode (RTC_SCENE_FLAG_ROBUST),
+the counterpart of canopy's default triangle test. Where no C compiler
 is found, the kernel figure falls back to an estimate: embreex's time less its time on a
 scene whose one triangle no ray comes near. Both are shown when both exist. canopy's
 figures are as called from Python, its own conversions and output arrays included.
@@ -156,11 +158,11 @@ def embree_run(scene, o, d, query, threads):
 class NativeEmbree:
     """Embree called per ray from C (bench/embree_native.c) through ctypes."""
 
-    def __init__(self, lib, verts, faces):
+    def __init__(self, lib, verts, faces, robust=False):
         self.lib = lib
         v = np.ascontiguousarray(verts, np.float32)
         f = np.ascontiguousarray(faces, np.uint32)
-        self.handle = lib.native_scene(v.ctypes.data, len(v), f.ctypes.data, len(f))
+        self.handle = lib.native_scene(v.ctypes.data, len(v), f.ctypes.data, len(f), int(robust))
         if not self.handle:
             raise RuntimeError("Embree could not build the scene")
 
@@ -208,7 +210,8 @@ def load_native():
             return None
         lib = ctypes.CDLL(out)
     lib.native_scene.restype = ctypes.c_void_p
-    lib.native_scene.argtypes = [ctypes.c_void_p, ctypes.c_size_t, ctypes.c_void_p, ctypes.c_size_t]
+    lib.native_scene.argtypes = [ctypes.c_void_p, ctypes.c_size_t, ctypes.c_void_p, ctypes.c_size_t,
+                                 ctypes.c_int]
     lib.native_release.argtypes = [ctypes.c_void_p]
     lib.native_trace.restype = ctypes.c_int
     lib.native_trace.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_size_t,
@@ -306,6 +309,7 @@ def main():
         TriangleMesh(scene, verts[faces])
         bvh = canopy.Bvh(verts, faces, builder=args.builder, width=8)
         native = native_lib and NativeEmbree(native_lib, verts, faces)
+        robust = native_lib and NativeEmbree(native_lib, verts, faces, robust=True)
         isa = bvh.stats()["isa"]
         po, pd = primary_rays(verts, args.size)
         _, prim_hits = embree_run(scene, po, pd, "closest", 1)
@@ -323,7 +327,8 @@ def main():
                     ]
                     if native:
                         passes += [lambda: native.run(o, d, query, threads),
-                                   lambda: native.run(so, sd, query, threads)]
+                                   lambda: native.run(so, sd, query, threads),
+                                   lambda: robust.run(o, d, query, threads)]
                     else:
                         passes += [lambda: embree_run(scene, so, sd, query, threads)]
                     timed = best_of(args.runs, *passes)
@@ -331,20 +336,24 @@ def main():
                     n = len(o)
                     estimate = n / max(e_s - x_s, 1e-9) / 1e6
                     if native:
-                        (k_s, k_out), (ks_s, _) = timed[3:]
+                        (k_s, k_out), (ks_s, _), (r_s, r_out) = timed[3:]
                         kernel, kernel_ordered = n / k_s / 1e6, n / ks_s / 1e6
+                        kernel_robust = n / r_s / 1e6
                     else:
-                        k_out = e_out
+                        k_out = r_out = e_out
                         kernel, kernel_ordered = estimate, n / max(timed[3][0] - x_s, 1e-9) / 1e6
+                        kernel_robust = float("nan")
                     row = {
                         "mesh": name, "rays": kind, "query": query, "threads": threads, "n": n,
                         "embree": n / e_s / 1e6,
                         "embree_estimate": estimate,
                         "embree_kernel": kernel,
                         "embree_kernel_ordered": kernel_ordered,
+                        "embree_kernel_robust": kernel_robust,
                         "kernel_source": "native" if native else "estimate",
                         "canopy": n / c_s / 1e6,
                         "mismatches": compare(query, k_out, c_out),
+                        "robust_mismatches": compare(query, r_out, c_out),
                         "embreex_mismatches": compare(query, e_out, c_out),
                         "isa": isa,
                     }
@@ -355,18 +364,25 @@ def main():
               else "estimated: embreex's time less its Python loop's")
     print(f"\ncanopy {canopy.__version__} ({args.builder}, 8-wide, {rows[0]['isa']}) against Embree 4 (embreex's "
           f"library), on the same numpy arrays, Mrays/s, best of {args.runs}. Embree kernel: {source}.\n")
-    print("| mesh | rays | query | threads | canopy | Embree kernel | ratio | Embree kernel, canopy's order "
-          "| ratio, same order | Embree via embreex | ratio (as called) | estimated kernel | disagreeing rays |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    print("Embree robust: the same library with RTC_SCENE_FLAG_ROBUST (watertight, as canopy's "
+          "default triangle test).\n")
+    print("| mesh | rays | query | threads | canopy | Embree kernel | ratio | Embree robust | ratio, robust "
+          "| Embree kernel, canopy's order | ratio, same order | Embree via embreex | ratio (as called) "
+          "| estimated kernel | disagreeing rays |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         print(f"| {r['mesh']} | {r['rays']} | {r['query']} | {r['threads']} | {r['canopy']:.2f} | "
               f"{r['embree_kernel']:.2f} | {r['canopy'] / r['embree_kernel']:.2f} | "
+              f"{r['embree_kernel_robust']:.2f} | {r['canopy'] / r['embree_kernel_robust']:.2f} | "
               f"{r['embree_kernel_ordered']:.2f} | {r['canopy'] / r['embree_kernel_ordered']:.2f} | "
               f"{r['embree']:.2f} | {r['canopy'] / r['embree']:.2f} | {r['embree_estimate']:.2f} | {r['mismatches']} |")
     print()
     for r in rows:
         print(f"ratio {r['mesh']} {r['rays']} {r['query']} {r['threads']}: {r['canopy'] / r['embree_kernel']:.2f}")
-    if any(max(r["mismatches"], r["embreex_mismatches"]) > 0.0001 * r["n"] for r in rows):
+        print(f"ratio-robust {r['mesh']} {r['rays']} {r['query']} {r['threads']}: "
+              f"{r['canopy'] / r['embree_kernel_robust']:.2f}")
+    if any(max(r["mismatches"], r["embreex_mismatches"], r["robust_mismatches"]) > 0.0001 * r["n"]
+           for r in rows):
         sys.exit("hits disagree on more than 0.01% of rays")
 
 

@@ -1,20 +1,28 @@
 """canopy against Mitsuba 3 (llvm_ad_rgb) on the same scene, in one process.
 
 The canopy scene is exported to a Mitsuba scene dict (spheres, cuboids and triangles,
-the materials, the sky or a constant background), both render it at the same size, spp,
+the materials, the sky or a constant background), both render it at the same size,
 depth and thread count in turns (best of N each), and the script prints
 
     ratio <scene> <threads>: X.XX            canopy's speed over Mitsuba's at equal spp
-    ratio-equal-error <scene> <threads>: X.XX  the same at equal noise
+    ratio-equal-error <scene> <threads>: X.XX  the same at equal noise, against the
+                                               Mitsuba sampler that is best on the scene
 
-Each renderer draws its random numbers with its own default unless told: canopy's
-scrambled Sobol points (`--sampler`), Mitsuba's independent sampler (`--mitsuba-sampler`;
-`ldsampler` is its low-discrepancy counterpart to canopy's).
+A user who compares renderers gives each its best sampler, and the best one depends on
+the scene. So Mitsuba renders with each of its samplers (`--mitsuba-samplers`, default
+independent, stratified, multijitter, orthogonal and ldsampler), each at the sample count
+nearest to `--spp` that it takes exactly (orthogonal takes squares of primes, stratified
+and ldsampler squares and powers of two: 64 and 256 suit all but orthogonal). canopy
+renders with its scene's sampler (scrambled Sobol points unless the scene says) or
+`--sampler`.
 
 Noise is measured, not guessed: each renderer renders twice with two seeds, and a pixel's
-standard deviation is |a - b| / sqrt(2) (RMS over the image). At equal noise a renderer
-needs spp proportional to its variance, so the equal-error ratio is the equal-spp ratio
-times (sigma_mitsuba / sigma_canopy)^2.
+standard deviation is |a - b| / sqrt(2) (RMS over the image). A renderer's efficiency is
+1 / (sigma^2 t): at equal noise a renderer needs time in proportion to sigma^2 t, so the
+equal-error ratio is (sigma_mitsuba^2 t_mitsuba) / (sigma_canopy^2 t_canopy), valid
+across sample counts (for low-discrepancy points, whose error falls faster than 1/spp,
+the one with more samples is slightly favoured). The equal-spp ratio compares times with
+the fastest Mitsuba sampler that takes exactly canopy's spp.
 
 The mean images must agree within noise (tile by tile); where the two models differ the
 mapping is stated: canopy's fuzzed metal (a sphere of radius `fuzz` about the mirror
@@ -110,7 +118,7 @@ def bsdf(material: dict) -> dict:
 
 
 def mitsuba_scene(mi, info, width: int, height: int, depth: int, workdir: str,
-                  sampler: str = "independent") -> dict:
+                  sampler: str = "independent", spp: int = 64) -> dict:
     """The Mitsuba scene dict of a canopy scene."""
     contents = info.contents()
     if contents["punctual_lights"] or contents["textured_materials"]:
@@ -124,7 +132,7 @@ def mitsuba_scene(mi, info, width: int, height: int, depth: int, workdir: str,
                                                    up=cam["up"]),
         "film": {"type": "hdrfilm", "width": width, "height": height, "rfilter": {"type": "box"},
                  "pixel_format": "rgb"},
-        "sampler": {"type": sampler},
+        "sampler": {"type": sampler, "sample_count": spp},
     }
     if cam["aperture"] > 0:
         sensor["type"] = "thinlens"
@@ -199,6 +207,30 @@ def tiles_agree(a, b, sa, sb, tile: int = 32) -> float:
     return good / max(total, 1)
 
 
+def accepted_spp(mi, sampler: str, wanted: int) -> int:
+    """The sample count nearest to `wanted` that Mitsuba's `sampler` takes as it is (the
+    samplers round other counts up, some to squares of primes)."""
+    def taken(n: int) -> int:
+        return mi.load_dict({"type": sampler, "sample_count": n}).sample_count()
+
+    level = mi.log_level()
+    mi.set_log_level(mi.LogLevel.Error)  # each rounding logs a warning
+    try:
+        up = taken(wanted)
+        down = next((n for n in range(wanted, max(wanted // 2, 1) - 1, -1) if taken(n) == n), None)
+    finally:
+        mi.set_log_level(level)
+    if down is None or up - wanted < wanted - down:
+        return up
+    return down
+
+
+def efficiency_ratio(canopy_run: dict, mitsuba_run: dict) -> float:
+    """canopy's speed over Mitsuba's at equal noise: (sigma^2 t) of Mitsuba's over canopy's."""
+    return (mitsuba_run["sigma"] ** 2 * mitsuba_run["time"]) / (
+        canopy_run["sigma"] ** 2 * canopy_run["time"])
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("scenes", nargs="*", default=["paper-1"])
@@ -207,7 +239,8 @@ def main() -> int:
     parser.add_argument("--allow-path", action="append",
                         default=[shared] if os.path.isdir(shared) else [],
                         help="a folder the scenes may read files from, beside their own")
-    parser.add_argument("--spp", type=int, default=128)
+    parser.add_argument("--spp", type=int, default=64,
+                        help="canopy's spp; each Mitsuba sampler takes the nearest it accepts")
     parser.add_argument("--size", default="480x480")
     parser.add_argument("--depth", type=int, default=5)
     parser.add_argument("--threads", type=int, default=2)
@@ -216,8 +249,10 @@ def main() -> int:
     parser.add_argument("--schedule", default=None, help="canopy's schedule: wavefront or depth")
     parser.add_argument("--images", help="write both mean images here as EXR")
     parser.add_argument("--sampler", default=None, help="canopy's sampler: sobol or independent")
-    parser.add_argument("--mitsuba-sampler", default="independent",
-                        help="Mitsuba's sampler: independent, ldsampler, multijitter, ...")
+    parser.add_argument("--mitsuba-samplers", nargs="+",
+                        default=["independent", "stratified", "multijitter", "orthogonal",
+                                 "ldsampler"],
+                        help="Mitsuba's samplers to try; the best on each scene is compared")
     args = parser.parse_args()
     width, height = (int(v) for v in args.size.lower().split("x"))
 
@@ -225,19 +260,24 @@ def main() -> int:
     import drjit as dr
     mi.set_variant(args.variant)
     dr.set_thread_count(args.threads)
+    sampler_spp = {s: accepted_spp(mi, s, args.spp) for s in args.mitsuba_samplers}
     print(f"mitsuba {mi.__version__} ({args.variant}), canopy {canopy.__version__}; "
-          f"{width}x{height}, {args.spp} spp, depth {args.depth}, {args.threads} threads; "
-          f"samplers: canopy {args.sampler or 'the scene default'}, mitsuba {args.mitsuba_sampler}")
+          f"{width}x{height}, depth {args.depth}, {args.threads} threads; canopy "
+          f"{args.spp} spp with {args.sampler or 'the scene sampler (sobol unless it says)'}; "
+          "mitsuba " + ", ".join(f"{s} {n} spp" for s, n in sampler_spp.items()))
 
     for name in args.scenes:
         info = canopy.load_scene(name, allow_paths=args.allow_path)
         with tempfile.TemporaryDirectory() as workdir:
-            scene = mi.load_dict(mitsuba_scene(mi, info, width, height, args.depth, workdir,
-                                               args.mitsuba_sampler))
+            def mitsuba_runner(sampler: str):
+                spp = sampler_spp[sampler]
+                scene = mi.load_dict(mitsuba_scene(mi, info, width, height, args.depth, workdir,
+                                                   sampler, spp))
 
-            def run_mitsuba(seed: int) -> np.ndarray:
-                image = mi.render(scene, spp=args.spp, seed=seed)
-                return np.array(image, dtype=np.float32)[:, :, :3]
+                def run(seed: int) -> np.ndarray:
+                    image = mi.render(scene, spp=spp, seed=seed)
+                    return np.array(image, dtype=np.float32)[:, :, :3]
+                return run
 
             def run_canopy(seed: int) -> np.ndarray:
                 options = dict(spp=args.spp, size=(width, height), max_depth=args.depth,
@@ -248,38 +288,50 @@ def main() -> int:
                     options["sampler"] = args.sampler
                 return canopy.render(name, allow_paths=args.allow_path, **options)
 
-            times = {"canopy": [], "mitsuba": []}
-            images = {"canopy": [], "mitsuba": []}
-            for turn in range(args.turns):
-                for side, run in (("mitsuba", run_mitsuba), ("canopy", run_canopy)):
+            runners = {f"mitsuba {s}": mitsuba_runner(s) for s in args.mitsuba_samplers}
+            runners["canopy"] = run_canopy
+            times = {side: [] for side in runners}
+            images = {side: [] for side in runners}
+            for turn in range(max(args.turns, 2)):
+                for side, run in runners.items():
+                    if turn >= args.turns and len(images[side]) >= 2:
+                        continue
                     start = time.perf_counter()
                     image = run(turn % 2)
                     times[side].append(time.perf_counter() - start)
                     if turn < 2:
                         images[side].append(image)
-            if args.turns < 2:
-                for side, run in (("mitsuba", run_mitsuba), ("canopy", run_canopy)):
-                    images[side].append(run(1))
-        best = {side: min(t) for side, t in times.items()}
-        noise = {side: sigma(*images[side]) for side in images}
-        means = {side: 0.5 * (images[side][0] + images[side][1]) for side in images}
-        pixel_sigma = {side: np.abs(images[side][0] - images[side][1]) / math.sqrt(2)
-                       for side in images}
-        agree = tiles_agree(means["canopy"], means["mitsuba"],
-                            pixel_sigma["canopy"] / math.sqrt(2), pixel_sigma["mitsuba"] / math.sqrt(2))
-        lum = {side: float(means[side].mean()) for side in means}
-        speed = best["mitsuba"] / best["canopy"]
-        equal_error = speed * (noise["mitsuba"] / noise["canopy"]) ** 2
-        print(f"{name}: canopy {best['canopy']:.2f} s (sigma {noise['canopy']:.4f}), "
-              f"mitsuba {best['mitsuba']:.2f} s (sigma {noise['mitsuba']:.4f}); "
-              f"mean {lum['canopy']:.4f} vs {lum['mitsuba']:.4f}, "
-              f"{100 * agree:.0f}% of 32x32 tiles agree within noise")
-        print(f"ratio {name} {args.threads}: {speed:.2f}")
-        print(f"ratio-equal-error {name} {args.threads}: {equal_error:.2f}")
+        runs = {side: {"time": min(times[side]), "sigma": sigma(*images[side]),
+                       "mean": 0.5 * (images[side][0] + images[side][1]),
+                       "pixel_sigma": np.abs(images[side][0] - images[side][1]) / math.sqrt(2)}
+                for side in runners}
+        ours = runs["canopy"]
+        print(f"{name}: canopy {ours['time']:.2f} s (sigma {ours['sigma']:.4f}, "
+              f"mean {float(ours['mean'].mean()):.4f})")
+        for s in args.mitsuba_samplers:
+            theirs = runs[f"mitsuba {s}"]
+            print(f"  mitsuba {s:<12} {sampler_spp[s]:>4} spp {theirs['time']:7.2f} s "
+                  f"(sigma {theirs['sigma']:.4f}, mean {float(theirs['mean'].mean()):.4f}): "
+                  f"canopy {efficiency_ratio(ours, theirs):.2f}x at equal error")
+        best = max(args.mitsuba_samplers,
+                   key=lambda s: 1.0 / (runs[f"mitsuba {s}"]["sigma"] ** 2
+                                        * runs[f"mitsuba {s}"]["time"]))
+        exact = [s for s in args.mitsuba_samplers if sampler_spp[s] == args.spp]
+        theirs = runs[f"mitsuba {best}"]
+        agree = tiles_agree(ours["mean"], theirs["mean"], ours["pixel_sigma"] / math.sqrt(2),
+                            theirs["pixel_sigma"] / math.sqrt(2))
+        print(f"  against mitsuba {best}: {100 * agree:.0f}% of 32x32 tiles agree within noise")
+        if exact:
+            fastest = min(exact, key=lambda s: runs[f"mitsuba {s}"]["time"])
+            speed = runs[f"mitsuba {fastest}"]["time"] / ours["time"]
+            print(f"ratio {name} {args.threads}: {speed:.2f} (mitsuba {fastest}, {args.spp} spp)")
+        print(f"ratio-equal-error {name} {args.threads}: {efficiency_ratio(ours, theirs):.2f} "
+              f"(mitsuba {best}, its best sampler here)")
         if args.images:
             os.makedirs(args.images, exist_ok=True)
-            for side in means:
-                canopy.write_image(os.path.join(args.images, f"{name}-{side}.exr"), means[side])
+            canopy.write_image(os.path.join(args.images, f"{name}-canopy.exr"), ours["mean"])
+            canopy.write_image(os.path.join(args.images, f"{name}-mitsuba-{best}.exr"),
+                               theirs["mean"])
     return 0
 
 

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # canopy against Mitsuba 3 (llvm_ad_rgb, from PyPI) rendering the same scene in one run:
 # speed at equal spp and at equal noise, and whether the images agree.
-#   bench/mitsuba_render.sh [paper-1 paper-3 ...] [--spp 128] [--size 480x480] [--depth 5]
+#   bench/mitsuba_render.sh [paper-1 paper-3 ...] [--spp 64] [--size 480x480] [--depth 5]
 #                           [--threads 2] [--turns 3] [--images DIR]
 # Mitsuba's LLVM backend needs Debian's libllvm19 (installed here when run as root).
 set -euo pipefail

@@ -300,7 +300,9 @@ impl PackRay {
     #[inline(always)]
     pub fn new(ray: &Ray) -> Self {
         let s = ShearedRay::new(ray);
-        let o = ray.origin;
+        // An array, not `Vec3`: glam indexes a `Vec3` with a `match`, whose branches on
+        // the ray's axes mispredicted about once a ray.
+        let o = ray.origin.to_array();
         Self {
             k: [s.kx, s.ky, s.kz],
             o: [o[s.kx], o[s.ky], o[s.kz]],

@@ -43,8 +43,9 @@ impl PacketShear {
             if *axes.get_or_insert(k) != k {
                 return None;
             }
+            let origin = ray.origin.to_array();
             for (axis, &k) in k.iter().enumerate() {
-                packet.o[axis][lane] = ray.origin[k];
+                packet.o[axis][lane] = origin[k];
             }
             for (axis, shear) in s.shear.to_array().into_iter().enumerate() {
                 packet.shear[axis][lane] = shear;

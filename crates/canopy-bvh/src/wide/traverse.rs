@@ -678,14 +678,54 @@ fn prefetch_child<const N: usize, L: PrefetchLeaves>(
         return;
     }
     if count == 0 {
-        prefetch(&nodes[child as usize]);
+        // SAFETY: `child` is an interior slot's child (see `node_at`).
+        prefetch(unsafe { node_at(nodes, child) });
     } else {
         leaves.prefetch(child, count);
     }
 }
 
+/// The node at index `child`, without a bounds check (a check and its branch on every
+/// node visit were about 5% of an incoherent ray's instructions).
+///
+/// # Safety
+/// `child` must be 0 in a non-empty tree or an interior slot's child (`count == 0`):
+/// [`super::BvhN::from_bvh2`] writes every such index in range, and nothing else writes
+/// them (a refit changes boxes only).
+#[inline(always)]
+unsafe fn node_at<const N: usize>(nodes: &[WideNode<N>], child: u32) -> &WideNode<N> {
+    debug_assert!((child as usize) < nodes.len());
+    // SAFETY: the caller's guarantee.
+    unsafe { nodes.get_unchecked(child as usize) }
+}
+
 /// A stack entry: a slot's `child` and `count` (see [`WideNode`]) and its entry distance.
 type Entry = (u32, u32, f32);
+
+/// The entered slots of `node` (the bits of `mask`, entry distances `t`) sorted far to
+/// near, equal distances in slot order, in the first `mask.count_ones()` entries: an
+/// insertion sort of a few. (Placing each slot at its rank, counted without branches,
+/// mispredicted 1.8 fewer branches a ray on incoherent rays but took 120 more
+/// instructions: no faster.)
+#[inline(always)]
+fn far_to_near<const N: usize>(mask: u32, t: &[f32; N], node: &WideNode<N>) -> [Entry; N] {
+    let mut sorted = [(0u32, 0u32, 0f32); N];
+    let mut n = 0;
+    let mut lanes = mask;
+    while lanes != 0 {
+        let i = lanes.trailing_zeros() as usize;
+        lanes &= lanes - 1;
+        let entry = (node.child[i], node.count[i], t[i]);
+        let mut j = n;
+        while j > 0 && sorted[j - 1].2 < entry.2 {
+            sorted[j] = sorted[j - 1];
+            j -= 1;
+        }
+        sorted[j] = entry;
+        n += 1;
+    }
+    sorted
+}
 
 /// Closest hit, nearest child first. `nodes` is non-empty.
 ///
@@ -722,8 +762,9 @@ where
         if count > 0 {
             leaves.closest(child, count, &mut search, counter);
         } else {
-            let node = &nodes[child as usize];
-            // SAFETY: as above.
+            // SAFETY: `child` is the root or an interior slot's child; the kernel's
+            // instruction set is the caller's guarantee.
+            let node = unsafe { node_at(nodes, child) };
             let (mask, t) = unsafe { K::hit_mask(node, &kray, search.ray.t_max) };
             if mask != 0 {
                 let first = mask.trailing_zeros() as usize;
@@ -746,23 +787,10 @@ where
                     (child, count) = (node.child[near], node.count[near]);
                     continue;
                 }
-                // More: sort the entered slots far to near (insertion sort of a few),
-                // push all but the nearest and descend into it.
-                let mut hits = [(0u32, 0u32, 0f32); N];
-                let mut n = 0;
-                let mut lanes = mask;
-                while lanes != 0 {
-                    let i = lanes.trailing_zeros() as usize;
-                    lanes &= lanes - 1;
-                    let entry = (node.child[i], node.count[i], t[i]);
-                    let mut j = n;
-                    while j > 0 && hits[j - 1].2 < entry.2 {
-                        hits[j] = hits[j - 1];
-                        j -= 1;
-                    }
-                    hits[j] = entry;
-                    n += 1;
-                }
+                // More: sort the entered slots far to near, push all but the nearest
+                // and descend into it.
+                let hits = far_to_near(mask, &t, node);
+                let n = mask.count_ones() as usize;
                 for &entry in &hits[..n - 1] {
                     prefetch_child(prefetch, nodes, leaves, entry.0, entry.1);
                     stack.push(entry);
@@ -814,8 +842,8 @@ where
                 return true;
             }
         } else {
-            let node = &nodes[child as usize];
-            // SAFETY: as above.
+            // SAFETY: as in `closest`.
+            let node = unsafe { node_at(nodes, child) };
             let (mask, t) = unsafe { K::hit_mask(node, &kray, ray.t_max) };
             if mask != 0 {
                 // Descend into the nearest entered slot (where a blocker is likeliest),
@@ -923,3 +951,31 @@ macro_rules! scalar_dispatch {
 
 #[cfg(not(target_arch = "x86_64"))]
 scalar_dispatch!(4, 8);
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use bytemuck::Zeroable;
+
+    /// The ranks place every entered slot where a stable sort by distance, far first,
+    /// puts it (ties in slot order), for every mask of an 8-wide node and distances with
+    /// many ties.
+    #[test]
+    fn far_to_near_is_a_stable_sort_of_the_entered_slots() {
+        let mut node = WideNode::<8>::zeroed();
+        for i in 0..8 {
+            node.child[i] = 100 + i as u32;
+            node.count[i] = i as u32;
+        }
+        for (round, mask) in (1u32..256).enumerate() {
+            let t: [f32; 8] = std::array::from_fn(|i| ((i * 7 + round * 3) % 5) as f32);
+            let mut expected: Vec<Entry> = (0..8)
+                .filter(|&i| mask >> i & 1 != 0)
+                .map(|i| (node.child[i], node.count[i], t[i]))
+                .collect();
+            expected.sort_by(|a, b| b.2.total_cmp(&a.2));
+            let sorted = far_to_near(mask, &t, &node);
+            assert_eq!(&sorted[..expected.len()], &expected[..], "mask {mask:#b}");
+        }
+    }
+}
