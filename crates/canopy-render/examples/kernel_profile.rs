@@ -17,7 +17,7 @@ use glam::Vec3;
 use std::sync::Arc;
 use std::time::Instant;
 
-fn words(path: &str) -> Vec<u8> {
+fn read_bytes(path: &str) -> Vec<u8> {
     std::fs::read(path).unwrap_or_else(|e| panic!("{path}: {e}"))
 }
 
@@ -41,7 +41,7 @@ fn u32s(bytes: &[u8], at: usize, n: usize) -> Vec<u32> {
 
 /// The mesh file: vertex and triangle counts (u64), vertices (f32 xyz), triangles (u32).
 fn read_mesh(path: &str) -> Vec<Primitive> {
-    let bytes = words(path);
+    let bytes = read_bytes(path);
     let (nv, nf) = (u64_at(&bytes, 0), u64_at(&bytes, 8));
     let v = f32s(&bytes, 16, 3 * nv);
     let f = u32s(&bytes, 16 + 12 * nv, 3 * nf);
@@ -56,7 +56,7 @@ fn read_mesh(path: &str) -> Vec<Primitive> {
 
 /// The ray file: a count (u64), origins (f32 xyz), directions (f32 xyz).
 fn read_rays(path: &str) -> Vec<Ray> {
-    let bytes = words(path);
+    let bytes = read_bytes(path);
     let n = u64_at(&bytes, 0);
     let o = f32s(&bytes, 8, 3 * n);
     let d = f32s(&bytes, 8 + 12 * n, 3 * n);

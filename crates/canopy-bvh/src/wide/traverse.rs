@@ -957,9 +957,9 @@ mod tests {
     use super::*;
     use bytemuck::Zeroable;
 
-    /// The ranks place every entered slot where a stable sort by distance, far first,
-    /// puts it (ties in slot order), for every mask of an 8-wide node and distances with
-    /// many ties.
+    /// Every entered slot lands where a stable sort by distance, far first, puts it
+    /// (ties in slot order), for every mask of an 8-wide node and distances with many
+    /// ties.
     #[test]
     fn far_to_near_is_a_stable_sort_of_the_entered_slots() {
         let mut node = WideNode::<8>::zeroed();
