@@ -109,13 +109,7 @@ fn closest_hit(c: &mut Criterion) {
 fn camera_packets(c: &mut Criterion) {
     for name in ["paper-1", "paper-3", "paper-5"] {
         let scene = load_scene(name).expect("a built-in scene");
-        let accel = Accel::for_scene(
-            &scene,
-            AccelKind::default(),
-            BvhWidth::Eight,
-            &BuildParams::default(),
-            None,
-        );
+        let accel = Accel::default_for(&scene);
         let rays = stream_camera_rays(&scene, 128, 8);
         let mut hits = vec![None; rays.len()];
         let mut group = c.benchmark_group(format!("packets/{name}"));

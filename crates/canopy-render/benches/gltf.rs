@@ -8,7 +8,7 @@
 use canopy_render::gltf_scene::parse_gltf;
 use canopy_render::scene_file::DirAssets;
 use canopy_render::texture::MaterialMaps;
-use canopy_render::{integrator, Accel, AccelKind, BvhWidth};
+use canopy_render::{integrator, Accel};
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use serde_json::Value;
 use std::path::PathBuf;
@@ -121,13 +121,7 @@ fn textures(c: &mut Criterion) {
     ) = (160, 160, 4);
     let mut plain = textured.clone();
     plain.material_maps = vec![MaterialMaps::default(); plain.material_maps.len()];
-    let accel = Accel::for_scene(
-        &textured,
-        AccelKind::default(),
-        BvhWidth::default(),
-        &Default::default(),
-        None,
-    );
+    let accel = Accel::default_for(&textured);
     assert!(textured.is_textured() && !plain.is_textured());
     let (a, b) = (
         integrator::render(&textured, &accel, &|| {}).0,

@@ -12,8 +12,8 @@
 //!
 //! `cargo run --release -p canopy-render --example packet_speed -- [scene ...]
 //!  [--size 480x480] [--samples 8] [--turns 5] [--shadows]`
-use canopy_bvh::{BuildParams, BvhWidth, Hit, Ray, RayQuery, ALL_MASKS};
-use canopy_render::accel::{Accel, AccelKind};
+use canopy_bvh::{Hit, Ray, RayQuery, ALL_MASKS};
+use canopy_render::accel::Accel;
 use canopy_render::camera::Camera;
 use canopy_render::lights::Lights;
 use canopy_render::load_scene;
@@ -45,13 +45,7 @@ fn main() {
     }
     for name in &scenes {
         let scene = load_scene(name).expect("a scene");
-        let accel = Accel::for_scene(
-            &scene,
-            AccelKind::default(),
-            BvhWidth::Eight,
-            &BuildParams::default(),
-            None,
-        );
+        let accel = Accel::default_for(&scene);
         let camera = Camera::new(&scene.camera, size.0, size.1);
         let mut rays = Vec::with_capacity((size.0 * size.1 * samples) as usize);
         for y in 0..size.1 {

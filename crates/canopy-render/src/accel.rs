@@ -230,6 +230,18 @@ impl Accel {
         Self::build_all(kind, width, primitives, &[], &[], params, optimize)
     }
 
+    /// [`Accel::for_scene`] with every choice at its default: the default builder, 8
+    /// wide, default parameters, no optimisation (what a render builds unless told).
+    pub fn default_for(scene: &Scene) -> Self {
+        Self::for_scene(
+            scene,
+            AccelKind::default(),
+            BvhWidth::default(),
+            &BuildParams::default(),
+            None,
+        )
+    }
+
     /// The structure of a whole scene: its primitives and its mesh instances, every
     /// structure built by `kind` in `width`.
     pub fn for_scene(

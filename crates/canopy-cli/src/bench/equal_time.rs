@@ -3,8 +3,7 @@
 //! and the table written where asked.
 
 use anyhow::Context;
-use canopy_bvh::BuildParams;
-use canopy_render::{load_scene_allowing, render, Accel, AccelKind, BvhWidth, Film, Scene};
+use canopy_render::{load_scene_allowing, render, Accel, Film, Scene};
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -37,13 +36,7 @@ pub fn load(
         crate::safety::refuse_inputs(out, &scene.inputs, "table")?;
     }
     (scene.settings.width, scene.settings.height) = size;
-    let accel = Accel::for_scene(
-        &scene,
-        AccelKind::default(),
-        BvhWidth::Eight,
-        &BuildParams::default(),
-        None,
-    );
+    let accel = Accel::default_for(&scene);
     Ok((scene, accel))
 }
 

@@ -3,8 +3,7 @@
 //! counts, cycles, required extensions, missing buffers) are errors that name the file
 //! and the object at fault, never panics.
 
-use canopy_bvh::{BuildParams, BvhWidth};
-use canopy_render::accel::{Accel, AccelKind};
+use canopy_render::accel::Accel;
 use canopy_render::gltf_scene::parse_gltf;
 use canopy_render::scene_file::Assets;
 use canopy_render::{integrator, load_scene};
@@ -402,13 +401,7 @@ fn data_uri(png: &[u8]) -> String {
 }
 
 fn accel_of(scene: &canopy_render::Scene) -> Accel {
-    Accel::for_scene(
-        scene,
-        AccelKind::default(),
-        BvhWidth::default(),
-        &BuildParams::default(),
-        None,
-    )
+    Accel::default_for(scene)
 }
 
 /// The ray straight down the z axis onto (x, y) of the triangle, and its hit.

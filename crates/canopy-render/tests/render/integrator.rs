@@ -230,13 +230,7 @@ fn sobol_sampling_is_unbiased_and_less_noisy() {
             scene.settings.height,
             scene.settings.spp,
         ) = (24, 24, 64);
-        let accel = Accel::for_scene(
-            &scene,
-            AccelKind::default(),
-            BvhWidth::Eight,
-            &BuildParams::default(),
-            None,
-        );
+        let accel = Accel::default_for(&scene);
         // Per sampler: the mean of the two seeds' images and the RMS per-pixel noise.
         let mut measure = |sampler| {
             scene.settings.sampler = sampler;
@@ -304,13 +298,7 @@ fn counted_render_is_the_same_image_and_counts_the_work() {
     // alone, as above, is left to BSDF sampling: no shadow rays).
     assert_eq!(stats.shadow_rays, 0);
     let lit = small("cornell");
-    let accel = Accel::for_scene(
-        &lit,
-        AccelKind::default(),
-        BvhWidth::Eight,
-        &BuildParams::default(),
-        None,
-    );
+    let accel = Accel::default_for(&lit);
     let (_, stats) = canopy_render::render_counted(&lit, &accel, &|| {});
     assert!(stats.shadow_rays > 0 && stats.shadow_time > std::time::Duration::ZERO);
 }

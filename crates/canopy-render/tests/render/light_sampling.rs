@@ -4,9 +4,8 @@
 //! lights (cuboid, sphere, triangles), glossy and mirror metal, glass, the sky, and an
 //! environment map. Furnaces check that no energy is gained or lost.
 
-use canopy_bvh::BuildParams;
 use canopy_render::scene_file::{parse_scene, Assets};
-use canopy_render::{render, Accel, AccelKind, BuiltinScene, BvhWidth, Film, Integrator, Scene};
+use canopy_render::{render, Accel, BuiltinScene, Film, Integrator, Scene};
 use glam::Vec3;
 
 /// Side of the square tiles whose means are compared.
@@ -19,13 +18,7 @@ struct TileStats {
 }
 
 fn render_film(scene: &Scene) -> Film {
-    let accel = Accel::for_scene(
-        scene,
-        AccelKind::default(),
-        BvhWidth::Eight,
-        &BuildParams::default(),
-        None,
-    );
+    let accel = Accel::default_for(scene);
     render(scene, &accel, &|| {}).0
 }
 

@@ -3,11 +3,10 @@
 //! irradiance times the cosine), seen through the path integrator; they cast shadows;
 //! and glTF files place them by their nodes.
 
-use canopy_bvh::BuildParams;
 use canopy_render::camera::CameraSpec;
 use canopy_render::lights::PunctualLight;
 use canopy_render::material::Material;
-use canopy_render::{integrator, Accel, AccelKind, BvhWidth, Integrator, Scene};
+use canopy_render::{integrator, Accel, Integrator, Scene};
 use glam::Vec3;
 use std::f32::consts::PI;
 
@@ -54,13 +53,7 @@ fn floor_under(light: PunctualLight) -> Scene {
 
 /// The radiance the camera sees at the middle of the image.
 fn centre(scene: &Scene) -> Vec3 {
-    let accel = Accel::for_scene(
-        scene,
-        AccelKind::default(),
-        BvhWidth::default(),
-        &BuildParams::default(),
-        None,
-    );
+    let accel = Accel::default_for(scene);
     integrator::render(scene, &accel, &|| {}).0.pixel(1, 1)
 }
 

@@ -3,8 +3,7 @@
 //! punctual lights (whose shadow rays the wavefront traces in packets), for any thread
 //! count, region and split of the samples.
 
-use canopy_bvh::{BuildParams, BvhWidth};
-use canopy_render::accel::{Accel, AccelKind};
+use canopy_render::accel::Accel;
 use canopy_render::lights::PunctualLight;
 use canopy_render::{
     load_scene, render_samples_with, Accumulator, BuiltinScene, Integrator, Region, Scene,
@@ -14,13 +13,7 @@ use glam::Vec3;
 use std::path::Path;
 
 fn accel_of(scene: &Scene) -> Accel {
-    Accel::for_scene(
-        scene,
-        AccelKind::default(),
-        BvhWidth::Eight,
-        &BuildParams::default(),
-        None,
-    )
+    Accel::default_for(scene)
 }
 
 fn shrunk(mut scene: Scene) -> Scene {
