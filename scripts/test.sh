@@ -2,8 +2,10 @@
 # The test command: Rust tests, then the Python bindings built into a venv of their own
 # (target/py-venv) and tested with pytest, then trimesh's own ray tests run against
 # canopy's engine. Needs Python 3.9+ with venv; installs maturin, numpy, pytest, trimesh
-# (pinned: its tests are) with what its tests use, matplotlib, and ray (a local Ray
-# instance for the distributed tests) into the venv from PyPI, while the Rust tests build.
+# (pinned: its tests are) with what its tests use, matplotlib, ray (a local Ray instance
+# for the distributed tests) and playwright (it drives Debian's Chromium, installed by
+# scripts/install-chromium.sh, in the viewer's browser test) into the venv from PyPI,
+# while the Rust tests build.
 #
 # Everything is built once, in the `test-opt` profile (Cargo.toml): the Rust tests, the
 # `canopy` binary the Python tests drive, and the wheel, which reuses the tests' crates.
@@ -18,6 +20,9 @@ mkdir -p target
 
 scripts/install-vulkan.sh >target/install-vulkan.log 2>&1 ||
     echo "note: could not install Mesa's software Vulkan driver (target/install-vulkan.log)"
+# Chromium for the viewer's browser test, installed while the Rust tests build.
+scripts/install-chromium.sh >target/install-chromium.log 2>&1 &
+chromium_pid=$!
 
 # The denoiser's library (from PyPI's pyoidn wheel), so that the denoising tests run the
 # real one: they fail, rather than skip, when it is missing.
@@ -35,7 +40,7 @@ python_env() {
     fi
     "$venv/bin/python" -m pip install --quiet --disable-pip-version-check \
         "maturin>=1.9,<2" numpy pytest "trimesh==5.2.0" rtree scipy shapely networkx manifold3d embreex ray \
-        matplotlib
+        matplotlib playwright
 }
 python_env >target/py-venv.log 2>&1 &
 python_env_pid=$!
@@ -66,6 +71,18 @@ CANOPY_BIN="$canopy_bin" "$venv/bin/python" -m pytest -q crates/canopy-py/tests 
 (cd crates/canopy-py/trimesh-suite &&
     "../../../$venv/bin/python" -m pytest -q -p no:cacheprovider tests/test_ray.py tests/test_ray_upstream.py) || status=1
 
+# The viewer in a real browser: `canopy view` driven through headless Chromium.
+browser_note=""
+if wait "$chromium_pid" && command -v chromium >/dev/null 2>&1; then
+    CANOPY_BIN="$canopy_bin" CANOPY_TEST_OUT=target/view-browser \
+        "$venv/bin/python" -m pytest -q crates/canopy-view/tests/browser || status=1
+else
+    browser_note="browser test SKIPPED: no Chromium (target/install-chromium.log). As root, scripts/install-chromium.sh installs Debian's."
+fi
+
+if [ -n "$browser_note" ]; then
+    echo "$browser_note"
+fi
 if [ -n "$gpu_note" ]; then
     echo "$gpu_note"
 fi

@@ -19,6 +19,7 @@ mod safety;
 mod scene_facts;
 mod signals;
 mod units;
+mod view;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
@@ -44,6 +45,9 @@ enum Command {
     Bench(bench::BenchArgs),
     /// Validate a scene and describe what it contains, without rendering.
     Check(check::CheckArgs),
+    /// View a scene in the browser while it renders: move the camera, change settings,
+    /// rebuild the BVH and explore it (a local web server; prints its address).
+    View(view::ViewArgs),
     /// List the built-in scenes.
     Scenes,
     /// List the GPU adapters wgpu finds (Vulkan, Metal, DX12; Mesa's lavapipe counts).
@@ -76,6 +80,7 @@ fn main() -> ExitCode {
         Command::Bvh(args) => bvh::run(&args),
         Command::Bench(args) => bench::run(&args),
         Command::Check(args) => check::run(&args),
+        Command::View(args) => view::run(&args),
         Command::Scenes => list_scenes(),
         Command::Devices => list_devices(),
     };

@@ -3,7 +3,8 @@
 use crate::observer::Observer;
 use crate::JobError;
 use canopy_render::{
-    render_aov_samples, render_samples_with, Accel, Accumulator, RenderStats, Scene, Schedule,
+    render_aov_samples, render_samples_abandonable, Accel, Accumulator, RenderStats, Scene,
+    Schedule,
 };
 
 /// A device ready to add samples to an accumulator.
@@ -22,24 +23,28 @@ pub(crate) enum Engine<'a> {
 }
 
 impl Engine<'_> {
-    /// Adds one sample to every pixel of the accumulator's region.
+    /// Adds one sample to every pixel of the accumulator's region; `None` when the
+    /// observer abandoned the pass (when `abandonable`; on the CPU, between rows; the accumulator is then
+    /// torn, see [`render_samples_abandonable`]). The GPU's passes run whole.
     pub(crate) fn pass(
         &self,
         accumulator: &mut Accumulator,
         observer: &dyn Observer,
-    ) -> Result<RenderStats, JobError> {
+        abandonable: bool,
+    ) -> Result<Option<RenderStats>, JobError> {
         match self {
             Engine::Cpu {
                 scene,
                 accel,
                 schedule,
-            } => Ok(render_samples_with(
+            } => Ok(render_samples_abandonable(
                 scene,
                 accel,
                 accumulator,
                 1,
                 *schedule,
                 &|| observer.rows_done(1),
+                &|| !(abandonable && observer.abandon_pass()),
             )),
             Engine::Gpu { renderer, aovs } => {
                 // The AOVs of the GPU's samples: the same camera rays, traced on the CPU.
@@ -49,13 +54,13 @@ impl Engine<'_> {
                 };
                 let done = renderer.render_samples(accumulator, 1)?;
                 observer.rows_done(accumulator.region.height as u64);
-                Ok(RenderStats {
+                Ok(Some(RenderStats {
                     rays: done.rays + aov_rays,
                     shadow_rays: done.shadow_rays,
                     invalid_samples: done.invalid_samples,
                     elapsed: done.elapsed,
                     ..RenderStats::default()
-                })
+                }))
             }
         }
     }

@@ -7,6 +7,7 @@ use crate::{Device, JobError, RenderJob};
 use canopy_render::checkpoint::{Checkpoint, CheckpointError};
 use canopy_render::{Accel, AccelKind, Accumulator, BvhWidth, RenderStats};
 use std::path::PathBuf;
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 /// Most worker threads a job may ask for.
@@ -27,7 +28,7 @@ pub struct Prepared<'j> {
     /// then the resumed checkpoint's owner.
     owners: Vec<u64>,
     pool: Option<rayon::ThreadPool>,
-    accel: Accel,
+    accel: Arc<Accel>,
     gpu: Option<canopy_gpu::Gpu>,
 }
 
@@ -50,6 +51,35 @@ impl<'s> RenderJob<'s> {
     /// Checks the job, starts its threads, opens its device and builds its acceleration
     /// structure.
     pub fn prepare(&self) -> Result<Prepared<'_>, JobError> {
+        self.prepare_inner(None)
+    }
+
+    /// [`prepare`](Self::prepare), tracing through `accel` instead of building one: the
+    /// structure an earlier job over the same scene built (a viewer renders many jobs
+    /// over one scene as its camera moves, through the one structure). It must hold this scene's own primitives (the same shared array) and one instance per
+    /// mesh instance, else the job is refused. On the GPU, it must be binary.
+    pub fn prepare_with(&self, accel: Arc<Accel>) -> Result<Prepared<'_>, JobError> {
+        let scene = self.scene;
+        let same_primitives = std::ptr::eq(accel.primitives(), scene.primitives.as_slice());
+        if !same_primitives || accel.world().instances().len() != scene.instances.len() + 1 {
+            return Err(JobError::Invalid(
+                "the acceleration structure given was not built over this scene".into(),
+            ));
+        }
+        let binary = accel
+            .world()
+            .blases()
+            .iter()
+            .all(|b| b.tree().is_none_or(|tree| tree.width() == BvhWidth::Two));
+        if self.device == Device::Gpu && !binary {
+            return Err(JobError::Invalid(
+                "the GPU walks binary trees; the structure given is wider".into(),
+            ));
+        }
+        self.prepare_inner(Some(accel))
+    }
+
+    fn prepare_inner(&self, accel: Option<Arc<Accel>>) -> Result<Prepared<'_>, JobError> {
         let settings = self.scene.settings;
         self.scene.validate().map_err(JobError::Invalid)?;
         self.region()
@@ -126,15 +156,18 @@ impl<'s> RenderJob<'s> {
             None => work(),
         };
         let scene = self.scene;
-        let accel = install(&|| {
-            Accel::for_scene(
-                scene,
-                structure.kind,
-                width,
-                &structure.params,
-                structure.optimize,
-            )
-        });
+        let accel = match accel {
+            Some(accel) => accel,
+            None => Arc::new(install(&|| {
+                Accel::for_scene(
+                    scene,
+                    structure.kind,
+                    width,
+                    &structure.params,
+                    structure.optimize,
+                )
+            })),
+        };
         Ok(Prepared {
             job: self,
             owners,
@@ -243,13 +276,21 @@ impl Prepared<'_> {
         let mut stats = RenderStats::default();
         let mut last_save = Instant::now();
         let mut save_failing = false;
+        let abandonable = observer.abandons_passes();
         while accumulator.samples < spp && observer.keep_going() {
-            let pass = self.install(|| engine.pass(&mut accumulator, &*observer))?;
+            let before = abandonable.then(|| accumulator.clone());
+            let pass = self.install(|| engine.pass(&mut accumulator, &*observer, abandonable))?;
+            let Some(pass) = pass else {
+                // Torn by the abandoned pass: the samples before it.
+                accumulator = before.expect("only abandonable passes are abandoned");
+                break;
+            };
             stats.rays += pass.rays;
             stats.shadow_rays += pass.shadow_rays;
             stats.invalid_samples += pass.invalid_samples;
             stats.elapsed += pass.elapsed;
             observer.pass_done(accumulator.samples, spp);
+            observer.pass_samples(&accumulator);
             let Some(path) = &policy.periodic else {
                 continue;
             };

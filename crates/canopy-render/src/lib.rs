@@ -39,8 +39,8 @@ pub use canopy_bvh::{BvhWidth, RayQuery};
 pub use error::{OutputError, SceneError};
 pub use film::Film;
 pub use integrator::{
-    render, render_aov_samples, render_counted, render_samples, render_samples_with, Accumulator,
-    RenderStats, Schedule,
+    render, render_aov_samples, render_counted, render_samples, render_samples_abandonable,
+    render_samples_with, Accumulator, RenderStats, Schedule,
 };
 pub use output::{write_image, write_image_with_aovs};
 pub use region::Region;

@@ -164,3 +164,22 @@ fn bench_options_at_their_limits() {
     limits.extend(BUILD);
     check(&BENCH, &limits);
 }
+
+#[test]
+fn view_options_at_their_limits() {
+    // An address no interface has: a run in range stops at listening.
+    let view = Command {
+        base: &["view", "cornell", "--bind", "192.0.2.1:9"],
+        in_range_status: 1,
+    };
+    check(
+        &view,
+        &[
+            ("--spp", false, "16777216", "16777217"),
+            ("--depth", false, "1024", "1025"),
+            ("--size", false, "65536x4096", "65537x1"),
+            ("--threads", false, "1024", "1025"),
+            ("--max-leaf-size", false, "256", "257"),
+        ],
+    );
+}

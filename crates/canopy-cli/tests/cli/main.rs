@@ -7,3 +7,4 @@ mod common;
 mod denoise;
 mod limits;
 mod safety;
+mod view;

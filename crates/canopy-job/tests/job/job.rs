@@ -479,3 +479,75 @@ fn on_the_gpu_aovs_are_the_cpus() {
     assert_eq!(on_gpu.aovs, on_cpu.aovs);
     assert!(on_gpu.aovs.albedo.iter().any(|a| a.length() > 0.0));
 }
+
+/// Abandons the pass in flight once `rows_before_abandoning` rows of pass
+/// `abandoned_pass` (0-based) are done, and sees every pass's samples.
+struct Abandoner {
+    rows: AtomicU64,
+    passes: u32,
+    abandoned_pass: u32,
+    rows_before_abandoning: u64,
+    shown: Vec<u32>,
+}
+
+impl Observer for Abandoner {
+    fn rows_done(&self, rows: u64) {
+        self.rows.fetch_add(rows, Ordering::SeqCst);
+    }
+    fn abandons_passes(&self) -> bool {
+        true
+    }
+    fn abandon_pass(&self) -> bool {
+        self.passes == self.abandoned_pass
+            && self.rows.load(Ordering::SeqCst) >= self.rows_before_abandoning
+    }
+    fn pass_done(&mut self, _samples: u32, _spp: u32) {
+        self.passes += 1;
+        self.rows.store(0, Ordering::SeqCst);
+    }
+    fn pass_samples(&mut self, accumulator: &Accumulator) {
+        self.shown.push(accumulator.samples);
+    }
+}
+
+#[test]
+fn an_abandoned_pass_leaves_the_passes_before_it_bit_for_bit() {
+    let scene = small("cornell", 40, 30, 6);
+    let mut two_passes = RenderJob::new(&scene, "cornell");
+    two_passes.threads = Some(2);
+    let mut scene_of_two = scene.clone();
+    scene_of_two.settings.spp = 2;
+    two_passes.scene = &scene_of_two;
+    let reference = two_passes.prepare().unwrap().run(&mut ()).unwrap();
+
+    let mut job = RenderJob::new(&scene, "cornell");
+    job.threads = Some(2);
+    // Dropped mid-pass: after 10 of the third pass's 30 rows.
+    let mut observer = Abandoner {
+        rows: AtomicU64::new(0),
+        passes: 0,
+        abandoned_pass: 2,
+        rows_before_abandoning: 10,
+        shown: Vec::new(),
+    };
+    let outcome = job.prepare().unwrap().run(&mut observer).unwrap();
+    assert!(!outcome.complete);
+    assert_eq!(
+        observer.shown,
+        [1, 2],
+        "each whole pass was shown, no torn one"
+    );
+    assert_eq!(outcome.accumulator.samples, 2);
+    assert_eq!(outcome.accumulator.sums, reference.accumulator.sums);
+    assert_eq!(outcome.accumulator.rays, reference.accumulator.rays);
+
+    // An observer that never abandons sees every pass to the end.
+    let mut whole = Abandoner {
+        abandoned_pass: u32::MAX,
+        ..observer
+    };
+    whole.shown.clear();
+    let outcome = job.prepare().unwrap().run(&mut whole).unwrap();
+    assert!(outcome.complete);
+    assert_eq!(whole.shown, [1, 2, 3, 4, 5, 6]);
+}

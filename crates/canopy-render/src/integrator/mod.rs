@@ -22,7 +22,7 @@ use canopy_bvh::{TraversalCounter, TraversalStats};
 use glam::Vec3;
 use path::{Tracer, Work};
 use rayon::prelude::*;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 /// The order in which a worker traces its paths. Both give the same image, bit for bit.
@@ -185,7 +185,9 @@ fn render_with<P: Probe>(
         scene.settings.spp,
         Schedule::default(),
         on_row_done,
-    );
+        &|| true,
+    )
+    .expect("a pass told to keep going is never abandoned");
     (accumulator.film(), stats)
 }
 
@@ -277,7 +279,40 @@ pub fn render_samples_with(
     schedule: Schedule,
     on_row_done: &(dyn Fn() + Sync),
 ) -> RenderStats {
-    accumulate::<()>(scene, accel, accumulator, count, schedule, on_row_done)
+    accumulate::<()>(
+        scene,
+        accel,
+        accumulator,
+        count,
+        schedule,
+        on_row_done,
+        &|| true,
+    )
+    .expect("a pass told to keep going is never abandoned")
+}
+
+/// [`render_samples_with`] that a caller may abandon: `keep_going` is asked before each
+/// row, and once it says no the remaining rows are skipped and `None` returned. The
+/// accumulator is then torn — some rows have the new samples, others not, and its
+/// sample count is unchanged — so the caller puts back a copy taken before, or drops it.
+pub fn render_samples_abandonable(
+    scene: &Scene,
+    accel: &Accel,
+    accumulator: &mut Accumulator,
+    count: u32,
+    schedule: Schedule,
+    on_row_done: &(dyn Fn() + Sync),
+    keep_going: &(dyn Fn() -> bool + Sync),
+) -> Option<RenderStats> {
+    accumulate::<()>(
+        scene,
+        accel,
+        accumulator,
+        count,
+        schedule,
+        on_row_done,
+        keep_going,
+    )
 }
 
 fn accumulate<P: Probe>(
@@ -287,7 +322,8 @@ fn accumulate<P: Probe>(
     count: u32,
     schedule: Schedule,
     on_row_done: &(dyn Fn() + Sync),
-) -> RenderStats {
+    keep_going: &(dyn Fn() -> bool + Sync),
+) -> Option<RenderStats> {
     let settings = scene.settings;
     let region = accumulator.region;
     if let Err(e) = region.check_within(settings.width, settings.height) {
@@ -305,6 +341,7 @@ fn accumulate<P: Probe>(
         seed: settings.seed,
     };
     let width = region.width as usize;
+    let abandoned = AtomicBool::new(false);
     // The AOV layers row by row beside the sums (none when not asked for).
     let mut aov_rows: Vec<Option<AovRow>> = match accumulator.aovs.set.is_empty() {
         true => (0..region.height).map(|_| None).collect(),
@@ -321,6 +358,10 @@ fn accumulate<P: Probe>(
         .zip(aov_rows.par_iter_mut())
         .enumerate()
         .for_each(|(row_in_region, (row, aovs))| {
+            if abandoned.load(Ordering::Relaxed) || !keep_going() {
+                abandoned.store(true, Ordering::Relaxed);
+                return;
+            }
             let row_start = Instant::now();
             let mut work = Work::<P>::default();
             let y = region.y as usize + row_in_region;
@@ -367,11 +408,14 @@ fn accumulate<P: Probe>(
             totals.add(&work, invalid, row_start.elapsed());
             on_row_done();
         });
+    if abandoned.into_inner() {
+        return None;
+    }
     accumulator.samples += count;
     let stats = totals.stats(start.elapsed());
     accumulator.rays += stats.rays;
     accumulator.invalid_samples += stats.invalid_samples;
-    stats
+    Some(stats)
 }
 
 /// Adds the AOVs of the next `count` samples (indices `samples .. samples + count`) to

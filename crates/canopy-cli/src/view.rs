@@ -1,0 +1,97 @@
+//! `canopy view`: the interactive viewer (canopy-view) on a local address, until Ctrl-C.
+
+use crate::limits;
+use canopy_bvh::{BuildParams, Builder};
+use canopy_render::BvhWidth;
+use canopy_view::{TreeSettings, ViewOptions, ViewServer};
+use clap::Args;
+use std::net::SocketAddr;
+use std::path::PathBuf;
+
+#[derive(Args)]
+pub struct ViewArgs {
+    /// Built-in scene name (see `canopy scenes`), scene file, glTF model, or OBJ/PLY mesh.
+    scene: String,
+    /// Where to listen. The default is this machine only, on a free port; another
+    /// address (`0.0.0.0:8700`) exposes the viewer on purpose, still behind its token.
+    #[arg(long, default_value = "127.0.0.1:0")]
+    bind: SocketAddr,
+    /// Open the page in the default browser.
+    #[arg(long)]
+    open: bool,
+    /// Image size as WIDTHxHEIGHT, each 1 to 65536 [default: from the scene].
+    #[arg(long, value_parser = limits::size)]
+    size: Option<(u32, u32)>,
+    /// Samples per pixel to refine to, 1 to 16777216 [default: from the scene].
+    #[arg(long, value_parser = limits::spp())]
+    spp: Option<u32>,
+    /// Maximum ray segments per path, 1 to 1024 [default: from the scene].
+    #[arg(long, value_parser = limits::depth())]
+    depth: Option<u32>,
+    /// Worker threads, 1 to 1024 [default: all cores].
+    #[arg(long, value_parser = limits::threads())]
+    threads: Option<u32>,
+    /// The BVH builder to start with (the page rebuilds with others).
+    #[arg(long, default_value = "binned-sah")]
+    bvh: Builder,
+    /// Children per node to start with: 2, 4 or 8.
+    #[arg(long, default_value = "8")]
+    width: BvhWidth,
+    /// Most primitives in a leaf to start with (1 to 256).
+    #[arg(long, default_value_t = BuildParams::default().max_leaf_size, value_parser = limits::leaf_size())]
+    max_leaf_size: u32,
+    /// A folder the scene may also read files from (see `canopy render --allow-path`).
+    #[arg(long, value_name = "DIR")]
+    allow_path: Vec<PathBuf>,
+}
+
+pub fn run(args: &ViewArgs) -> anyhow::Result<()> {
+    let mut scene = canopy_render::load_scene_allowing(&args.scene, &args.allow_path)?;
+    let s = &mut scene.settings;
+    if let Some((w, h)) = args.size {
+        (s.width, s.height) = (w, h);
+    }
+    s.spp = args.spp.unwrap_or(s.spp);
+    s.max_depth = args.depth.unwrap_or(s.max_depth);
+    s.check().map_err(anyhow::Error::msg)?;
+    let options = ViewOptions {
+        bind: args.bind,
+        threads: args.threads.map(|n| n as usize),
+        tree: TreeSettings {
+            builder: args.bvh,
+            width: args.width,
+            max_leaf_size: args.max_leaf_size,
+        },
+    };
+    let server = ViewServer::start(scene, options)?;
+    let url = server.url();
+    outln!("canopy view: {} at", args.scene);
+    outln!("  {url}");
+    outln!("Ctrl-C stops the server.");
+    if args.open {
+        if let Err(e) = open_browser(&url) {
+            eprintln!("warning: could not open a browser ({e}); open the address above");
+        }
+    }
+    server.wait();
+    Ok(())
+}
+
+/// Hands the address to the desktop's opener.
+fn open_browser(url: &str) -> std::io::Result<()> {
+    let mut command = match std::env::consts::OS {
+        "macos" => std::process::Command::new("open"),
+        "windows" => {
+            let mut c = std::process::Command::new("cmd");
+            c.args(["/C", "start", ""]);
+            c
+        }
+        _ => std::process::Command::new("xdg-open"),
+    };
+    command
+        .arg(url)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .map(drop)
+}

@@ -1,0 +1,347 @@
+//! The viewer's messages over its WebSocket, as JSON text; each frame's image follows
+//! its [`ServerMessage::Frame`] as one binary message (JPEG).
+//!
+//! A command from the page is checked whole before it changes anything: a message that
+//! is not JSON, names no known command, or holds a value out of range gets an
+//! [`ServerMessage::Error`] reply and changes nothing.
+
+use crate::settings::{Mode, ViewSettings};
+use canopy_bvh::{Builder, BvhWidth};
+use canopy_render::camera::CameraSpec;
+use canopy_render::{Integrator, RenderSettings};
+use glam::Vec3;
+use serde::{Deserialize, Serialize};
+
+/// Longest command a page may send (every command is far shorter); a longer one gets
+/// an error reply.
+pub const MAX_MESSAGE_BYTES: usize = 16 * 1024;
+
+/// Longest message the socket takes at all: past this the connection is closed.
+pub const MAX_SOCKET_MESSAGE_BYTES: usize = 1 << 20;
+
+/// What the page asks for.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(tag = "type", rename_all = "snake_case", deny_unknown_fields)]
+pub enum Command {
+    /// Look from here at there: restarts accumulation.
+    Camera {
+        look_from: [f32; 3],
+        look_at: [f32; 3],
+        #[serde(default = "up_y")]
+        up: [f32; 3],
+        vfov: f32,
+    },
+    /// Render settings; a field left out keeps its value. Restarts accumulation.
+    Settings {
+        spp: Option<u32>,
+        max_depth: Option<u32>,
+        integrator: Option<String>,
+        exposure: Option<f32>,
+        mode: Option<Mode>,
+        /// The tree levels the `boxes` mode draws, first and last (the root is 0).
+        levels: Option<[u32; 2]>,
+    },
+    /// Build the tree again with this builder, width and leaf size.
+    Rebuild {
+        builder: String,
+        width: u32,
+        max_leaf_size: u32,
+    },
+    /// The walk of the primary ray through pixel (x, y) of the full-size image.
+    Pick { x: u32, y: u32 },
+}
+
+fn up_y() -> [f32; 3] {
+    [0.0, 1.0, 0.0]
+}
+
+/// What a checked command changes.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Change {
+    View(ViewSettings),
+    Rebuild(crate::settings::TreeSettings),
+    Pick { x: u32, y: u32 },
+}
+
+impl Command {
+    /// Parses a message from the page.
+    pub fn parse(text: &str) -> Result<Command, String> {
+        if text.len() > MAX_MESSAGE_BYTES {
+            return Err(format!(
+                "message of {} bytes, more than {MAX_MESSAGE_BYTES}",
+                text.len()
+            ));
+        }
+        serde_json::from_str(text).map_err(|e| format!("not a command: {e}"))
+    }
+
+    /// What the command changes in `current`, or why it cannot be done (`width` and
+    /// `height` are the image's, for picks).
+    pub fn apply(self, current: &ViewSettings, width: u32, height: u32) -> Result<Change, String> {
+        match self {
+            Command::Camera {
+                look_from,
+                look_at,
+                up,
+                vfov,
+            } => {
+                let camera = CameraSpec {
+                    look_from: finite_vec("look_from", look_from)?,
+                    look_at: finite_vec("look_at", look_at)?,
+                    up: finite_vec("up", up)?,
+                    vfov,
+                    ..current.camera
+                };
+                check_camera(&camera)?;
+                Ok(Change::View(ViewSettings {
+                    camera,
+                    ..current.clone()
+                }))
+            }
+            Command::Settings {
+                spp,
+                max_depth,
+                integrator,
+                exposure,
+                mode,
+                levels,
+            } => {
+                let mut next = current.clone();
+                if let Some(spp) = spp {
+                    check_range("spp", spp, 1, RenderSettings::MAX_SPP)?;
+                    next.spp = spp;
+                }
+                if let Some(depth) = max_depth {
+                    check_range("max_depth", depth, 1, RenderSettings::MAX_DEPTH)?;
+                    next.max_depth = depth;
+                }
+                if let Some(name) = integrator {
+                    next.integrator = name.parse::<Integrator>()?;
+                }
+                if let Some(exposure) = exposure {
+                    if !(-20.0..=20.0).contains(&exposure) {
+                        return Err(format!(
+                            "exposure must be in -20..=20 stops, not {exposure}"
+                        ));
+                    }
+                    next.exposure = exposure;
+                }
+                if let Some(mode) = mode {
+                    next.mode = mode;
+                }
+                if let Some([first, last]) = levels {
+                    if first > last || last > 64 {
+                        return Err(format!(
+                            "levels must be first <= last <= 64, not {first}..{last}"
+                        ));
+                    }
+                    next.levels = [first, last];
+                }
+                Ok(Change::View(next))
+            }
+            Command::Rebuild {
+                builder,
+                width,
+                max_leaf_size,
+            } => {
+                let builder: Builder = builder.parse().map_err(|e| format!("{e}"))?;
+                let width = match width {
+                    2 => BvhWidth::Two,
+                    4 => BvhWidth::Four,
+                    8 => BvhWidth::Eight,
+                    w => return Err(format!("width must be 2, 4 or 8, not {w}")),
+                };
+                check_range("max_leaf_size", max_leaf_size, 1, 256)?;
+                Ok(Change::Rebuild(crate::settings::TreeSettings {
+                    builder,
+                    width,
+                    max_leaf_size,
+                }))
+            }
+            Command::Pick { x, y } => {
+                if x >= width || y >= height {
+                    return Err(format!(
+                        "pixel ({x}, {y}) is outside the {width}x{height} image"
+                    ));
+                }
+                Ok(Change::Pick { x, y })
+            }
+        }
+    }
+}
+
+fn finite_vec(name: &str, v: [f32; 3]) -> Result<Vec3, String> {
+    match v.iter().all(|c| c.is_finite() && c.abs() < 1e30) {
+        true => Ok(Vec3::from(v)),
+        false => Err(format!("{name} must be three finite numbers, not {v:?}")),
+    }
+}
+
+fn check_range(name: &str, value: u32, min: u32, max: u32) -> Result<(), String> {
+    match (min..=max).contains(&value) {
+        true => Ok(()),
+        false => Err(format!("{name} must be in {min}..={max}, not {value}")),
+    }
+}
+
+/// A camera the renderer can use: apart eye and target, an up that is not along the
+/// view, a field of view strictly between 0 and 180 degrees.
+fn check_camera(camera: &CameraSpec) -> Result<(), String> {
+    let forward = camera.look_at - camera.look_from;
+    if forward.length() <= 1e-6 * camera.look_from.abs().max_element().max(1.0) {
+        return Err("look_from and look_at must be apart".into());
+    }
+    if forward
+        .normalize()
+        .cross(camera.up.normalize_or_zero())
+        .length()
+        < 1e-4
+    {
+        return Err("up must not be along the viewing direction".into());
+    }
+    if !(camera.vfov > 0.01 && camera.vfov < 179.0) {
+        return Err(format!(
+            "vfov must be between 0.01 and 179 degrees, not {}",
+            camera.vfov
+        ));
+    }
+    Ok(())
+}
+
+/// A camera as the page holds it.
+#[derive(Clone, Debug, Serialize)]
+pub struct CameraState {
+    pub look_from: [f32; 3],
+    pub look_at: [f32; 3],
+    pub up: [f32; 3],
+    pub vfov: f32,
+}
+
+impl From<&CameraSpec> for CameraState {
+    fn from(c: &CameraSpec) -> Self {
+        Self {
+            look_from: c.look_from.to_array(),
+            look_at: c.look_at.to_array(),
+            up: c.up.to_array(),
+            vfov: c.vfov,
+        }
+    }
+}
+
+/// A builder the page may choose.
+#[derive(Clone, Debug, Serialize)]
+pub struct BuilderInfo {
+    pub name: &'static str,
+    pub description: &'static str,
+}
+
+/// The tree being rendered through, and what it cost.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct TreeReport {
+    pub builder: String,
+    pub width: u32,
+    pub max_leaf_size: u32,
+    pub build_ms: f64,
+    /// SAH cost with the root's area as 1 (the scene's own primitives' tree).
+    pub sah: f32,
+    /// EPO with the scene's area as 1, where the scene has no spheres.
+    pub epo: Option<f32>,
+    pub depth: usize,
+    pub nodes: usize,
+    pub leaves: usize,
+    /// Bytes of every structure: the primitives' tree, each mesh's and the top one.
+    pub memory_bytes: usize,
+}
+
+/// One node of a primary ray's walk, in the order visited.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct WalkStep {
+    /// Tree level (the root is 0).
+    pub level: u32,
+    /// The node's box, min and max corners.
+    pub bounds: [[f32; 3]; 2],
+    /// A leaf: the primitives it tested, in order.
+    pub leaf: Option<Vec<u32>>,
+    /// An inner node: how many of its children the ray entered and skipped.
+    pub entered: u32,
+    pub skipped: u32,
+}
+
+/// Where a picked ray hit.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct PickHit {
+    pub t: f32,
+    pub instance: u32,
+    pub primitive: u32,
+    pub material: Option<String>,
+}
+
+/// What the server tells the page.
+#[derive(Clone, Debug, Serialize)]
+#[serde(tag = "type", rename_all = "snake_case")]
+pub enum ServerMessage {
+    /// First message on a socket: the scene and everything the controls offer.
+    Hello {
+        scene: String,
+        width: u32,
+        height: u32,
+        camera: CameraState,
+        settings: ViewSettingsState,
+        builders: Vec<BuilderInfo>,
+        widths: [u32; 3],
+        modes: Vec<Mode>,
+        integrators: Vec<String>,
+    },
+    /// The tree after a build.
+    Tree(TreeReport),
+    /// An image follows as the next (binary) message.
+    Frame(FrameInfo),
+    /// The walk of a picked pixel's primary ray.
+    Walk {
+        x: u32,
+        y: u32,
+        /// A scene with mesh instances: the walk of its primitives' own tree only.
+        partial: bool,
+        steps: Vec<WalkStep>,
+        primitives_tested: u32,
+        hit: Option<PickHit>,
+    },
+    /// A command that changed nothing, and why.
+    Error { message: String },
+}
+
+/// The settings as the page shows them.
+#[derive(Clone, Debug, Serialize)]
+pub struct ViewSettingsState {
+    pub spp: u32,
+    pub max_depth: u32,
+    pub integrator: String,
+    pub exposure: f32,
+    pub mode: Mode,
+    pub levels: [u32; 2],
+    pub builder: String,
+    pub width: u32,
+    pub max_leaf_size: u32,
+}
+
+/// What a frame shows.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct FrameInfo {
+    /// Counts frames since the server started.
+    pub sequence: u64,
+    /// Counts restarts of accumulation (camera or settings changes).
+    pub generation: u64,
+    pub mode: Mode,
+    /// A quick image at reduced size, shown until the first full-size pass.
+    pub preview: bool,
+    pub width: u32,
+    pub height: u32,
+    /// Samples per pixel in the image, and the target.
+    pub spp: u32,
+    pub target_spp: u32,
+    /// Since accumulation restarted.
+    pub seconds: f64,
+    pub mrays_per_second: f64,
+    /// The process's resident memory, where the system tells it.
+    pub memory_bytes: Option<u64>,
+}

@@ -1,0 +1,232 @@
+//! The HTTP side: the page (built into the binary) and the WebSocket, both behind the
+//! session's token; one task per socket sends frames and tree reports as they come and
+//! answers the page's commands.
+
+use crate::protocol::{
+    BuilderInfo, CameraState, Change, Command, ServerMessage, ViewSettingsState,
+    MAX_SOCKET_MESSAGE_BYTES,
+};
+use crate::session::Session;
+use crate::settings::Mode;
+use crate::walk::{primary_ray, walk};
+use axum::extract::ws::{Message, WebSocket, WebSocketUpgrade};
+use axum::extract::{Query, State};
+use axum::http::{header, StatusCode};
+use axum::response::{IntoResponse, Response};
+use axum::routing::get;
+use axum::Router;
+use canopy_bvh::Builder;
+use canopy_render::Integrator;
+use serde::Deserialize;
+use std::sync::Arc;
+
+/// The page: markup, style and script in one file, no network needed.
+const PAGE: &str = include_str!("../page/index.html");
+
+#[derive(Clone)]
+pub(crate) struct App {
+    pub session: Arc<Session>,
+    pub token: Arc<str>,
+}
+
+#[derive(Deserialize)]
+pub(crate) struct TokenQuery {
+    token: Option<String>,
+}
+
+pub(crate) fn router(app: App) -> Router {
+    Router::new()
+        .route("/", get(page))
+        .route("/ws", get(socket))
+        .with_state(app)
+}
+
+/// Compares in time independent of where the strings differ.
+fn token_matches(given: Option<&str>, token: &str) -> bool {
+    let Some(given) = given else {
+        return false;
+    };
+    given.len() == token.len()
+        && given
+            .bytes()
+            .zip(token.bytes())
+            .fold(0u8, |acc, (a, b)| acc | (a ^ b))
+            == 0
+}
+
+fn refused() -> Response {
+    (
+        StatusCode::FORBIDDEN,
+        "canopy view: this address needs the token printed when the server started\n",
+    )
+        .into_response()
+}
+
+async fn page(State(app): State<App>, Query(q): Query<TokenQuery>) -> Response {
+    if !token_matches(q.token.as_deref(), &app.token) {
+        return refused();
+    }
+    (
+        [
+            (header::CONTENT_TYPE, "text/html; charset=utf-8"),
+            (header::CACHE_CONTROL, "no-store"),
+        ],
+        PAGE,
+    )
+        .into_response()
+}
+
+async fn socket(
+    State(app): State<App>,
+    Query(q): Query<TokenQuery>,
+    upgrade: WebSocketUpgrade,
+) -> Response {
+    if !token_matches(q.token.as_deref(), &app.token) {
+        return refused();
+    }
+    upgrade
+        .max_message_size(MAX_SOCKET_MESSAGE_BYTES)
+        .max_frame_size(MAX_SOCKET_MESSAGE_BYTES)
+        .on_upgrade(move |ws| serve_socket(ws, app.session))
+}
+
+/// A page's connection: counted as a client while it lasts, so that rendering stops
+/// when the last one closes.
+async fn serve_socket(mut ws: WebSocket, session: Arc<Session>) {
+    session.client_joined();
+    let _ = talk(&mut ws, &session).await;
+    session.client_left();
+}
+
+/// Why a connection ended (the page closed it, or a send failed).
+struct Closed;
+
+async fn send(ws: &mut WebSocket, message: &ServerMessage) -> Result<(), Closed> {
+    let text = serde_json::to_string(message).expect("server messages serialise");
+    ws.send(Message::Text(text.into()))
+        .await
+        .map_err(|_| Closed)
+}
+
+async fn talk(ws: &mut WebSocket, session: &Arc<Session>) -> Result<(), Closed> {
+    send(ws, &hello(session)).await?;
+    let mut frames = session.frames.subscribe();
+    let mut trees = session.trees.subscribe();
+    // Whatever is there already is news to this page.
+    frames.mark_changed();
+    trees.mark_changed();
+    loop {
+        tokio::select! {
+            received = ws.recv() => match received {
+                Some(Ok(Message::Text(text))) => {
+                    if let Some(reply) = command(session, text.as_str()).await {
+                        send(ws, &reply).await?;
+                    }
+                }
+                Some(Ok(Message::Binary(_))) => {
+                    let message = "binary messages are not commands; send JSON text".into();
+                    send(ws, &ServerMessage::Error { message }).await?;
+                }
+                Some(Ok(Message::Ping(_) | Message::Pong(_))) => {}
+                Some(Ok(Message::Close(_))) | Some(Err(_)) | None => return Err(Closed),
+            },
+            changed = frames.changed() => {
+                changed.map_err(|_| Closed)?;
+                let frame = frames.borrow_and_update().clone();
+                if let Some(frame) = frame {
+                    send(ws, &ServerMessage::Frame(frame.info.clone())).await?;
+                    ws.send(Message::Binary(frame.jpeg.clone().into()))
+                        .await
+                        .map_err(|_| Closed)?;
+                }
+            }
+            changed = trees.changed() => {
+                changed.map_err(|_| Closed)?;
+                let report = trees.borrow_and_update().clone();
+                if let Some(report) = report {
+                    send(ws, &ServerMessage::Tree((*report).clone())).await?;
+                }
+            }
+        }
+    }
+}
+
+/// Checks and applies a page's command; the reply, if it has one.
+async fn command(session: &Arc<Session>, text: &str) -> Option<ServerMessage> {
+    let current = session.control();
+    let change =
+        Command::parse(text).and_then(|c| c.apply(&current.view, session.width, session.height));
+    match change {
+        Err(message) => Some(ServerMessage::Error { message }),
+        Ok(Change::View(view)) => {
+            session.set_view(view);
+            None
+        }
+        Ok(Change::Rebuild(tree)) => {
+            session.set_tree(tree);
+            None
+        }
+        Ok(Change::Pick { x, y }) => {
+            let session = session.clone();
+            let camera = current.view.camera;
+            let explored = tokio::task::spawn_blocking(move || {
+                let accel = session
+                    .accel
+                    .lock()
+                    .unwrap_or_else(|e| e.into_inner())
+                    .clone()?;
+                let scene = session.scene.read().unwrap_or_else(|e| e.into_inner());
+                let mut at_full_size = scene.settings;
+                (at_full_size.width, at_full_size.height) = (session.width, session.height);
+                let ray = primary_ray(&camera, &at_full_size, x, y);
+                Some(walk(&scene, &accel, &ray))
+            })
+            .await;
+            Some(match explored {
+                Ok(Some(w)) => ServerMessage::Walk {
+                    x,
+                    y,
+                    partial: w.partial,
+                    steps: w.steps,
+                    primitives_tested: w.primitives_tested,
+                    hit: w.hit,
+                },
+                _ => ServerMessage::Error {
+                    message: "the tree is not built yet; pick again in a moment".into(),
+                },
+            })
+        }
+    }
+}
+
+fn hello(session: &Session) -> ServerMessage {
+    let c = session.control();
+    let v = &c.view;
+    ServerMessage::Hello {
+        scene: session.name.clone(),
+        width: session.width,
+        height: session.height,
+        camera: CameraState::from(&v.camera),
+        settings: ViewSettingsState {
+            spp: v.spp,
+            max_depth: v.max_depth,
+            integrator: v.integrator.name().into(),
+            exposure: v.exposure,
+            mode: v.mode,
+            levels: v.levels,
+            builder: c.tree.builder.name().into(),
+            width: c.tree.width.children(),
+            max_leaf_size: c.tree.max_leaf_size,
+        },
+        builders: Builder::ALL
+            .iter()
+            .map(|b| BuilderInfo {
+                name: b.name(),
+                description: b.description(),
+            })
+            .collect(),
+        widths: [2, 4, 8],
+        modes: Mode::ALL.to_vec(),
+        integrators: Integrator::ALL.iter().map(|i| i.name().into()).collect(),
+    }
+}

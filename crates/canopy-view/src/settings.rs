@@ -1,0 +1,94 @@
+//! What the viewer renders: the view (camera, samples, estimator, what is shown) and the
+//! tree (builder, width, leaf size). A change of the view restarts accumulation; a change
+//! of the tree rebuilds it first.
+
+use canopy_bvh::{BuildParams, Builder, BvhWidth};
+use canopy_render::camera::CameraSpec;
+use canopy_render::{Integrator, Scene};
+use serde::{Deserialize, Serialize};
+
+/// What the image shows.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Mode {
+    /// The path-traced image, refining pass by pass.
+    #[default]
+    Render,
+    /// Each pixel's primary-ray traversal cost (node visits plus primitive tests).
+    Heatmap,
+    /// The render with the tree's boxes of the chosen levels drawn over it.
+    Boxes,
+}
+
+impl Mode {
+    pub const ALL: [Mode; 3] = [Mode::Render, Mode::Heatmap, Mode::Boxes];
+}
+
+/// The view: changing any of it restarts accumulation.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ViewSettings {
+    pub camera: CameraSpec,
+    /// Samples per pixel to refine to.
+    pub spp: u32,
+    pub max_depth: u32,
+    pub integrator: Integrator,
+    /// Stops of exposure applied to the image shown (not to the samples).
+    pub exposure: f32,
+    pub mode: Mode,
+    /// Tree levels drawn in [`Mode::Boxes`], first and last.
+    pub levels: [u32; 2],
+}
+
+impl ViewSettings {
+    /// The scene's own camera and settings.
+    pub fn of_scene(scene: &Scene) -> Self {
+        let s = scene.settings;
+        Self {
+            camera: scene.camera,
+            spp: s.spp,
+            max_depth: s.max_depth,
+            integrator: s.integrator,
+            exposure: 0.0,
+            mode: Mode::Render,
+            levels: [0, 3],
+        }
+    }
+
+    /// Whether going from `self` to `next` leaves the accumulated samples valid: only
+    /// the exposure, the target spp, the boxes drawn over the render or their levels
+    /// changed (the caller checks that the samples are not more than the new target).
+    pub fn keeps_samples(&self, next: &ViewSettings) -> bool {
+        self.camera == next.camera
+            && self.max_depth == next.max_depth
+            && self.integrator == next.integrator
+            && self.mode != Mode::Heatmap
+            && next.mode != Mode::Heatmap
+    }
+}
+
+/// The tree rendered through.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TreeSettings {
+    pub builder: Builder,
+    pub width: BvhWidth,
+    pub max_leaf_size: u32,
+}
+
+impl Default for TreeSettings {
+    fn default() -> Self {
+        Self {
+            builder: Builder::default(),
+            width: BvhWidth::default(),
+            max_leaf_size: BuildParams::default().max_leaf_size,
+        }
+    }
+}
+
+impl TreeSettings {
+    pub fn params(&self) -> BuildParams {
+        BuildParams {
+            max_leaf_size: self.max_leaf_size,
+            ..BuildParams::default()
+        }
+    }
+}

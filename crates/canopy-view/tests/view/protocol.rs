@@ -1,0 +1,397 @@
+//! The viewer's protocol over a real socket: the token, frames, camera moves, rebuilds,
+//! picks, hostile messages, slow clients and the last page closing. Every wait is on a
+//! message or a state, never a fixed time (the timeouts only end a failing test).
+
+use canopy_view::{ViewOptions, ViewServer};
+use futures_util::{SinkExt, StreamExt};
+use serde_json::{json, Value};
+use std::io::{Read, Write};
+use std::time::Duration;
+use tokio::net::TcpStream;
+use tokio_tungstenite::tungstenite::Message;
+use tokio_tungstenite::{MaybeTlsStream, WebSocketStream};
+
+/// Long enough for a loaded machine; only a failing test waits this long.
+const PATIENCE: Duration = Duration::from_secs(120);
+
+/// A small image of the first reference scene (spheres, a few lights).
+fn server(width: u32, height: u32, spp: u32) -> ViewServer {
+    let mut scene = canopy_render::load_scene("paper-1").unwrap();
+    scene.settings.width = width;
+    scene.settings.height = height;
+    scene.settings.spp = spp;
+    scene.settings.max_depth = 4;
+    let options = ViewOptions {
+        threads: Some(2),
+        ..ViewOptions::default()
+    };
+    ViewServer::start(scene, options).unwrap()
+}
+
+/// `GET path` over plain HTTP; the status code and body.
+fn http_get(server: &ViewServer, path: &str) -> (u16, String) {
+    let mut stream = std::net::TcpStream::connect(server.addr()).unwrap();
+    write!(
+        stream,
+        "GET {path} HTTP/1.1\r\nHost: {}\r\nConnection: close\r\n\r\n",
+        server.addr()
+    )
+    .unwrap();
+    let mut response = String::new();
+    stream.read_to_string(&mut response).unwrap();
+    let status = response.split_whitespace().nth(1).unwrap().parse().unwrap();
+    (status, response)
+}
+
+type Socket = WebSocketStream<MaybeTlsStream<TcpStream>>;
+
+struct Client {
+    ws: Socket,
+    /// The first message, sent on connection.
+    hello: Value,
+}
+
+enum Received {
+    Json(Value),
+    Image(Vec<u8>),
+}
+
+impl Client {
+    async fn connect(server: &ViewServer) -> Client {
+        let url = format!("ws://{}/ws?token={}", server.addr(), server.token());
+        let (ws, _) = tokio_tungstenite::connect_async(url).await.unwrap();
+        Self::after_handshake(ws).await
+    }
+
+    async fn after_handshake(ws: Socket) -> Client {
+        let mut client = Client {
+            ws,
+            hello: Value::Null,
+        };
+        let Received::Json(hello) = client.next().await else {
+            panic!("the first message is not JSON");
+        };
+        assert_eq!(hello["type"], "hello");
+        client.hello = hello;
+        client
+    }
+
+    async fn next(&mut self) -> Received {
+        loop {
+            let message = tokio::time::timeout(PATIENCE, self.ws.next())
+                .await
+                .expect("no message in time")
+                .expect("the socket closed")
+                .expect("a socket error");
+            match message {
+                Message::Text(text) => return Received::Json(serde_json::from_str(&text).unwrap()),
+                Message::Binary(bytes) => return Received::Image(bytes.to_vec()),
+                _ => continue,
+            }
+        }
+    }
+
+    async fn send(&mut self, command: Value) {
+        self.ws
+            .send(Message::Text(command.to_string().into()))
+            .await
+            .unwrap();
+    }
+
+    /// The next message of type `kind` (frames' images skipped).
+    async fn next_of(&mut self, kind: &str) -> Value {
+        loop {
+            if let Received::Json(m) = self.next().await {
+                if m["type"] == kind {
+                    return m;
+                }
+            }
+        }
+    }
+
+    /// The next frame and its decoded image.
+    async fn frame(&mut self) -> (Value, image::RgbImage) {
+        let info = self.next_of("frame").await;
+        let Received::Image(bytes) = self.next().await else {
+            panic!("a frame's image did not follow it");
+        };
+        let image = image::load_from_memory(&bytes).unwrap().to_rgb8();
+        (info, image)
+    }
+
+    /// Frames until one satisfies `done`.
+    async fn frame_until(&mut self, done: impl Fn(&Value) -> bool) -> (Value, image::RgbImage) {
+        loop {
+            let frame = self.frame().await;
+            if done(&frame.0) {
+                return frame;
+            }
+        }
+    }
+}
+
+fn runtime() -> tokio::runtime::Runtime {
+    tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap()
+}
+
+#[test]
+fn every_request_needs_the_token() {
+    let server = server(32, 24, 2);
+    assert!(server.url().contains(server.token()));
+    assert_eq!(server.token().len(), 32);
+    let (status, body) = http_get(&server, &format!("/?token={}", server.token()));
+    assert_eq!(status, 200);
+    assert!(body.contains("canopy view"));
+    assert_eq!(http_get(&server, "/").0, 403);
+    assert_eq!(http_get(&server, "/?token=0123").0, 403);
+    let mut wrong = server.token().to_string();
+    wrong.replace_range(0..1, if wrong.starts_with('a') { "b" } else { "a" });
+    assert_eq!(http_get(&server, &format!("/?token={wrong}")).0, 403);
+    runtime().block_on(async {
+        for url in [
+            format!("ws://{}/ws", server.addr()),
+            format!("ws://{}/ws?token={wrong}", server.addr()),
+        ] {
+            let refused = tokio_tungstenite::connect_async(url).await;
+            assert!(refused.is_err(), "a socket without the token was accepted");
+        }
+    });
+    assert_eq!(server.clients(), 0);
+}
+
+#[test]
+fn frames_arrive_and_refine_to_the_target() {
+    let server = server(48, 32, 6);
+    runtime().block_on(async {
+        let mut page = Client::connect(&server).await;
+        assert_eq!(page.hello["width"], 48);
+        assert_eq!(page.hello["settings"]["spp"], 6);
+        // A preview at a quarter of the size first, then full-size passes 1..=6.
+        let (first, image) = page.frame().await;
+        assert_eq!(first["preview"], true);
+        assert_eq!((image.width(), image.height()), (12, 8));
+        let mut spp = 0;
+        while spp < 6 {
+            let (info, image) = page.frame().await;
+            assert_eq!(info["preview"], false);
+            assert_eq!((image.width(), image.height()), (48, 32));
+            let now = info["spp"].as_u64().unwrap();
+            assert!(now > spp, "samples went from {spp} to {now}");
+            assert_eq!(info["target_spp"], 6);
+            spp = now;
+        }
+        assert_eq!(spp, 6);
+        // Every sample in: the render thread waits.
+        wait_until(|| !server.is_rendering()).await;
+    });
+}
+
+#[test]
+fn a_camera_move_restarts_accumulation_and_other_tabs_see_it() {
+    let server = server(48, 32, 1000);
+    runtime().block_on(async {
+        let mut page = Client::connect(&server).await;
+        let (before, _) = page.frame_until(|f| f["spp"].as_u64() >= Some(3)).await;
+        let generation = before["generation"].as_u64().unwrap();
+        let mut camera = page.hello["camera"].clone();
+        camera["type"] = json!("camera");
+        camera["look_from"][0] = json!(camera["look_from"][0].as_f64().unwrap() + 1.0);
+        page.send(camera.clone()).await;
+        let (after, _) = page
+            .frame_until(|f| f["generation"].as_u64() > Some(generation))
+            .await;
+        assert_eq!(after["preview"], true, "a move shows a preview first");
+        let (full, _) = page.frame_until(|f| f["preview"] == false).await;
+        assert_eq!(full["spp"], 1, "accumulation restarted");
+        // A second tab joins the same session: the moved camera.
+        let second = Client::connect(&server).await;
+        assert_eq!(second.hello["camera"]["look_from"], camera["look_from"]);
+    });
+}
+
+#[test]
+fn a_rebuild_changes_the_tree_statistics() {
+    let server = server(32, 24, 1000);
+    runtime().block_on(async {
+        let mut page = Client::connect(&server).await;
+        let first = page.next_of("tree").await;
+        assert_eq!(first["builder"], "binned-sah");
+        assert_eq!(first["width"], 8);
+        assert!(first["nodes"].as_u64() > Some(0));
+        assert!(first["sah"].as_f64() > Some(0.0));
+        page.send(json!({"type": "rebuild", "builder": "sort-x", "width": 2, "max_leaf_size": 1}))
+            .await;
+        let second = page.next_of("tree").await;
+        assert_eq!(second["builder"], "sort-x");
+        assert_eq!(second["width"], 2);
+        assert_eq!(second["max_leaf_size"], 1);
+        assert!(second["nodes"].as_u64() > first["nodes"].as_u64());
+        assert!(
+            second["sah"].as_f64() > first["sah"].as_f64(),
+            "sorting by x alone is worse"
+        );
+        // Frames go on through the new tree.
+        page.frame().await;
+    });
+}
+
+#[test]
+fn a_pick_walks_the_tree_to_the_hit() {
+    let server = server(48, 32, 1000);
+    runtime().block_on(async {
+        let mut page = Client::connect(&server).await;
+        page.next_of("tree").await;
+        // The middle of the first reference scene is a sphere.
+        page.send(json!({"type": "pick", "x": 24, "y": 16})).await;
+        let walk = page.next_of("walk").await;
+        let steps = walk["steps"].as_array().unwrap();
+        assert!(!steps.is_empty());
+        assert_eq!(steps[0]["level"], 0, "the walk starts at the root");
+        let hit = &walk["hit"];
+        assert!(hit["t"].as_f64() > Some(0.0));
+        let prim = hit["primitive"].as_u64().unwrap();
+        let in_a_leaf = steps
+            .iter()
+            .filter_map(|s| s["leaf"].as_array())
+            .flatten()
+            .any(|p| p.as_u64() == Some(prim));
+        assert!(in_a_leaf, "the hit primitive is in a leaf the walk tested");
+        // A pixel off the image is refused.
+        page.send(json!({"type": "pick", "x": 48, "y": 0})).await;
+        let error = page.next_of("error").await;
+        assert!(error["message"].as_str().unwrap().contains("outside"));
+    });
+}
+
+#[test]
+fn hostile_messages_get_an_error_and_change_nothing() {
+    let server = server(32, 24, 1000);
+    runtime().block_on(async {
+        let mut page = Client::connect(&server).await;
+        let hostile = [
+            json!("not an object").to_string(),
+            "{\"type\":".to_string(),
+            json!({"type": "format_disk"}).to_string(),
+            json!({"type": "settings", "spp": 0}).to_string(),
+            json!({"type": "settings", "max_depth": 100000}).to_string(),
+            json!({"type": "settings", "integrator": "magic"}).to_string(),
+            json!({"type": "settings", "exposure": 1e30}).to_string(),
+            json!({"type": "settings", "levels": [5, 2]}).to_string(),
+            json!({"type": "settings", "spp": 4, "extra": true}).to_string(),
+            json!({"type": "rebuild", "builder": "nope", "width": 8, "max_leaf_size": 4})
+                .to_string(),
+            json!({"type": "rebuild", "builder": "lbvh", "width": 3, "max_leaf_size": 4})
+                .to_string(),
+            json!({"type": "rebuild", "builder": "lbvh", "width": 8, "max_leaf_size": 0})
+                .to_string(),
+            json!({"type": "camera", "look_from": [0, 0, 0], "look_at": [0, 0, 0], "vfov": 40})
+                .to_string(),
+            json!({"type": "camera", "look_from": [0, 1, 0], "look_at": [0, 0, 0], "vfov": 40})
+                .to_string(),
+            json!({"type": "camera", "look_from": [1e39, 0, 0], "look_at": [0, 0, 0], "vfov": 40})
+                .to_string(),
+            json!({"type": "camera", "look_from": [0, 0, 1], "look_at": [0, 0, 0], "vfov": 0})
+                .to_string(),
+            json!({"type": "pick", "x": -1, "y": 0}).to_string(),
+            format!("{{\"type\":\"settings\",\"spp\":{}}}", "9".repeat(100)),
+            " ".repeat(100_000),
+        ];
+        let generation_before = server_generation(&mut page).await;
+        for message in &hostile {
+            page.send(Value::Null).await; // a valid JSON value that is no command
+            page.next_of("error").await;
+            page.ws
+                .send(Message::Text(message.clone().into()))
+                .await
+                .unwrap();
+            let error = page.next_of("error").await;
+            assert!(
+                !error["message"].as_str().unwrap().is_empty(),
+                "{message:.80} got an empty error"
+            );
+        }
+        page.ws
+            .send(Message::Binary(vec![0u8; 64].into()))
+            .await
+            .unwrap();
+        page.next_of("error").await;
+        // Nothing changed: the same generation renders on.
+        assert_eq!(server_generation(&mut page).await, generation_before);
+        // And the session still obeys a good command.
+        page.send(json!({"type": "settings", "spp": 3})).await;
+        page.frame_until(|f| f["target_spp"] == 3).await;
+    });
+}
+
+/// The generation of the next frame.
+async fn server_generation(page: &mut Client) -> u64 {
+    page.frame().await.0["generation"].as_u64().unwrap()
+}
+
+#[test]
+fn a_slow_page_skips_frames_instead_of_queueing_them() {
+    // Frames large enough that a page which stops reading fills the socket's buffers
+    // after a few of them.
+    let server = server(320, 240, 48);
+    runtime().block_on(async {
+        let mut reader = Client::connect(&server).await;
+        // The slow page: a small receive buffer, then it stops reading.
+        let socket = tokio::net::TcpSocket::new_v4().unwrap();
+        socket.set_recv_buffer_size(4096).unwrap();
+        let stream = socket.connect(server.addr()).await.unwrap();
+        let url = format!("ws://{}/ws?token={}", server.addr(), server.token());
+        let (ws, _) = tokio_tungstenite::client_async(url, MaybeTlsStream::Plain(stream))
+            .await
+            .unwrap();
+        let mut slow = Client::after_handshake(ws).await;
+        // Until every sample is in, as the page that reads sees it.
+        reader.frame_until(|f| f["spp"] == 48).await;
+        // The slow page now gets what was in flight, then the latest frame: not 48.
+        let mut frames = 0;
+        loop {
+            let (info, _) = slow.frame().await;
+            frames += 1;
+            if info["spp"] == 48 {
+                break;
+            }
+        }
+        assert!(
+            frames < 40,
+            "the slow page got {frames} of 49 frames: they queued"
+        );
+    });
+}
+
+#[test]
+fn rendering_stops_when_the_last_page_closes() {
+    let server = server(48, 32, 1_000_000);
+    runtime().block_on(async {
+        let mut page = Client::connect(&server).await;
+        page.frame_until(|f| f["spp"].as_u64() >= Some(2)).await;
+        assert!(server.is_rendering());
+        page.ws.close(None).await.unwrap();
+        wait_until(|| server.clients() == 0).await;
+        wait_until(|| !server.is_rendering()).await;
+        let made = server.frames_made();
+        // No page: nothing renders, however long one waits.
+        tokio::time::sleep(Duration::from_millis(300)).await;
+        assert_eq!(server.frames_made(), made);
+        assert!(!server.is_rendering());
+        // A page comes back: rendering resumes.
+        let mut again = Client::connect(&server).await;
+        again.frame().await;
+    });
+}
+
+async fn wait_until(condition: impl Fn() -> bool) {
+    tokio::time::timeout(PATIENCE, async {
+        while !condition() {
+            tokio::time::sleep(Duration::from_millis(10)).await;
+        }
+    })
+    .await
+    .expect("the condition did not come true in time");
+}
