@@ -1,9 +1,10 @@
-//! `canopy view`: the interactive viewer (canopy-view) on a local address, until Ctrl-C.
+//! `canopy view`: the interactive viewer (canopy-view) on a local address, until Ctrl-C;
+//! the scene is loaded again whenever its files change.
 
 use crate::limits;
 use canopy_bvh::{BuildParams, Builder};
 use canopy_render::BvhWidth;
-use canopy_view::{TreeSettings, ViewOptions, ViewServer};
+use canopy_view::{Reload, TreeSettings, ViewOptions, ViewServer};
 use clap::Args;
 use std::net::SocketAddr;
 use std::path::PathBuf;
@@ -43,6 +44,13 @@ pub struct ViewArgs {
     /// A folder the scene may also read files from (see `canopy render --allow-path`).
     #[arg(long, value_name = "DIR")]
     allow_path: Vec<PathBuf>,
+    /// Where the page's "Save" writes images, as `<scene>-<n>.png` or `.exr` under new
+    /// names [default: the current folder].
+    #[arg(long, value_name = "DIR", default_value = ".")]
+    output_dir: PathBuf,
+    /// Do not load the scene again when its files change on disk.
+    #[arg(long)]
+    no_reload: bool,
 }
 
 pub fn run(args: &ViewArgs) -> anyhow::Result<()> {
@@ -54,8 +62,23 @@ pub fn run(args: &ViewArgs) -> anyhow::Result<()> {
     s.spp = args.spp.unwrap_or(s.spp);
     s.max_depth = args.depth.unwrap_or(s.max_depth);
     s.check().map_err(anyhow::Error::msg)?;
+    // Found now, not at the first save (a folder that is not writable is told then).
+    if !args.output_dir.is_dir() {
+        anyhow::bail!(
+            "{}: --output-dir must be an existing folder",
+            args.output_dir.display()
+        );
+    }
+    let reload = (!args.no_reload).then(|| {
+        let (name, allowed) = (args.scene.clone(), args.allow_path.clone());
+        Reload::new(move || {
+            canopy_render::load_scene_allowing(&name, &allowed).map_err(|e| e.to_string())
+        })
+    });
     let options = ViewOptions {
         bind: args.bind,
+        save_dir: args.output_dir.clone(),
+        reload,
         threads: args.threads.map(|n| n as usize),
         tree: TreeSettings {
             builder: args.bvh,

@@ -5,8 +5,10 @@
 //! the full image pass by pass through canopy-job, each pass sent as a frame over a
 //! WebSocket. The page moves the camera, changes the settings, rebuilds the tree with
 //! another builder, width or leaf size (its statistics shown), shows the traversal-cost
-//! heat map or the tree's boxes, and walks a clicked pixel's primary ray through the
-//! tree. Every request needs the random token in the printed address.
+//! heat map or the tree's boxes, walks a clicked pixel's primary ray through the tree,
+//! descends the tree node by node and saves the image. Where given a way to load the
+//! scene again, the viewer follows its files and shows each saved version. Every request
+//! needs the random token in the printed address.
 //!
 //! The library never prints: the caller shows [`ViewServer::url`].
 //!
@@ -20,17 +22,22 @@
 mod frame;
 pub mod protocol;
 mod renderer;
+pub mod save;
 mod server;
 mod session;
 pub mod settings;
+pub mod tree_view;
 pub mod walk;
+mod watcher;
 
 pub use settings::{Mode, TreeSettings, ViewSettings};
+pub use watcher::Reload;
 
 use axum::serve::ListenerExt;
 use canopy_render::Scene;
 use session::Session;
 use std::net::{SocketAddr, TcpListener};
+use std::path::PathBuf;
 use std::sync::Arc;
 use std::thread::JoinHandle;
 use thiserror::Error;
@@ -50,6 +57,11 @@ pub struct ViewOptions {
     pub threads: Option<usize>,
     /// The tree to start with.
     pub tree: TreeSettings,
+    /// Where the page's "save" writes images.
+    pub save_dir: PathBuf,
+    /// Loads the scene again when one of its files ([`Scene::inputs`]) changes on disk;
+    /// `None`: the scene is not followed (a built-in scene, a scene built in code).
+    pub reload: Option<Reload>,
 }
 
 impl Default for ViewOptions {
@@ -58,6 +70,8 @@ impl Default for ViewOptions {
             bind: SocketAddr::from(([127, 0, 0, 1], 0)),
             threads: None,
             tree: TreeSettings::default(),
+            save_dir: PathBuf::from("."),
+            reload: None,
         }
     }
 }
@@ -84,6 +98,7 @@ pub struct ViewServer {
     stop: Option<tokio::sync::oneshot::Sender<()>>,
     server: Option<JoinHandle<()>>,
     renderer: Option<JoinHandle<()>>,
+    watcher: Option<JoinHandle<()>>,
 }
 
 impl ViewServer {
@@ -99,6 +114,7 @@ impl ViewServer {
         listener.set_nonblocking(true).map_err(bind_error)?;
         let addr = listener.local_addr().map_err(bind_error)?;
         let token: Arc<str> = new_token().into();
+        let inputs = scene.inputs.clone();
         let session = Arc::new(Session::new(scene, options.tree));
 
         let pool = match options.threads {
@@ -120,6 +136,18 @@ impl ViewServer {
                 })
                 .map_err(|e| ViewError::Threads(e.to_string()))?
         };
+        let watcher = match options.reload {
+            Some(reload) if !inputs.is_empty() => {
+                let session = session.clone();
+                Some(
+                    std::thread::Builder::new()
+                        .name("canopy-view-watch".into())
+                        .spawn(move || watcher::run(&session, &reload, inputs))
+                        .map_err(|e| ViewError::Threads(e.to_string()))?,
+                )
+            }
+            _ => None,
+        };
         let runtime = tokio::runtime::Builder::new_multi_thread()
             .worker_threads(2)
             .enable_all()
@@ -128,6 +156,7 @@ impl ViewServer {
         let app = server::App {
             session: session.clone(),
             token: token.clone(),
+            save_dir: Arc::new(options.save_dir),
         };
         let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
         let server = std::thread::Builder::new()
@@ -159,6 +188,7 @@ impl ViewServer {
             stop: Some(stop),
             server: Some(server),
             renderer: Some(renderer),
+            watcher,
         })
     }
 
@@ -219,8 +249,11 @@ impl ViewServer {
         if let Some(server) = self.server.take() {
             let _ = server.join();
         }
-        if let Some(renderer) = self.renderer.take() {
-            let _ = renderer.join();
+        for thread in [self.renderer.take(), self.watcher.take()]
+            .into_iter()
+            .flatten()
+        {
+            let _ = thread.join();
         }
     }
 }

@@ -49,6 +49,11 @@ pub enum Command {
     },
     /// The walk of the primary ray through pixel (x, y) of the full-size image.
     Pick { x: u32, y: u32 },
+    /// Write the image shown (`png`, as shown, or `exr`, linear) into the viewer's folder.
+    Save { format: String },
+    /// The children of a node of the tree over the scene's own primitives (`None`: the
+    /// root), for the tree's view.
+    Node { index: Option<usize> },
 }
 
 fn up_y() -> [f32; 3] {
@@ -61,6 +66,8 @@ pub enum Change {
     View(ViewSettings),
     Rebuild(crate::settings::TreeSettings),
     Pick { x: u32, y: u32 },
+    Save(crate::save::SaveFormat),
+    Node(Option<usize>),
 }
 
 impl Command {
@@ -166,6 +173,8 @@ impl Command {
                 }
                 Ok(Change::Pick { x, y })
             }
+            Command::Save { format } => Ok(Change::Save(crate::save::SaveFormat::parse(&format)?)),
+            Command::Node { index } => Ok(Change::Node(index)),
         }
     }
 }
@@ -239,6 +248,9 @@ pub struct BuilderInfo {
 #[derive(Clone, Debug, Serialize, PartialEq)]
 pub struct TreeReport {
     pub builder: String,
+    /// Primitives of the scene's own and mesh instances, for telling a reload.
+    pub primitives: usize,
+    pub instances: usize,
     pub width: u32,
     pub max_leaf_size: u32,
     pub build_ms: f64,
@@ -306,8 +318,40 @@ pub enum ServerMessage {
         primitives_tested: u32,
         hit: Option<PickHit>,
     },
-    /// A command that changed nothing, and why.
+    /// The image was written here.
+    Saved { path: String },
+    /// The scene's files changed on disk and it was loaded again (the camera kept).
+    Reloaded { primitives: usize, instances: usize },
+    /// A node of the tree and its children, for the tree's view.
+    Node(NodeReport),
+    /// A command that changed nothing, or a reload that failed, and why.
     Error { message: String },
+}
+
+/// A node of the tree and its children, each with what it costs.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct NodeReport {
+    /// `None`: the root.
+    pub index: Option<usize>,
+    pub bounds: [[f32; 3]; 2],
+    pub children: Vec<NodeChild>,
+}
+
+/// One child of a node in the tree's view.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct NodeChild {
+    /// The index to ask for its children; `None` for a leaf.
+    pub index: Option<usize>,
+    pub bounds: [[f32; 3]; 2],
+    /// Primitive references below it.
+    pub primitives: usize,
+    /// Inner nodes and leaves below it, itself included.
+    pub nodes: usize,
+    pub leaves: usize,
+    /// Its share of the tree's SAH cost: the cost of its subtree (nodes visited and
+    /// primitives tested, weighted by the chance that a ray through the root's box
+    /// enters each box) over the whole tree's.
+    pub sah_share: f32,
 }
 
 /// The settings as the page shows them.

@@ -7,7 +7,7 @@
 
 use crate::frame::{encode, resident_bytes, Overlay};
 use crate::protocol::{FrameInfo, TreeReport};
-use crate::session::{Control, Frame, Session};
+use crate::session::{Control, Frame, Session, Shown};
 use crate::settings::{Mode, TreeSettings, ViewSettings};
 use canopy_job::{Observer, RenderJob, Structure};
 use canopy_render::visualize::render_heatmap;
@@ -38,6 +38,11 @@ pub(crate) fn run(session: &Session) {
             return;
         };
         if built_generation != Some(control.tree_generation) {
+            if let Some(scene) = session.take_pending_scene() {
+                *session.scene.write().unwrap_or_else(|e| e.into_inner()) = scene;
+                // The old scene's samples.
+                kept = None;
+            }
             let report = build(session, &control.tree);
             session.publish_tree(report);
             built_generation = Some(control.tree_generation);
@@ -122,6 +127,8 @@ fn tree_report(scene: &Scene, accel: &Accel, settings: &TreeSettings) -> TreeRep
     };
     TreeReport {
         builder: settings.builder.name().into(),
+        primitives: scene.primitives.len(),
+        instances: scene.instances.len(),
         width: settings.width.children(),
         max_leaf_size: settings.max_leaf_size,
         build_ms: accel.build_time.as_secs_f64() * 1e3,
@@ -166,10 +173,12 @@ fn heatmap(session: &Session, control: &Control, accel: &Accel) {
         mrays_per_second: 0.0,
         memory_bytes: resident_bytes(),
     };
-    session.publish_frame(Frame {
-        info,
-        jpeg: encode(map.film, 0.0, None),
+    let jpeg = encode(map.film.clone(), 0.0, None);
+    session.publish_shown(Shown {
+        film: map.film,
+        exposure: 0.0,
     });
+    session.publish_frame(Frame { info, jpeg });
 }
 
 /// Renders the view: a preview unless continuing from `resume`, then the full image.
@@ -295,7 +304,11 @@ impl Observer for FrameObserver<'_> {
             }),
             _ => None,
         };
-        let jpeg = encode(film, view.exposure, overlay);
+        let jpeg = encode(film.clone(), view.exposure, overlay);
+        self.session.publish_shown(Shown {
+            film,
+            exposure: view.exposure,
+        });
         self.session.publish_frame(Frame { info, jpeg });
     }
 }

@@ -6,8 +6,10 @@ use crate::protocol::{
     BuilderInfo, CameraState, Change, Command, ServerMessage, ViewSettingsState,
     MAX_SOCKET_MESSAGE_BYTES,
 };
+use crate::save::save;
 use crate::session::Session;
 use crate::settings::Mode;
+use crate::tree_view::node_report;
 use crate::walk::{primary_ray, walk};
 use axum::extract::ws::{Message, WebSocket, WebSocketUpgrade};
 use axum::extract::{Query, State};
@@ -18,6 +20,7 @@ use axum::Router;
 use canopy_bvh::Builder;
 use canopy_render::Integrator;
 use serde::Deserialize;
+use std::path::PathBuf;
 use std::sync::Arc;
 
 /// The page: markup, style and script in one file, no network needed.
@@ -27,6 +30,8 @@ const PAGE: &str = include_str!("../page/index.html");
 pub(crate) struct App {
     pub session: Arc<Session>,
     pub token: Arc<str>,
+    /// Where saved images go.
+    pub save_dir: Arc<PathBuf>,
 }
 
 #[derive(Deserialize)]
@@ -87,15 +92,15 @@ async fn socket(
     upgrade
         .max_message_size(MAX_SOCKET_MESSAGE_BYTES)
         .max_frame_size(MAX_SOCKET_MESSAGE_BYTES)
-        .on_upgrade(move |ws| serve_socket(ws, app.session))
+        .on_upgrade(move |ws| serve_socket(ws, app))
 }
 
 /// A page's connection: counted as a client while it lasts, so that rendering stops
 /// when the last one closes.
-async fn serve_socket(mut ws: WebSocket, session: Arc<Session>) {
-    session.client_joined();
-    let _ = talk(&mut ws, &session).await;
-    session.client_left();
+async fn serve_socket(mut ws: WebSocket, app: App) {
+    app.session.client_joined();
+    let _ = talk(&mut ws, &app).await;
+    app.session.client_left();
 }
 
 /// Why a connection ended (the page closed it, or a send failed).
@@ -108,10 +113,13 @@ async fn send(ws: &mut WebSocket, message: &ServerMessage) -> Result<(), Closed>
         .map_err(|_| Closed)
 }
 
-async fn talk(ws: &mut WebSocket, session: &Arc<Session>) -> Result<(), Closed> {
+async fn talk(ws: &mut WebSocket, app: &App) -> Result<(), Closed> {
+    let session = &app.session;
     send(ws, &hello(session)).await?;
     let mut frames = session.frames.subscribe();
     let mut trees = session.trees.subscribe();
+    // Only news from now on: an old reload is no news to a new page.
+    let mut notices = session.notices.subscribe();
     // Whatever is there already is news to this page.
     frames.mark_changed();
     trees.mark_changed();
@@ -119,7 +127,7 @@ async fn talk(ws: &mut WebSocket, session: &Arc<Session>) -> Result<(), Closed> 
         tokio::select! {
             received = ws.recv() => match received {
                 Some(Ok(Message::Text(text))) => {
-                    if let Some(reply) = command(session, text.as_str()).await {
+                    if let Some(reply) = command(app, text.as_str()).await {
                         send(ws, &reply).await?;
                     }
                 }
@@ -147,12 +155,20 @@ async fn talk(ws: &mut WebSocket, session: &Arc<Session>) -> Result<(), Closed> 
                     send(ws, &ServerMessage::Tree((*report).clone())).await?;
                 }
             }
+            changed = notices.changed() => {
+                changed.map_err(|_| Closed)?;
+                let notice = notices.borrow_and_update().clone();
+                if let Some(notice) = notice {
+                    send(ws, &notice).await?;
+                }
+            }
         }
     }
 }
 
 /// Checks and applies a page's command; the reply, if it has one.
-async fn command(session: &Arc<Session>, text: &str) -> Option<ServerMessage> {
+async fn command(app: &App, text: &str) -> Option<ServerMessage> {
+    let session = &app.session;
     let current = session.control();
     let change =
         Command::parse(text).and_then(|c| c.apply(&current.view, session.width, session.height));
@@ -191,11 +207,69 @@ async fn command(session: &Arc<Session>, text: &str) -> Option<ServerMessage> {
                     primitives_tested: w.primitives_tested,
                     hit: w.hit,
                 },
-                _ => ServerMessage::Error {
-                    message: "the tree is not built yet; pick again in a moment".into(),
+                _ => not_built(),
+            })
+        }
+        Ok(Change::Save(format)) => {
+            let (session, folder) = (session.clone(), app.save_dir.clone());
+            let saved = tokio::task::spawn_blocking(move || {
+                let shown = session
+                    .shown
+                    .lock()
+                    .unwrap_or_else(|e| e.into_inner())
+                    .clone();
+                let Some(shown) = shown else {
+                    return Err("nothing is shown yet; save again in a moment".to_string());
+                };
+                let inputs = session
+                    .scene
+                    .read()
+                    .unwrap_or_else(|e| e.into_inner())
+                    .inputs
+                    .clone();
+                save(
+                    &shown.film,
+                    shown.exposure,
+                    format,
+                    &folder,
+                    &session.name,
+                    &inputs,
+                )
+            })
+            .await;
+            Some(match saved {
+                Ok(Ok(path)) => ServerMessage::Saved {
+                    path: path.display().to_string(),
+                },
+                Ok(Err(message)) => ServerMessage::Error { message },
+                Err(_) => ServerMessage::Error {
+                    message: "the image could not be saved".into(),
                 },
             })
         }
+        Ok(Change::Node(index)) => {
+            let session = session.clone();
+            let costs = current.tree.params().sah;
+            let report = tokio::task::spawn_blocking(move || {
+                let accel = session.accel.lock().unwrap_or_else(|e| e.into_inner()).clone();
+                let tree = accel.as_ref().and_then(|a| a.tree()).ok_or(
+                    "the tree is not built yet, or the scene has no primitives of its own (only mesh instances)",
+                )?;
+                node_report(tree.view(), &costs, index)
+            })
+            .await;
+            Some(match report {
+                Ok(Ok(node)) => ServerMessage::Node(node),
+                Ok(Err(message)) => ServerMessage::Error { message },
+                Err(_) => not_built(),
+            })
+        }
+    }
+}
+
+fn not_built() -> ServerMessage {
+    ServerMessage::Error {
+        message: "the tree is not built yet; ask again in a moment".into(),
     }
 }
 

@@ -3,12 +3,20 @@
 //! report, which every connection sends on as it can (a slow one skips frames; nothing
 //! queues).
 
-use crate::protocol::{FrameInfo, TreeReport};
+use crate::protocol::{FrameInfo, ServerMessage, TreeReport};
 use crate::settings::{TreeSettings, ViewSettings};
-use canopy_render::{Accel, Scene};
+use canopy_render::{Accel, Film, Scene};
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard, RwLock};
+use std::time::Duration;
 use tokio::sync::watch;
+
+/// The image last shown, as the renderer made it (before exposure and boxes), to save.
+#[derive(Debug)]
+pub struct Shown {
+    pub film: Film,
+    pub exposure: f32,
+}
 
 /// A frame ready to send: what it shows, and its image.
 #[derive(Debug)]
@@ -39,6 +47,10 @@ pub(crate) struct Session {
     pub height: u32,
     /// The structure rendered through (`None` until the first build).
     pub accel: Mutex<Option<Arc<Accel>>>,
+    /// A scene loaded again after its files changed, for the render thread to take up.
+    pending_scene: Mutex<Option<Scene>>,
+    /// The image last shown.
+    pub shown: Mutex<Option<Arc<Shown>>>,
     control: Mutex<Control>,
     changed: Condvar,
     clients: AtomicUsize,
@@ -48,6 +60,8 @@ pub(crate) struct Session {
     sequence: AtomicU64,
     pub frames: watch::Sender<Option<Arc<Frame>>>,
     pub trees: watch::Sender<Option<Arc<TreeReport>>>,
+    /// News for every page (a reload, a reload that failed).
+    pub notices: watch::Sender<Option<Arc<ServerMessage>>>,
 }
 
 impl Session {
@@ -59,6 +73,8 @@ impl Session {
             height: scene.settings.height,
             scene: RwLock::new(scene),
             accel: Mutex::new(None),
+            pending_scene: Mutex::new(None),
+            shown: Mutex::new(None),
             control: Mutex::new(Control {
                 view,
                 tree,
@@ -72,6 +88,7 @@ impl Session {
             sequence: AtomicU64::new(0),
             frames: watch::channel(None).0,
             trees: watch::channel(None).0,
+            notices: watch::channel(None).0,
         }
     }
 
@@ -98,6 +115,38 @@ impl Session {
         c.tree = tree;
         c.tree_generation += 1;
         self.changed.notify_all();
+    }
+
+    /// Replaces the scene (loaded again from its changed files): the render thread takes
+    /// it up, rebuilds the tree and renders the view again, the camera kept.
+    pub fn replace_scene(&self, scene: Scene) {
+        *self.pending_scene.lock().unwrap_or_else(|e| e.into_inner()) = Some(scene);
+        let mut c = self.lock();
+        c.tree_generation += 1;
+        c.view_generation += 1;
+        self.changed.notify_all();
+    }
+
+    /// The scene loaded again, if there is one to take up.
+    pub fn take_pending_scene(&self) -> Option<Scene> {
+        self.pending_scene
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .take()
+    }
+
+    pub fn notify(&self, message: ServerMessage) {
+        self.notices.send_replace(Some(Arc::new(message)));
+    }
+
+    /// Waits `time`, or less if the session shuts down; whether it is still running.
+    pub fn sleep(&self, time: Duration) -> bool {
+        let c = self.lock();
+        let (c, _) = self
+            .changed
+            .wait_timeout_while(c, time, |c| !c.shutdown)
+            .unwrap_or_else(|e| e.into_inner());
+        !c.shutdown
     }
 
     pub fn shut_down(&self) {
@@ -160,6 +209,10 @@ impl Session {
             && self.clients() > 0
             && c.view_generation == started.view_generation
             && c.tree_generation == started.tree_generation
+    }
+
+    pub fn publish_shown(&self, shown: Shown) {
+        *self.shown.lock().unwrap_or_else(|e| e.into_inner()) = Some(Arc::new(shown));
     }
 
     pub fn publish_frame(&self, frame: Frame) {

@@ -71,3 +71,20 @@ fn view_refuses_an_address_it_cannot_listen_on() {
     );
     std::fs::remove_dir_all(dir).unwrap();
 }
+
+#[test]
+fn view_refuses_an_output_folder_that_does_not_exist() {
+    let dir = scratch("view-output-dir");
+    let out = canopy_within(
+        &["view", "cornell", "--output-dir", "missing"],
+        &dir,
+        Duration::from_secs(120),
+    );
+    assert_eq!(out.status.code(), Some(1));
+    assert!(
+        stderr(&out).contains("missing: --output-dir must be an existing folder"),
+        "{}",
+        stderr(&out)
+    );
+    std::fs::remove_dir_all(dir).unwrap();
+}

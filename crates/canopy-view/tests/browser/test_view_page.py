@@ -1,7 +1,8 @@
 """`canopy view` in headless Chromium (Debian's, driven by Playwright): the page loads and
 shows frames, a drag orbits (the image changes), another builder rebuilds the tree (its
 statistics change), the heat map and the tree's boxes show, a click lists the picked ray's walk, and a
-screenshot is saved into the test's output folder.
+the tree's view descends a level, the image is saved, and a screenshot is saved into the
+test's output folder.
 
 Every wait is on an event of the page (`window.canopyView` counts what it received),
 never on a fixed time, so that it passes on a busy machine.
@@ -33,8 +34,12 @@ def viewer():
         pytest.fail("set CANOPY_BIN to the canopy binary")
     if not Path(CHROMIUM).exists():
         pytest.fail(f"no Chromium at {CHROMIUM}: run scripts/install-chromium.sh")
+    OUT.mkdir(parents=True, exist_ok=True)
+    for old in OUT.glob("paper-1-*.png"):
+        old.unlink()
     process = subprocess.Popen(
-        [CANOPY, "view", "paper-1", "--size", "320x240", "--spp", "4096", "--threads", "1"],
+        [CANOPY, "view", "paper-1", "--size", "320x240", "--spp", "4096", "--threads", "1",
+         "--output-dir", str(OUT)],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
@@ -75,7 +80,6 @@ def wait_for(page, condition):
 
 
 def test_the_page_renders_orbits_rebuilds_shows_the_heat_map_and_explores(viewer):
-    OUT.mkdir(parents=True, exist_ok=True)
     with playwright.sync_playwright() as p:
         browser = p.chromium.launch(executable_path=CHROMIUM, args=["--no-sandbox"])
         try:
@@ -123,6 +127,17 @@ def test_the_page_renders_orbits_rebuilds_shows_the_heat_map_and_explores(viewer
             assert page.locator("#walk div").count() > 0
             assert "pixel (" in page.inner_text("#pick")
             assert not page.evaluate("window.canopyView.errors.length")
+
+            # The tree's view: a click on an inner node's row descends to its children.
+            wait_for(page, "window.canopyView.node && window.canopyView.node.children.length > 0")
+            page.locator("#node tr.inner").first.click()
+            wait_for(page, "window.canopyView.node.index !== null")
+
+            # Save: a PNG in the viewer's folder.
+            page.click("#save-png")
+            wait_for(page, "window.canopyView.saved.length === 1")
+            saved = Path(page.evaluate("window.canopyView.saved[0]"))
+            assert saved.name == "paper-1-001.png" and saved.stat().st_size > 0
 
             page.screenshot(path=str(OUT / "view.png"))
         finally:

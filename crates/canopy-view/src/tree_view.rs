@@ -1,0 +1,166 @@
+//! The tree's view: a node of the tree over the scene's own primitives and its children,
+//! each with its subtree's size and share of the tree's SAH cost, so that a user can
+//! descend to where a builder spends its cost.
+
+use crate::protocol::{NodeChild, NodeReport};
+use canopy_bvh::view::{Child, ChildKind, TreeView};
+use canopy_bvh::{Aabb, SahCosts};
+
+/// Node `index` (an inner node's, as a report's child gives it; `None`: the root) and its
+/// children, or why there is none such.
+pub fn node_report(
+    view: &dyn TreeView,
+    costs: &SahCosts,
+    index: Option<usize>,
+) -> Result<NodeReport, String> {
+    let root = view.root().ok_or("the tree is empty")?;
+    let node = match index {
+        None => root,
+        // Looked for from the root: an index from the page is never trusted.
+        Some(i) => find_inner(view, root, i).ok_or_else(|| format!("no inner node {i}"))?,
+    };
+    let root_area = root.bounds.surface_area();
+    let total = subtree(view, root, costs, root_area)
+        .cost
+        .max(f64::MIN_POSITIVE);
+    let mut children = Vec::new();
+    match node.kind {
+        ChildKind::Inner(i) => view.children(i, &mut children),
+        ChildKind::Leaf { .. } => {}
+    }
+    Ok(NodeReport {
+        index,
+        bounds: corners(&node.bounds),
+        children: children
+            .iter()
+            .map(|&c| {
+                let s = subtree(view, c, costs, root_area);
+                NodeChild {
+                    index: match c.kind {
+                        ChildKind::Inner(i) => Some(i),
+                        ChildKind::Leaf { .. } => None,
+                    },
+                    bounds: corners(&c.bounds),
+                    primitives: s.primitives,
+                    nodes: s.nodes,
+                    leaves: s.leaves,
+                    sah_share: (s.cost / total) as f32,
+                }
+            })
+            .collect(),
+    })
+}
+
+fn find_inner(view: &dyn TreeView, root: Child, index: usize) -> Option<Child> {
+    let mut children = Vec::new();
+    let mut stack = vec![root];
+    while let Some(c) = stack.pop() {
+        if let ChildKind::Inner(i) = c.kind {
+            if i == index {
+                return Some(c);
+            }
+            view.children(i, &mut children);
+            stack.extend_from_slice(&children);
+        }
+    }
+    None
+}
+
+#[derive(Default)]
+struct Subtree {
+    cost: f64,
+    primitives: usize,
+    nodes: usize,
+    leaves: usize,
+}
+
+/// The SAH cost of `top`'s subtree as `canopy_bvh::view::stats` counts it (areas
+/// relative to the root's), and its size.
+fn subtree(view: &dyn TreeView, top: Child, costs: &SahCosts, root_area: f32) -> Subtree {
+    let relative = |b: &Aabb| match root_area > 0.0 {
+        true => (b.surface_area() / root_area) as f64,
+        false => 1.0,
+    };
+    let mut s = Subtree::default();
+    let mut children = Vec::new();
+    let mut stack = vec![top];
+    while let Some(c) = stack.pop() {
+        s.nodes += 1;
+        match c.kind {
+            ChildKind::Leaf { count, .. } => {
+                s.leaves += 1;
+                s.primitives += count;
+                s.cost += relative(&c.bounds) * count as f64 * costs.intersection as f64;
+            }
+            ChildKind::Inner(i) => {
+                s.cost += relative(&c.bounds) * costs.traversal as f64;
+                view.children(i, &mut children);
+                stack.extend_from_slice(&children);
+            }
+        }
+    }
+    s
+}
+
+fn corners(b: &Aabb) -> [[f32; 3]; 2] {
+    [b.min.to_array(), b.max.to_array()]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use canopy_bvh::{build, BuildParams, Builder, BvhWidth, Tree};
+    use glam::Vec3;
+
+    fn tree(width: BvhWidth) -> Tree {
+        let boxes: Vec<Aabb> = (0..200)
+            .map(|i| {
+                let p = Vec3::new((i % 7) as f32, (i / 7 % 5) as f32, (i / 35) as f32 * 1.5);
+                Aabb::new(p, p + Vec3::splat(0.5))
+            })
+            .collect();
+        let bvh = build(Builder::BinnedSah, &boxes, &BuildParams::default());
+        Tree::new(bvh, width)
+    }
+
+    #[test]
+    fn the_roots_children_share_out_the_whole_tree() {
+        for width in BvhWidth::ALL {
+            let tree = tree(width);
+            let costs = SahCosts::default();
+            let root = node_report(tree.view(), &costs, None).unwrap();
+            let prims: usize = root.children.iter().map(|c| c.primitives).sum();
+            assert_eq!(prims, 200);
+            // Every inner node and leaf once, the root besides.
+            let stats = tree.stats(&costs);
+            let inner_and_leaves = match width {
+                // Each node of a binary tree is a storage entry of its own.
+                BvhWidth::Two => stats.nodes,
+                // A wide tree's leaves live in their parents' slots.
+                _ => stats.nodes + stats.leaves,
+            };
+            let nodes: usize = root.children.iter().map(|c| c.nodes).sum();
+            assert_eq!(nodes + 1, inner_and_leaves, "{width:?}");
+            // The children's shares and the root's own step make the whole.
+            let shares: f32 = root.children.iter().map(|c| c.sah_share).sum();
+            let root_step = costs.traversal / tree.stats(&costs).sah_cost;
+            assert!(
+                (shares + root_step - 1.0).abs() < 1e-4,
+                "{width:?}: {shares} + {root_step}"
+            );
+            // Each child descends, to its own children.
+            let inner = root.children.iter().find_map(|c| c.index).unwrap();
+            let below = node_report(tree.view(), &costs, Some(inner)).unwrap();
+            assert!(!below.children.is_empty());
+        }
+    }
+
+    #[test]
+    fn an_index_that_is_no_inner_node_is_refused() {
+        let tree = tree(BvhWidth::Eight);
+        let costs = SahCosts::default();
+        for index in [usize::MAX, 1 << 40, tree.stats(&costs).nodes + 5] {
+            assert!(node_report(tree.view(), &costs, Some(index)).is_err());
+        }
+    }
+}
