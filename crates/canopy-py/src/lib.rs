@@ -11,6 +11,7 @@ mod pools;
 mod ray_scene;
 mod render;
 mod scene;
+mod view;
 
 use pyo3::prelude::*;
 
@@ -41,6 +42,7 @@ fn _canopy(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<render::SceneInfo>()?;
     m.add_class::<scene::PyScene>()?;
     m.add_class::<ray_scene::RayScene>()?;
+    m.add_class::<view::PyViewer>()?;
     m.add_function(wrap_pyfunction!(builders, m)?)?;
     m.add_function(wrap_pyfunction!(scenes, m)?)?;
     m.add_function(wrap_pyfunction!(devices, m)?)?;
@@ -52,6 +54,7 @@ fn _canopy(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(outputs::check_output, m)?)?;
     m.add_function(wrap_pyfunction!(outputs::write_file, m)?)?;
     m.add_function(wrap_pyfunction!(render::load_mesh, m)?)?;
+    m.add_function(wrap_pyfunction!(view::view, m)?)?;
     m.add_function(wrap_pyfunction!(scene::eval_material, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())

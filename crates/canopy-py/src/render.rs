@@ -16,7 +16,7 @@ use pyo3::types::PyDict;
 use std::path::PathBuf;
 use std::time::Duration;
 
-fn scene_error(e: canopy_render::SceneError) -> PyErr {
+pub(crate) fn scene_error(e: canopy_render::SceneError) -> PyErr {
     match e {
         canopy_render::SceneError::Read { .. } => PyOSError::new_err(e.to_string()),
         _ => PyValueError::new_err(e.to_string()),

@@ -27,6 +27,7 @@ from . import _canopy
 from ._arguments import naming_arguments, naming_arguments_of_methods
 from .scene import Scene, _transform, dielectric, emissive, eval_material, lambertian, metal, pbr
 from .ray_scene import ClosestPoints, RayHitLists, RayHits, RayScene
+from .view import Viewer
 
 __version__: str = _canopy.__version__
 
@@ -53,6 +54,8 @@ __all__ = [
     "load_scene",
     "read_image",
     "render",
+    "view",
+    "Viewer",
     "denoise",
     "__version__",
     "write_image",
@@ -494,6 +497,52 @@ def denoise(
     normal = None if normal is None else _array(normal, "normal", np.float32, 3, "(height, width, 3)")
     return _canopy.denoise(color, albedo, normal, threads=threads, prefilter=bool(prefilter),
                            oidn_paths=_oidn_paths())
+
+
+@naming_arguments
+def view(
+    scene,
+    *,
+    bind: str = "127.0.0.1:0",
+    size: Optional[Tuple[int, int]] = None,
+    spp: Optional[int] = None,
+    max_depth: Optional[int] = None,
+    threads: Optional[int] = None,
+    bvh: str = "binned-sah",
+    width: int = 8,
+    max_leaf_size: int = 4,
+    output_dir=".",
+    allow_paths: Sequence = (),
+    reload: bool = True,
+) -> Viewer:
+    """Shows a scene (built-in name, scene file or mesh, or a :class:`Scene` built in
+    Python) in the browser while it renders, as ``canopy view`` does, and returns the
+    running :class:`Viewer`: open ``viewer.url`` (in a notebook the viewer shows the page
+    inline), and ``viewer.stop()`` when done (or use it in a ``with`` block).
+
+    The page moves the camera, changes settings, rebuilds the tree with another builder,
+    width or leaf size, shows the traversal-cost heat map and the tree's boxes, walks a
+    clicked pixel's ray through the tree, and saves images into ``output_dir``. It is
+    served on ``bind`` (this machine only, a free port, by default) behind a random token
+    that ``url`` carries. A scene read from files is loaded again when they change
+    (``reload=False``: not). ``size`` is (width, height); the others start as named and
+    the page changes them. The call returns at once: the viewer runs on threads of its
+    own until stopped."""
+    native = _canopy.view(
+        scene._native.native if isinstance(scene, Scene) else str(scene),
+        bind=str(bind),
+        size=None if size is None else (int(size[0]), int(size[1])),
+        spp=spp,
+        max_depth=max_depth,
+        threads=threads,
+        bvh=str(bvh),
+        width=int(width),
+        max_leaf_size=int(max_leaf_size),
+        output_dir=str(output_dir),
+        allow_paths=[str(p) for p in allow_paths],
+        reload=bool(reload),
+    )
+    return Viewer(native)
 
 
 def write_image(path, image) -> None:

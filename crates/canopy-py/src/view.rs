@@ -1,0 +1,150 @@
+//! `canopy_rt.view`: the interactive viewer (canopy-view) for a scene from Python.
+
+use crate::render::{scene_error, SceneArg};
+use canopy_bvh::{Builder, BvhWidth};
+use canopy_render::{load_scene_allowing, RenderSettings};
+use canopy_view::{Reload, TreeSettings, ViewOptions, ViewServer};
+use pyo3::exceptions::{PyOSError, PyValueError};
+use pyo3::prelude::*;
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::sync::Mutex;
+
+/// A running viewer: its address, and a way to stop it (it also stops when collected).
+#[pyclass(frozen, module = "canopy_rt._canopy", name = "Viewer")]
+pub struct PyViewer {
+    url: String,
+    server: Mutex<Option<ViewServer>>,
+}
+
+#[pymethods]
+impl PyViewer {
+    /// The page's address, token included.
+    #[getter]
+    fn url(&self) -> String {
+        self.url.clone()
+    }
+
+    /// Pages connected now.
+    #[getter]
+    fn clients(&self) -> usize {
+        let server = self.server.lock().unwrap_or_else(|e| e.into_inner());
+        server.as_ref().map_or(0, |s| s.clients())
+    }
+
+    /// Whether it still serves.
+    #[getter]
+    fn running(&self) -> bool {
+        self.server
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .is_some()
+    }
+
+    /// Stops serving and rendering (after the pass in flight); nothing happens if it
+    /// has stopped already.
+    fn stop(&self, py: Python<'_>) {
+        let server = self.server.lock().unwrap_or_else(|e| e.into_inner()).take();
+        if let Some(server) = server {
+            py.detach(|| server.shutdown());
+        }
+    }
+}
+
+/// Serves `scene` (a name, a file, or a `Scene` built in Python) in the browser; see
+/// `canopy_rt.view`.
+#[pyfunction]
+#[pyo3(signature = (scene, *, bind, size, spp, max_depth, threads, bvh, width, max_leaf_size, output_dir, allow_paths, reload))]
+#[allow(clippy::too_many_arguments)]
+pub fn view(
+    py: Python<'_>,
+    scene: SceneArg<'_>,
+    bind: &str,
+    size: Option<(u32, u32)>,
+    spp: Option<u32>,
+    max_depth: Option<u32>,
+    threads: Option<usize>,
+    bvh: &str,
+    width: u32,
+    max_leaf_size: u32,
+    output_dir: PathBuf,
+    allow_paths: Vec<PathBuf>,
+    reload: bool,
+) -> PyResult<PyViewer> {
+    let bind: SocketAddr = bind
+        .parse()
+        .map_err(|e| PyValueError::new_err(format!("bind: {bind:?} is no address ({e})")))?;
+    let builder: Builder = bvh
+        .parse()
+        .map_err(|e| PyValueError::new_err(format!("bvh: {e}")))?;
+    let width = match width {
+        2 => BvhWidth::Two,
+        4 => BvhWidth::Four,
+        8 => BvhWidth::Eight,
+        w => {
+            return Err(PyValueError::new_err(format!(
+                "width must be 2, 4 or 8, not {w}"
+            )))
+        }
+    };
+    if !(1..=256).contains(&max_leaf_size) {
+        return Err(PyValueError::new_err(format!(
+            "max_leaf_size must be in 1..=256, not {max_leaf_size}"
+        )));
+    }
+    if threads.is_some_and(|n| !(1..=canopy_job::MAX_THREADS).contains(&n)) {
+        return Err(PyValueError::new_err(format!(
+            "threads must be in 1..={}",
+            canopy_job::MAX_THREADS
+        )));
+    }
+    if !output_dir.is_dir() {
+        return Err(PyValueError::new_err(format!(
+            "output_dir: {} is not an existing folder",
+            output_dir.display()
+        )));
+    }
+    let (mut scene, reload) = match scene {
+        SceneArg::Named(name) => {
+            let scene = py
+                .detach(|| load_scene_allowing(&name, &allow_paths))
+                .map_err(scene_error)?;
+            let reload = reload.then(|| {
+                Reload::new(move || {
+                    load_scene_allowing(&name, &allow_paths).map_err(|e| e.to_string())
+                })
+            });
+            (scene, reload)
+        }
+        // Built in code: no file to follow.
+        SceneArg::Built(built) => (built.borrow().scene.clone(), None),
+    };
+    let s = &mut scene.settings;
+    if let Some((w, h)) = size {
+        (s.width, s.height) = (w, h);
+    }
+    s.spp = spp.unwrap_or(s.spp);
+    s.max_depth = max_depth.unwrap_or(s.max_depth);
+    RenderSettings::check(s).map_err(PyValueError::new_err)?;
+    let options = ViewOptions {
+        bind,
+        threads,
+        tree: TreeSettings {
+            builder,
+            width,
+            max_leaf_size,
+        },
+        save_dir: output_dir,
+        reload,
+    };
+    let server = py
+        .detach(|| ViewServer::start(scene, options))
+        .map_err(|e| match e {
+            canopy_view::ViewError::Bind { .. } => PyOSError::new_err(e.to_string()),
+            _ => PyValueError::new_err(e.to_string()),
+        })?;
+    Ok(PyViewer {
+        url: server.url(),
+        server: Mutex::new(Some(server)),
+    })
+}
