@@ -11,7 +11,8 @@ use crate::session::{Control, Frame, Session, Shown};
 use crate::settings::{Mode, TreeSettings, ViewSettings};
 use canopy_job::{Observer, RenderJob, Structure};
 use canopy_render::visualize::render_heatmap;
-use canopy_render::{Accel, AccelKind, Accumulator, Scene};
+use canopy_render::{Accel, AccelKind, Accumulator, Film, Scene};
+use glam::Vec3;
 use std::sync::{Arc, RwLockReadGuard};
 use std::time::Instant;
 
@@ -62,7 +63,7 @@ pub(crate) fn run(session: &Session) {
                 heatmap(session, &control, &accel);
                 true
             }
-            Mode::Render | Mode::Boxes => {
+            Mode::Render | Mode::Boxes | Mode::Albedo | Mode::Normal => {
                 let resume = kept
                     .take()
                     .filter(|k| k.view.keeps_samples(&control.view))
@@ -231,6 +232,7 @@ fn run_job(
         optimize: None,
     };
     job.resume = resume;
+    job.aovs = control.view.mode.aovs();
     let samples_before = job.resume.as_ref().map_or(0, |a| a.samples);
     let prepared = job.prepare_with(accel.clone()).ok()?;
     let mut observer = FrameObserver {
@@ -281,7 +283,7 @@ impl Observer for FrameObserver<'_> {
 
     fn pass_samples(&mut self, accumulator: &Accumulator) {
         let view = &self.control.view;
-        let film = accumulator.film();
+        let film = shown_film(accumulator, view.mode);
         let rays = accumulator.rays - self.rays_before;
         let info = FrameInfo {
             sequence: self.session.next_sequence(),
@@ -310,5 +312,34 @@ impl Observer for FrameObserver<'_> {
             exposure: view.exposure,
         });
         self.session.publish_frame(Frame { info, jpeg });
+    }
+}
+
+/// The image of `accumulator` that `mode` shows: the render, or an AOV layer.
+fn shown_film(accumulator: &Accumulator, mode: Mode) -> Film {
+    let film = accumulator.film();
+    let layers = accumulator.aovs.resolved(accumulator.samples);
+    let pixels = match mode {
+        Mode::Albedo => layers.albedo,
+        // Each axis from -1..1 to 0..1, as the colour shown (sRGB-encoded).
+        Mode::Normal => layers
+            .normal
+            .iter()
+            .map(|n| {
+                (*n * 0.5 + 0.5)
+                    .clamp(Vec3::ZERO, Vec3::ONE)
+                    .map(srgb_to_linear)
+            })
+            .collect(),
+        Mode::Render | Mode::Boxes | Mode::Heatmap => return film,
+    };
+    Film { pixels, ..film }
+}
+
+/// The inverse of the sRGB transfer function.
+fn srgb_to_linear(c: f32) -> f32 {
+    match c <= 0.040_45 {
+        true => c / 12.92,
+        false => ((c + 0.055) / 1.055).powf(2.4),
     }
 }

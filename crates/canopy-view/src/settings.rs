@@ -4,7 +4,7 @@
 
 use canopy_bvh::{BuildParams, Builder, BvhWidth};
 use canopy_render::camera::CameraSpec;
-use canopy_render::{Integrator, Scene};
+use canopy_render::{AovSet, Integrator, Scene};
 use serde::{Deserialize, Serialize};
 
 /// What the image shows.
@@ -18,10 +18,28 @@ pub enum Mode {
     Heatmap,
     /// The render with the tree's boxes of the chosen levels drawn over it.
     Boxes,
+    /// The albedo a denoiser takes: the first surface past mirrors and glass.
+    Albedo,
+    /// The shading normal there, as colour (x, y, z from -1..1 to 0..1).
+    Normal,
 }
 
 impl Mode {
-    pub const ALL: [Mode; 3] = [Mode::Render, Mode::Heatmap, Mode::Boxes];
+    pub const ALL: [Mode; 5] = [
+        Mode::Render,
+        Mode::Heatmap,
+        Mode::Boxes,
+        Mode::Albedo,
+        Mode::Normal,
+    ];
+
+    /// The AOV layers a render of this mode accumulates.
+    pub fn aovs(self) -> AovSet {
+        match self {
+            Mode::Albedo | Mode::Normal => AovSet::DENOISING,
+            Mode::Render | Mode::Heatmap | Mode::Boxes => AovSet::NONE,
+        }
+    }
 }
 
 /// The view: changing any of it restarts accumulation.
@@ -55,14 +73,16 @@ impl ViewSettings {
     }
 
     /// Whether going from `self` to `next` leaves the accumulated samples valid: only
-    /// the exposure, the target spp, the boxes drawn over the render or their levels
-    /// changed (the caller checks that the samples are not more than the new target).
+    /// the exposure, the target spp, the boxes drawn over the render or their levels, or
+    /// the layer shown of the same layers changed (the caller checks that the samples
+    /// are not more than the new target).
     pub fn keeps_samples(&self, next: &ViewSettings) -> bool {
         self.camera == next.camera
             && self.max_depth == next.max_depth
             && self.integrator == next.integrator
             && self.mode != Mode::Heatmap
             && next.mode != Mode::Heatmap
+            && self.mode.aovs() == next.mode.aovs()
     }
 }
 

@@ -606,3 +606,44 @@ fn a_changed_scene_file_is_reloaded_with_the_camera_kept() {
     drop(server);
     std::fs::remove_dir_all(dir).unwrap();
 }
+
+#[test]
+fn the_albedo_and_normal_layers_are_shown() {
+    let server = server(64, 48, 1000);
+    runtime().block_on(async {
+        let mut page = Client::connect(&server).await;
+        page.send(json!({"type": "settings", "mode": "albedo"}))
+            .await;
+        let (info, image) = page
+            .frame_until(|f| f["mode"] == "albedo" && f["preview"] == false)
+            .await;
+        assert!(info["spp"].as_u64() >= Some(1));
+        // The bottom row sees the ground, lambertian (0.6, 0.12, 0.1): in sRGB about
+        // (203, 97, 89), without noise (the albedo of the first surface).
+        let mut row: Vec<[u8; 3]> = (0..64).map(|x| image.get_pixel(x, 47).0).collect();
+        row.sort_by_key(|p| p[0]);
+        let median = row[32];
+        for (channel, expected) in [203, 97, 89].into_iter().enumerate() {
+            let got = median[channel] as i32;
+            assert!(
+                (got - expected).abs() <= 8,
+                "channel {channel}: {got}, not about {expected}"
+            );
+        }
+        // The normal layer of the same samples: shown at once, no restart.
+        let generation = info["generation"].as_u64().unwrap();
+        page.send(json!({"type": "settings", "mode": "normal"}))
+            .await;
+        let (normal, image) = page.frame_until(|f| f["mode"] == "normal").await;
+        assert!(normal["generation"].as_u64() > Some(generation));
+        assert!(
+            normal["spp"].as_u64() >= info["spp"].as_u64(),
+            "the samples were kept"
+        );
+        // The ground's normal points up: (0, 1, 0) shows as (128, 255, 128).
+        let mut row: Vec<[u8; 3]> = (0..64).map(|x| image.get_pixel(x, 47).0).collect();
+        row.sort_by_key(|p| p[1]);
+        let p = row[32];
+        assert!(p[1] > 230 && (p[0] as i32 - 128).abs() < 40, "{p:?}");
+    });
+}
