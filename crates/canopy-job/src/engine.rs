@@ -24,8 +24,9 @@ pub(crate) enum Engine<'a> {
 
 impl Engine<'_> {
     /// Adds one sample to every pixel of the accumulator's region; `None` when the
-    /// observer abandoned the pass (when `abandonable`; on the CPU, between rows; the accumulator is then
-    /// torn, see [`render_samples_abandonable`]). The GPU's passes run whole.
+    /// observer abandoned the pass (when `abandonable`; on the CPU, between rows), the
+    /// accumulator then torn (see [`render_samples_abandonable`]). The GPU's passes run
+    /// whole.
     pub(crate) fn pass(
         &self,
         accumulator: &mut Accumulator,

@@ -56,8 +56,9 @@ impl<'s> RenderJob<'s> {
 
     /// [`prepare`](Self::prepare), tracing through `accel` instead of building one: the
     /// structure an earlier job over the same scene built (a viewer renders many jobs
-    /// over one scene as its camera moves, through the one structure). It must hold this scene's own primitives (the same shared array) and one instance per
-    /// mesh instance, else the job is refused. On the GPU, it must be binary.
+    /// over one scene as its camera moves, through the one structure). It must hold
+    /// this scene's own primitives (the same shared array) and one instance per mesh
+    /// instance, else the job is refused. On the GPU, it must be binary.
     pub fn prepare_with(&self, accel: Arc<Accel>) -> Result<Prepared<'_>, JobError> {
         let scene = self.scene;
         let same_primitives = std::ptr::eq(accel.primitives(), scene.primitives.as_slice());

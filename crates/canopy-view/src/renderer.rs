@@ -6,7 +6,7 @@
 //! continues from them.
 
 use crate::frame::{encode, resident_bytes, Overlay};
-use crate::protocol::{FrameInfo, TreeReport};
+use crate::protocol::{FrameInfo, ServerMessage, TreeReport};
 use crate::session::{Control, Frame, Session, Shown};
 use crate::settings::{Mode, TreeSettings, ViewSettings};
 use canopy_job::{Observer, RenderJob, Structure};
@@ -25,8 +25,8 @@ struct Kept {
     accumulator: Accumulator,
 }
 
-/// Runs until the session shuts down. Errors of a job (none are expected: the scene was
-/// checked when loaded) are sent to the pages as frames' absence and are not fatal.
+/// Runs until the session shuts down. A job that cannot run is told to the pages (as an
+/// error notice) and not tried again until something changes.
 pub(crate) fn run(session: &Session) {
     let mut built_generation = None;
     let mut finished_generation = None;
@@ -183,7 +183,9 @@ fn heatmap(session: &Session, control: &Control, accel: &Accel) {
 }
 
 /// Renders the view: a preview unless continuing from `resume`, then the full image.
-/// Returns the samples it has (to continue from) and whether the target is reached.
+/// Returns the samples it has (to continue from) and whether the target is reached; a
+/// job that cannot run (an image too large for the memory left, say) is told to the
+/// pages and counts as done, so that it is not tried again until the view changes.
 fn render(
     session: &Session,
     control: &Control,
@@ -204,17 +206,24 @@ fn render(
             },
             Some(size),
         );
-        let _ = run_job(session, control, accel, None, start, true);
+        let preview = run_job(session, control, accel, None, start, true);
         apply_view(session, &control.view, None);
+        if let Err(message) = preview {
+            session.notify(ServerMessage::Error { message });
+            return (None, true);
+        }
     }
     match run_job(session, control, accel, resume, start, false) {
-        Some(outcome) => (Some(outcome.accumulator), outcome.complete),
-        None => (None, false),
+        Ok(outcome) => (Some(outcome.accumulator), outcome.complete),
+        Err(message) => {
+            session.notify(ServerMessage::Error { message });
+            (None, true)
+        }
     }
 }
 
-/// One job over the scene as it is set now, publishing a frame after each pass; `None`
-/// if it could not run (the page sees no frame).
+/// One job over the scene as it is set now, publishing a frame after each pass; why it
+/// could not run, if it could not.
 fn run_job(
     session: &Session,
     control: &Control,
@@ -222,7 +231,7 @@ fn run_job(
     resume: Option<Accumulator>,
     start: Instant,
     preview: bool,
-) -> Option<canopy_job::Outcome> {
+) -> Result<canopy_job::Outcome, String> {
     let scene = read(session);
     let mut job = RenderJob::new(&scene, scene.name.clone());
     job.structure = Structure {
@@ -234,7 +243,9 @@ fn run_job(
     job.resume = resume;
     job.aovs = control.view.mode.aovs();
     let samples_before = job.resume.as_ref().map_or(0, |a| a.samples);
-    let prepared = job.prepare_with(accel.clone()).ok()?;
+    let prepared = job
+        .prepare_with(accel.clone())
+        .map_err(|e| format!("cannot render the view: {e}"))?;
     let mut observer = FrameObserver {
         session,
         control,
@@ -244,13 +255,15 @@ fn run_job(
         rays_before: job.resume.as_ref().map_or(0, |a| a.rays),
         passes_started: Instant::now(),
     };
-    let outcome = prepared.run(&mut observer).ok()?;
+    let outcome = prepared
+        .run(&mut observer)
+        .map_err(|e| format!("the render stopped: {e}"))?;
     // Samples continued at their target (a new exposure, say) make no pass, yet the
     // page waits for the image they make now.
     if outcome.accumulator.samples == samples_before && samples_before > 0 {
         observer.pass_samples(&outcome.accumulator);
     }
-    Some(outcome)
+    Ok(outcome)
 }
 
 /// Publishes each pass as a frame, and stops the job when the view changes or the last

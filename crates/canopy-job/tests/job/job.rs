@@ -551,3 +551,28 @@ fn an_abandoned_pass_leaves_the_passes_before_it_bit_for_bit() {
     assert!(outcome.complete);
     assert_eq!(whole.shown, [1, 2, 3, 4, 5, 6]);
 }
+
+#[test]
+fn a_job_traces_through_a_structure_given_only_if_it_is_over_its_scene() {
+    let scene = small("cornell", 16, 16, 2);
+    let accel = std::sync::Arc::new(canopy_render::Accel::default_for(&scene));
+    let job = RenderJob::new(&scene, "cornell");
+    let reused = job
+        .prepare_with(accel.clone())
+        .unwrap()
+        .run(&mut ())
+        .unwrap();
+    let built = job.prepare().unwrap().run(&mut ()).unwrap();
+    assert_eq!(reused.accumulator.sums, built.accumulator.sums);
+    // The same geometry loaded again is another scene: its structure is refused.
+    let other = small("cornell", 16, 16, 2);
+    let foreign = RenderJob::new(&other, "cornell");
+    assert!(matches!(
+        foreign.prepare_with(accel.clone()),
+        Err(JobError::Invalid(_))
+    ));
+    // A wide tree for the GPU is refused before the GPU is opened.
+    let mut gpu = RenderJob::new(&scene, "cornell");
+    gpu.device = Device::Gpu;
+    assert!(matches!(gpu.prepare_with(accel), Err(JobError::Invalid(m)) if m.contains("binary")));
+}
