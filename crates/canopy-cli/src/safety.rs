@@ -23,47 +23,16 @@ pub fn check_output(
     canopy_render::output_policy::check_output(path, what, kind, inputs).map_err(anyhow::Error::msg)
 }
 
-pub use canopy_render::output_policy::OutputKind;
+pub use canopy_render::output_policy::{file_stem_from_name, OutputKind};
 
 /// Refuses work that needs more memory than is available (where that is known).
 pub fn check_memory(needed: u64, what: &str) -> anyhow::Result<()> {
     canopy_render::files::check_memory(needed, available_memory(), what).map_err(anyhow::Error::msg)
 }
 
-/// A scene's name made into a plain file name in the current directory: path
-/// separators, `..`, control and other unusual characters become `_`.
-pub fn file_stem_from_name(name: &str) -> String {
-    let cleaned: String = name
-        .chars()
-        .map(|c| match c {
-            'a'..='z' | 'A'..='Z' | '0'..='9' | '-' | '_' | '.' => c,
-            _ => '_',
-        })
-        .take(100)
-        .collect();
-    // No hidden files, no `.` or `..`.
-    let cleaned = cleaned.trim_start_matches('.');
-    if cleaned.chars().all(|c| c == '_') {
-        "render".to_owned()
-    } else {
-        cleaned.to_owned()
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn names_become_plain_file_names() {
-        assert_eq!(file_stem_from_name("cornell"), "cornell");
-        assert_eq!(file_stem_from_name("../x"), "_x");
-        assert_eq!(file_stem_from_name("/etc/passwd"), "_etc_passwd");
-        assert_eq!(file_stem_from_name(".."), "render");
-        assert_eq!(file_stem_from_name(""), "render");
-        assert_eq!(file_stem_from_name("my scene\n"), "my_scene_");
-        assert_eq!(file_stem_from_name(&"a".repeat(500)).len(), 100);
-    }
 
     #[test]
     fn same_file_sees_through_relative_paths() {

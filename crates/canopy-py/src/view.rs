@@ -1,7 +1,7 @@
 //! `canopy_rt.view`: the interactive viewer (canopy-view) for a scene from Python.
 
 use crate::render::{scene_error, SceneArg};
-use canopy_bvh::{Builder, BvhWidth};
+use canopy_bvh::Builder;
 use canopy_render::{load_scene_allowing, RenderSettings};
 use canopy_view::{Reload, TreeSettings, ViewOptions, ViewServer};
 use pyo3::exceptions::{PyOSError, PyValueError};
@@ -77,21 +77,7 @@ pub fn view(
     let builder: Builder = bvh
         .parse()
         .map_err(|e| PyValueError::new_err(format!("bvh: {e}")))?;
-    let width = match width {
-        2 => BvhWidth::Two,
-        4 => BvhWidth::Four,
-        8 => BvhWidth::Eight,
-        w => {
-            return Err(PyValueError::new_err(format!(
-                "width must be 2, 4 or 8, not {w}"
-            )))
-        }
-    };
-    if !(1..=256).contains(&max_leaf_size) {
-        return Err(PyValueError::new_err(format!(
-            "max_leaf_size must be in 1..=256, not {max_leaf_size}"
-        )));
-    }
+    let tree = TreeSettings::new(builder, width, max_leaf_size).map_err(PyValueError::new_err)?;
     if threads.is_some_and(|n| !(1..=canopy_job::MAX_THREADS).contains(&n)) {
         return Err(PyValueError::new_err(format!(
             "threads must be in 1..={}",
@@ -129,11 +115,7 @@ pub fn view(
     let options = ViewOptions {
         bind,
         threads,
-        tree: TreeSettings {
-            builder,
-            width,
-            max_leaf_size,
-        },
+        tree,
         save_dir: output_dir,
         reload,
     };

@@ -175,6 +175,18 @@ impl Camera {
         let target = self.upper_left + s * self.horizontal - t * self.vertical;
         Ray::new(origin, (target - origin).normalize(), 0.0, f32::INFINITY)
     }
+
+    /// The ray through the centre of pixel (`x`, `y`): the primary ray the heat map and
+    /// the viewer's explorer trace (a lens is sampled by the pixel's first stream of
+    /// `seed`; a pinhole draws nothing).
+    pub fn pixel_centre_ray(&self, x: u32, y: u32, seed: u64) -> Ray {
+        let mut rng = Rng::for_sample(seed, y as u64 * self.width as u64 + x as u64, 0);
+        self.ray(
+            (x as f32 + 0.5) / self.width as f32,
+            (y as f32 + 0.5) / self.height as f32,
+            &mut rng,
+        )
+    }
 }
 
 #[cfg(test)]

@@ -47,6 +47,17 @@ pub fn linear_to_srgb(c: f32) -> f32 {
     }
 }
 
+/// The inverse of [`linear_to_srgb`] (the sRGB decoding of textures and drawn colours),
+/// for a value in [0, 1].
+#[inline]
+pub fn srgb_to_linear(c: f32) -> f32 {
+    if c <= 0.040_45 {
+        c / 12.92
+    } else {
+        ((c + 0.055) / 1.055).powf(2.4)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -107,6 +107,27 @@ pub fn check_writable_folder(path: &Path, what: &str) -> Result<(), String> {
     }
 }
 
+/// A scene's name made into a plain file name (the default image of `canopy render`,
+/// the viewer's saved images): path separators, `..`, control and other unusual
+/// characters become `_`.
+pub fn file_stem_from_name(name: &str) -> String {
+    let cleaned: String = name
+        .chars()
+        .map(|c| match c {
+            'a'..='z' | 'A'..='Z' | '0'..='9' | '-' | '_' | '.' => c,
+            _ => '_',
+        })
+        .take(100)
+        .collect();
+    // No hidden files, no `.` or `..`.
+    let cleaned = cleaned.trim_start_matches('.');
+    if cleaned.chars().all(|c| c == '_') {
+        "render".to_owned()
+    } else {
+        cleaned.to_owned()
+    }
+}
+
 /// Where the samples of a render whose output could not be written are kept instead,
 /// in order: beside the output, in the working directory, in the temporary directory.
 /// `name` is the file name to use (`<image>.checkpoint`).
@@ -123,6 +144,17 @@ pub fn fallback_places(output: &Path, name: &str) -> Vec<PathBuf> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn names_become_plain_file_names() {
+        assert_eq!(file_stem_from_name("cornell"), "cornell");
+        assert_eq!(file_stem_from_name("../x"), "_x");
+        assert_eq!(file_stem_from_name("/etc/passwd"), "_etc_passwd");
+        assert_eq!(file_stem_from_name(".."), "render");
+        assert_eq!(file_stem_from_name(""), "render");
+        assert_eq!(file_stem_from_name("my scene\n"), "my_scene_");
+        assert_eq!(file_stem_from_name(&"a".repeat(500)).len(), 100);
+    }
 
     fn scratch(tag: &str) -> PathBuf {
         let dir = std::env::temp_dir().join(format!("canopy-policy-{tag}-{}", std::process::id()));

@@ -129,16 +129,8 @@ pub struct TextureRef {
     pub transform: Option<UvTransform>,
 }
 
-static SRGB_TO_LINEAR: LazyLock<[f32; 256]> = LazyLock::new(|| {
-    std::array::from_fn(|i| {
-        let c = i as f32 / 255.0;
-        if c <= 0.04045 {
-            c / 12.92
-        } else {
-            ((c + 0.055) / 1.055).powf(2.4)
-        }
-    })
-});
+static SRGB_TO_LINEAR: LazyLock<[f32; 256]> =
+    LazyLock::new(|| std::array::from_fn(|i| crate::film::srgb_to_linear(i as f32 / 255.0)));
 
 impl TextureRef {
     /// The texture at `uv`, bilinearly filtered between texel centres; with `srgb` the

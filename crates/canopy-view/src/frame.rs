@@ -21,10 +21,7 @@ pub struct Overlay<'a> {
 
 /// `film` exposed by `exposure` stops, with `overlay`'s boxes, as JPEG bytes.
 pub fn encode(mut film: Film, exposure: f32, overlay: Option<Overlay>) -> Vec<u8> {
-    if exposure != 0.0 {
-        let scale = exposure.exp2();
-        film.pixels.iter_mut().for_each(|p| *p *= scale);
-    }
+    expose(&mut film, exposure);
     if let Some(o) = overlay {
         let camera = Camera::new(o.camera, film.width, film.height);
         let levels = LevelRange {
@@ -39,6 +36,14 @@ pub fn encode(mut film: Film, exposure: f32, overlay: Option<Overlay>) -> Vec<u8
         .encode(&rgb, film.width, film.height, ExtendedColorType::Rgb8)
         .expect("an RGB8 buffer of the film's size encodes into memory");
     bytes
+}
+
+/// `film` scaled by `exposure` stops, as the page shows it.
+pub fn expose(film: &mut Film, exposure: f32) {
+    if exposure != 0.0 {
+        let scale = exposure.exp2();
+        film.pixels.iter_mut().for_each(|p| *p *= scale);
+    }
 }
 
 /// The process's resident memory in bytes, where the system tells it (Linux).

@@ -5,8 +5,7 @@
 //! is not JSON, names no known command, or holds a value out of range gets an
 //! [`ServerMessage::Error`] reply and changes nothing.
 
-use crate::settings::{Mode, ViewSettings};
-use canopy_bvh::{Builder, BvhWidth};
+use crate::settings::{Mode, TreeSettings, ViewSettings};
 use canopy_render::camera::CameraSpec;
 use canopy_render::{Integrator, RenderSettings};
 use glam::Vec3;
@@ -64,7 +63,7 @@ fn up_y() -> [f32; 3] {
 #[derive(Clone, Debug, PartialEq)]
 pub enum Change {
     View(ViewSettings),
-    Rebuild(crate::settings::TreeSettings),
+    Rebuild(TreeSettings),
     Pick { x: u32, y: u32 },
     Save(crate::save::SaveFormat),
     Node(Option<usize>),
@@ -151,19 +150,8 @@ impl Command {
                 width,
                 max_leaf_size,
             } => {
-                let builder: Builder = builder.parse().map_err(|e| format!("{e}"))?;
-                let width = match width {
-                    2 => BvhWidth::Two,
-                    4 => BvhWidth::Four,
-                    8 => BvhWidth::Eight,
-                    w => return Err(format!("width must be 2, 4 or 8, not {w}")),
-                };
-                check_range("max_leaf_size", max_leaf_size, 1, 256)?;
-                Ok(Change::Rebuild(crate::settings::TreeSettings {
-                    builder,
-                    width,
-                    max_leaf_size,
-                }))
+                let builder = builder.parse().map_err(|e| format!("{e}"))?;
+                TreeSettings::new(builder, width, max_leaf_size).map(Change::Rebuild)
             }
             Command::Pick { x, y } => {
                 if x >= width || y >= height {
@@ -263,6 +251,11 @@ pub struct TreeReport {
     pub leaves: usize,
     /// Bytes of every structure: the primitives' tree, each mesh's and the top one.
     pub memory_bytes: usize,
+}
+
+/// A box as the page takes it: min and max corners.
+pub(crate) fn corners(b: &canopy_bvh::Aabb) -> [[f32; 3]; 2] {
+    [b.min.to_array(), b.max.to_array()]
 }
 
 /// One node of a primary ray's walk, in the order visited.

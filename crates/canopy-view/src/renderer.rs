@@ -10,6 +10,7 @@ use crate::protocol::{FrameInfo, ServerMessage, TreeReport};
 use crate::session::{Control, Frame, Session, Shown};
 use crate::settings::{Mode, TreeSettings, ViewSettings};
 use canopy_job::{Observer, RenderJob, Structure};
+use canopy_render::film::srgb_to_linear;
 use canopy_render::visualize::render_heatmap;
 use canopy_render::{Accel, AccelKind, Accumulator, Film, Scene};
 use glam::Vec3;
@@ -331,6 +332,9 @@ impl Observer for FrameObserver<'_> {
 /// The image of `accumulator` that `mode` shows: the render, or an AOV layer.
 fn shown_film(accumulator: &Accumulator, mode: Mode) -> Film {
     let film = accumulator.film();
+    if mode.aovs().is_empty() {
+        return film;
+    }
     let layers = accumulator.aovs.resolved(accumulator.samples);
     let pixels = match mode {
         Mode::Albedo => layers.albedo,
@@ -347,12 +351,4 @@ fn shown_film(accumulator: &Accumulator, mode: Mode) -> Film {
         Mode::Render | Mode::Boxes | Mode::Heatmap => return film,
     };
     Film { pixels, ..film }
-}
-
-/// The inverse of the sRGB transfer function.
-fn srgb_to_linear(c: f32) -> f32 {
-    match c <= 0.040_45 {
-        true => c / 12.92,
-        false => ((c + 0.055) / 1.055).powf(2.4),
-    }
 }

@@ -3,7 +3,7 @@
 //! never over a file that is there.
 
 use canopy_render::output::write_image;
-use canopy_render::output_policy::{check_output, OutputKind};
+use canopy_render::output_policy::{check_output, file_stem_from_name, OutputKind};
 use canopy_render::Film;
 use std::path::{Path, PathBuf};
 
@@ -34,24 +34,6 @@ impl SaveFormat {
     }
 }
 
-/// `scene_name` made into a plain file-name stem: letters, digits, `-` and `_`.
-fn stem_of(scene_name: &str) -> String {
-    let stem: String = scene_name
-        .chars()
-        .map(
-            |c| match c.is_ascii_alphanumeric() || c == '-' || c == '_' {
-                true => c,
-                false => '_',
-            },
-        )
-        .take(64)
-        .collect();
-    match stem.trim_matches('_').is_empty() {
-        true => "view".into(),
-        false => stem,
-    }
-}
-
 /// Writes `film` (exposed by `exposure` stops for PNG) as `<scene>-<n>.<ext>` in `folder`,
 /// `n` the first number whose file does not exist; never replaces a file, never writes
 /// one of `inputs`. Returns the path written.
@@ -63,11 +45,10 @@ pub fn save(
     scene_name: &str,
     inputs: &[PathBuf],
 ) -> Result<PathBuf, String> {
-    let stem = stem_of(scene_name);
+    let stem = file_stem_from_name(scene_name);
     let mut film = film.clone();
-    if format == SaveFormat::Png && exposure != 0.0 {
-        let scale = exposure.exp2();
-        film.pixels.iter_mut().for_each(|p| *p *= scale);
+    if format == SaveFormat::Png {
+        crate::frame::expose(&mut film, exposure);
     }
     for n in 1..=MAX_NUMBER {
         let path = folder.join(format!("{stem}-{n:03}.{}", format.extension()));

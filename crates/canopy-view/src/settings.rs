@@ -105,6 +105,22 @@ impl Default for TreeSettings {
 }
 
 impl TreeSettings {
+    /// A tree of `builder` with a width and a leaf size as a page or a caller gives
+    /// them (children per node; primitives), or why there is none such.
+    pub fn new(builder: Builder, width: u32, max_leaf_size: u32) -> Result<Self, String> {
+        let width: BvhWidth = width.to_string().parse()?;
+        if !(1..=256).contains(&max_leaf_size) {
+            return Err(format!(
+                "max_leaf_size must be in 1..=256, not {max_leaf_size}"
+            ));
+        }
+        Ok(Self {
+            builder,
+            width,
+            max_leaf_size,
+        })
+    }
+
     pub fn params(&self) -> BuildParams {
         BuildParams {
             max_leaf_size: self.max_leaf_size,

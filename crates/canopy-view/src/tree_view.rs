@@ -2,7 +2,7 @@
 //! each with its subtree's size and share of the tree's SAH cost, so that a user can
 //! descend to where a builder spends its cost.
 
-use crate::protocol::{NodeChild, NodeReport};
+use crate::protocol::{corners, NodeChild, NodeReport};
 use canopy_bvh::view::{Child, ChildKind, TreeView};
 use canopy_bvh::{Aabb, SahCosts};
 
@@ -100,10 +100,6 @@ fn subtree(view: &dyn TreeView, top: Child, costs: &SahCosts, root_area: f32) ->
         }
     }
     s
-}
-
-fn corners(b: &Aabb) -> [[f32; 3]; 2] {
-    [b.min.to_array(), b.max.to_array()]
 }
 
 #[cfg(test)]

@@ -3,11 +3,10 @@
 //! first, subtrees beyond the hit so far skipped), over any layout through its
 //! [`TreeView`].
 
-use crate::protocol::{PickHit, WalkStep};
+use crate::protocol::{corners, PickHit, WalkStep};
 use canopy_bvh::view::{ChildKind, TreeView};
-use canopy_bvh::{Aabb, Ray, RayQuery};
+use canopy_bvh::{Ray, RayQuery};
 use canopy_render::camera::{Camera, CameraSpec};
-use canopy_render::rng::Rng;
 use canopy_render::{Accel, RenderSettings, Scene};
 
 /// Most steps a walk reports (a pathological tree's walk is cut there).
@@ -27,14 +26,7 @@ pub struct Walk {
 /// The primary ray through the centre of pixel `(x, y)` of an image of `settings`' size
 /// seen by `camera`.
 pub fn primary_ray(camera: &CameraSpec, s: &RenderSettings, x: u32, y: u32) -> Ray {
-    let camera = Camera::new(camera, s.width, s.height);
-    // Only a lens sample would use the generator; the centre ray of a pinhole does not.
-    let mut rng = Rng::for_sample(s.seed, (y as u64) * s.width as u64 + x as u64, 0);
-    camera.ray(
-        (x as f32 + 0.5) / s.width as f32,
-        (y as f32 + 0.5) / s.height as f32,
-        &mut rng,
-    )
+    Camera::new(camera, s.width, s.height).pixel_centre_ray(x, y, s.seed)
 }
 
 /// Walks `ray` through the tree over the scene's own primitives in `accel`.
@@ -134,8 +126,4 @@ fn walk_view(
             }
         }
     }
-}
-
-fn corners(b: &Aabb) -> [[f32; 3]; 2] {
-    [b.min.to_array(), b.max.to_array()]
 }

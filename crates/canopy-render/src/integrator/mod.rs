@@ -279,7 +279,7 @@ pub fn render_samples_with(
     schedule: Schedule,
     on_row_done: &(dyn Fn() + Sync),
 ) -> RenderStats {
-    accumulate::<()>(
+    render_samples_abandonable(
         scene,
         accel,
         accumulator,

@@ -7,14 +7,7 @@ use glam::Vec3;
 
 /// The inverse of the sRGB transfer function.
 fn srgb_to_linear(c: Vec3) -> Vec3 {
-    let f = |c: f32| {
-        if c <= 0.040_45 {
-            c / 12.92
-        } else {
-            ((c + 0.055) / 1.055).powf(2.4)
-        }
-    };
-    Vec3::new(f(c.x), f(c.y), f(c.z))
+    c.map(crate::film::srgb_to_linear)
 }
 
 pub struct Canvas<'a> {

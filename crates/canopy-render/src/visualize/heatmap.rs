@@ -7,7 +7,6 @@ use super::font::text_width;
 use crate::accel::Accel;
 use crate::camera::Camera;
 use crate::film::Film;
-use crate::rng::Rng;
 use crate::scene::Scene;
 use canopy_bvh::RayQuery;
 use glam::Vec3;
@@ -30,11 +29,8 @@ pub fn render_heatmap(scene: &Scene, accel: &Accel) -> Heatmap {
     let costs: Vec<u32> = (0..width * s.height as usize)
         .into_par_iter()
         .map(|i| {
-            // Only a lens sample would use the generator; pinhole centre rays do not.
-            let mut rng = Rng::for_sample(s.seed, i as u64, 0);
-            let u = ((i % width) as f32 + 0.5) / s.width as f32;
-            let v = ((i / width) as f32 + 0.5) / s.height as f32;
-            let work = accel.traversal_cost(&camera.ray(u, v, &mut rng));
+            let ray = camera.pixel_centre_ray((i % width) as u32, (i / width) as u32, s.seed);
+            let work = accel.traversal_cost(&ray);
             (work.nodes_visited + work.primitives_tested) as u32
         })
         .collect();
