@@ -27,6 +27,14 @@ impl<T: Copy> TraversalStack<T> {
         }
     }
 
+    /// Empties the stack (a walk that stopped early leaves entries behind), keeping its
+    /// memory for the next walk.
+    #[inline(always)]
+    pub(crate) fn clear(&mut self) {
+        self.len = 0;
+        self.spill.clear();
+    }
+
     #[inline(always)]
     pub(crate) fn push(&mut self, item: T) {
         if self.len < STACK_INLINE {

@@ -25,7 +25,9 @@ use packet::walk_packet;
 use packet_packs::PackedPacketLeaves;
 use rayon::prelude::*;
 use std::marker::PhantomData;
-use traverse::{closest, ClosureLeaves, EveryHit, PackedLeaves, Query, SphereLeaves};
+use traverse::{
+    any_each, closest_each, AnyStack, ClosureLeaves, EveryHit, PackedLeaves, Query, SphereLeaves,
+};
 
 pub use packet::PACKET;
 pub(crate) use traverse::Dispatch;
@@ -478,16 +480,12 @@ where
         P: IntoHit,
         C: TraversalCounter,
     {
-        if self.nodes.is_empty() {
-            return None;
-        }
-        let query = ClosestQuery {
-            bvh: self,
-            ray,
-            test: hit_prim,
-            counter,
-        };
-        WideNode::<N>::dispatch(self.isa, query)
+        let mut hit = None;
+        let one =
+            Batch::<N, _, _, _, ClosestOneByOne>::new(self, 1, |_| *ray, |_, h| hit = h, hit_prim)
+                .counted(counter);
+        WideNode::<N>::dispatch(self.isa, one);
+        hit
     }
 
     /// Whether anything blocks `ray`; same contract as [`Bvh2::occluded`].
@@ -496,15 +494,11 @@ where
     where
         F: FnMut(u32, &Ray) -> bool,
     {
-        if self.nodes.is_empty() {
-            return false;
-        }
-        let query = AnyQuery {
-            bvh: self,
-            ray,
-            test: hit_prim,
-        };
-        WideNode::<N>::dispatch(self.isa, query)
+        let mut blocked = false;
+        let one =
+            Batch::<N, _, _, _, AnyOneByOne>::new(self, 1, |_| *ray, |_, b| blocked = b, hit_prim);
+        WideNode::<N>::dispatch(self.isa, one);
+        blocked
     }
 }
 
@@ -550,7 +544,9 @@ where
         F: FnMut(u32, &Ray) -> Option<P>,
         P: IntoHit,
     {
-        let each = Batch::<N, _, _, _, ClosestOneByOne>::new(self, count, ray, answer, hit_prim);
+        let mut uncounted = ();
+        let each = Batch::<N, _, _, _, ClosestOneByOne>::new(self, count, ray, answer, hit_prim)
+            .counted(&mut uncounted);
         WideNode::<N>::dispatch(self.isa, each)
     }
 
@@ -606,12 +602,14 @@ where
 /// Rays `0..count` for one dispatch: `ray(i)` makes ray `i`, `answer(i, _)` takes its
 /// answer, and `test` is the caller's test of the primitives the tree leaves to it. `Q`
 /// names the query and how the rays go (one of the four kinds below).
-struct Batch<'a, const N: usize, R, A, F, Q> {
+struct Batch<'a, const N: usize, R, A, F, Q, C = ()> {
     bvh: &'a BvhN<N>,
     count: usize,
     ray: R,
     answer: A,
     test: F,
+    /// Told of each node visit and primitive test (closest hits one by one).
+    counter: C,
     query: PhantomData<Q>,
 }
 
@@ -624,7 +622,31 @@ impl<'a, const N: usize, R, A, F, Q> Batch<'a, N, R, A, F, Q> {
             ray,
             answer,
             test,
+            counter: (),
             query: PhantomData,
+        }
+    }
+
+    /// The batch, reporting its work to `counter`.
+    #[inline(always)]
+    fn counted<C>(self, counter: C) -> Batch<'a, N, R, A, F, Q, C> {
+        let Self {
+            bvh,
+            count,
+            ray,
+            answer,
+            test,
+            query,
+            ..
+        } = self;
+        Batch {
+            bvh,
+            count,
+            ray,
+            answer,
+            test,
+            counter,
+            query,
         }
     }
 }
@@ -638,33 +660,78 @@ struct AnyOneByOne;
 /// Occlusion in packets ([`BvhN::occluded_coherent`]).
 struct AnyInPackets;
 
-impl<const N: usize, R, A, F, P> Query<N> for Batch<'_, N, R, A, F, ClosestOneByOne>
+impl<const N: usize, R, A, F, P, C> Query<N> for Batch<'_, N, R, A, F, ClosestOneByOne, &mut C>
 where
     R: FnMut(usize) -> Ray,
     A: FnMut(usize, Option<Hit>),
     F: FnMut(u32, &Ray) -> Option<P>,
     P: IntoHit,
+    C: TraversalCounter,
 {
     type Out = ();
 
     #[inline(always)]
-    unsafe fn run<K: kernels::NodeKernel<N>, T: crate::triangle::PackKernel>(mut self) {
-        for i in 0..self.count {
-            let ray = (self.ray)(i);
-            let hit = match self.bvh.nodes.is_empty() {
-                true => None,
-                // SAFETY: the caller guarantees the instruction sets.
-                false => unsafe {
-                    ClosestQuery {
-                        bvh: self.bvh,
-                        ray: &ray,
-                        test: &mut self.test,
-                        counter: &mut (),
-                    }
-                    .run::<K, T>()
-                },
+    unsafe fn run<K: kernels::NodeKernel<N>, T: crate::triangle::PackKernel>(self) {
+        let Self {
+            bvh,
+            count,
+            ray,
+            mut answer,
+            test,
+            counter,
+            ..
+        } = self;
+        if bvh.nodes.is_empty() {
+            return (0..count).for_each(|i| answer(i, None));
+        }
+        let (nodes, prefetch) = (&bvh.nodes, bvh.prefetches());
+        // SAFETY (all calls): the caller guarantees the instruction sets.
+        if bvh.has_sphere_leaves() {
+            let mut leaves = SphereLeaves {
+                prims: &bvh.prim_indices,
+                spheres: &bvh.spheres,
+                test,
             };
-            (self.answer)(i, hit);
+            unsafe {
+                closest_each::<N, K, _, _>(
+                    nodes,
+                    count,
+                    ray,
+                    answer,
+                    &mut leaves,
+                    counter,
+                    prefetch,
+                )
+            }
+        } else if bvh.packs.is_empty() {
+            let mut leaves = ClosureLeaves {
+                prims: &bvh.prim_indices,
+                test,
+            };
+            unsafe {
+                closest_each::<N, K, _, _>(
+                    nodes,
+                    count,
+                    ray,
+                    answer,
+                    &mut leaves,
+                    counter,
+                    prefetch,
+                )
+            }
+        } else {
+            let mut leaves = PackedLeaves::<T, F>::new(&bvh.packs, &bvh.spheres, test);
+            unsafe {
+                closest_each::<N, K, _, _>(
+                    nodes,
+                    count,
+                    ray,
+                    answer,
+                    &mut leaves,
+                    counter,
+                    prefetch,
+                )
+            }
         }
     }
 }
@@ -704,20 +771,36 @@ where
     type Out = ();
 
     #[inline(always)]
-    unsafe fn run<K: kernels::NodeKernel<N>, T: crate::triangle::PackKernel>(mut self) {
-        for i in 0..self.count {
-            let ray = (self.ray)(i);
-            let blocked = !self.bvh.nodes.is_empty()
-                // SAFETY: the caller guarantees the instruction sets.
-                && unsafe {
-                    AnyQuery {
-                        bvh: self.bvh,
-                        ray: &ray,
-                        test: &mut self.test,
-                    }
-                    .run::<K, T>()
-                };
-            (self.answer)(i, blocked);
+    unsafe fn run<K: kernels::NodeKernel<N>, T: crate::triangle::PackKernel>(self) {
+        let Self {
+            bvh,
+            count,
+            ray,
+            mut answer,
+            test,
+            ..
+        } = self;
+        if bvh.nodes.is_empty() {
+            return (0..count).for_each(|i| answer(i, false));
+        }
+        let (nodes, prefetch) = (&bvh.nodes, bvh.prefetches());
+        // SAFETY (all calls): the caller guarantees the instruction sets.
+        if bvh.has_sphere_leaves() {
+            let mut leaves = SphereLeaves {
+                prims: &bvh.prim_indices,
+                spheres: &bvh.spheres,
+                test,
+            };
+            unsafe { any_each::<N, K, _>(nodes, count, ray, answer, &mut leaves, prefetch) }
+        } else if bvh.packs.is_empty() {
+            let mut leaves = ClosureLeaves {
+                prims: &bvh.prim_indices,
+                test,
+            };
+            unsafe { any_each::<N, K, _>(nodes, count, ray, answer, &mut leaves, prefetch) }
+        } else {
+            let mut leaves = PackedLeaves::<T, F>::new(&bvh.packs, &bvh.spheres, test);
+            unsafe { any_each::<N, K, _>(nodes, count, ray, answer, &mut leaves, prefetch) }
         }
     }
 }
@@ -751,89 +834,6 @@ where
     }
 }
 
-struct ClosestQuery<'a, const N: usize, F, C> {
-    bvh: &'a BvhN<N>,
-    ray: &'a Ray,
-    test: F,
-    counter: &'a mut C,
-}
-
-impl<const N: usize, F, P, C> Query<N> for ClosestQuery<'_, N, F, C>
-where
-    F: FnMut(u32, &Ray) -> Option<P>,
-    P: IntoHit,
-    C: TraversalCounter,
-{
-    type Out = Option<Hit>;
-
-    #[inline(always)]
-    unsafe fn run<K: kernels::NodeKernel<N>, T: crate::triangle::PackKernel>(self) -> Option<Hit> {
-        let Self {
-            bvh,
-            ray,
-            test,
-            counter,
-        } = self;
-        // SAFETY (all calls): the caller guarantees the instruction sets.
-        if bvh.has_sphere_leaves() {
-            let mut leaves = SphereLeaves {
-                prims: &bvh.prim_indices,
-                spheres: &bvh.spheres,
-                test,
-            };
-            unsafe {
-                closest::<N, K, _, _>(&bvh.nodes, ray, &mut leaves, counter, bvh.prefetches())
-            }
-        } else if bvh.packs.is_empty() {
-            let mut leaves = ClosureLeaves {
-                prims: &bvh.prim_indices,
-                test,
-            };
-            unsafe {
-                closest::<N, K, _, _>(&bvh.nodes, ray, &mut leaves, counter, bvh.prefetches())
-            }
-        } else {
-            let mut leaves = PackedLeaves::<T, F>::new(&bvh.packs, &bvh.spheres, test);
-            unsafe {
-                closest::<N, K, _, _>(&bvh.nodes, ray, &mut leaves, counter, bvh.prefetches())
-            }
-        }
-    }
-}
-
-struct AnyQuery<'a, const N: usize, F> {
-    bvh: &'a BvhN<N>,
-    ray: &'a Ray,
-    test: F,
-}
-
-impl<const N: usize, F: FnMut(u32, &Ray) -> bool> Query<N> for AnyQuery<'_, N, F> {
-    type Out = bool;
-
-    #[inline(always)]
-    unsafe fn run<K: kernels::NodeKernel<N>, T: crate::triangle::PackKernel>(self) -> bool {
-        let Self { bvh, ray, test } = self;
-        // SAFETY (all calls): the caller guarantees the instruction sets.
-        if bvh.has_sphere_leaves() {
-            let mut leaves = SphereLeaves {
-                prims: &bvh.prim_indices,
-                spheres: &bvh.spheres,
-                test,
-            };
-            unsafe { traverse::any::<N, K, _>(&bvh.nodes, ray, &mut leaves, bvh.prefetches()) }
-        } else if bvh.packs.is_empty() {
-            let mut leaves = ClosureLeaves {
-                prims: &bvh.prim_indices,
-                test,
-            };
-            unsafe { traverse::any::<N, K, _>(&bvh.nodes, ray, &mut leaves, bvh.prefetches()) }
-        } else {
-            let mut leaves = PackedLeaves::<T, F>::new(&bvh.packs, &bvh.spheres, test);
-            unsafe { traverse::any::<N, K, _>(&bvh.nodes, ray, &mut leaves, bvh.prefetches()) }
-        }
-    }
-}
-
 struct EveryHitQuery<'a, const N: usize, F, H> {
     bvh: &'a BvhN<N>,
     ray: &'a Ray,
@@ -858,6 +858,7 @@ where
             found,
         } = self;
         let prims = &bvh.prim_indices;
+        let (prefetch, stack) = (bvh.prefetches(), &mut AnyStack::new());
         // SAFETY (all calls): the caller guarantees the instruction sets.
         if bvh.has_sphere_leaves() {
             let spheres = &bvh.spheres;
@@ -867,15 +868,15 @@ where
                 test,
             };
             let mut every = EveryHit { leaves, found };
-            unsafe { traverse::any::<N, K, _>(&bvh.nodes, ray, &mut every, bvh.prefetches()) };
+            unsafe { traverse::any::<N, K, _>(&bvh.nodes, ray, &mut every, prefetch, stack) };
         } else if bvh.packs.is_empty() {
             let leaves = ClosureLeaves { prims, test };
             let mut every = EveryHit { leaves, found };
-            unsafe { traverse::any::<N, K, _>(&bvh.nodes, ray, &mut every, bvh.prefetches()) };
+            unsafe { traverse::any::<N, K, _>(&bvh.nodes, ray, &mut every, prefetch, stack) };
         } else {
             let leaves = PackedLeaves::<T, F>::new(&bvh.packs, &bvh.spheres, test);
             let mut every = EveryHit { leaves, found };
-            unsafe { traverse::any::<N, K, _>(&bvh.nodes, ray, &mut every, bvh.prefetches()) };
+            unsafe { traverse::any::<N, K, _>(&bvh.nodes, ray, &mut every, prefetch, stack) };
         }
     }
 }
