@@ -3,7 +3,7 @@
 //! checked against).
 
 use crate::proximity::PointTree;
-use crate::query::RayQuery;
+use crate::query::{RayBatch, RayQuery};
 use crate::{
     build_with_clipper, Aabb, BuildParams, Builder, BvhWidth, Geometry, Hit, OptimizeBudget, Ray,
     RefitError, ShearedRay, TraversalCounter, Tree, PACK_LANES,
@@ -312,68 +312,30 @@ impl<G: Geometry> RayQuery for Blas<G> {
         self.bounds
     }
 
-    #[inline]
-    fn occluded_masked(&self, ray: &Ray, _mask: u32) -> bool {
-        self.any(ray)
-    }
-
-    #[inline]
-    fn intersect_counted<C: TraversalCounter>(
-        &self,
-        ray: &Ray,
-        _mask: u32,
-        counter: &mut C,
-    ) -> Option<Hit> {
-        self.closest(ray, counter)
-    }
-
-    fn intersect_each<R, A>(&self, count: usize, mask: u32, mut ray: R, mut answer: A)
+    fn closest_hits<R, A, C>(&self, batch: RayBatch, mut ray: R, mut answer: A, counter: &mut C)
     where
         R: FnMut(usize) -> Ray,
         A: FnMut(usize, Option<Hit>),
-    {
-        let g = &self.geometry;
-        match self.tree_for_each() {
-            Some(tree) => tree.intersect_each(count, ray, answer, |p, r| g.intersect_other(p, r)),
-            None => (0..count).for_each(|i| answer(i, self.intersect_masked(&ray(i), mask))),
-        }
-    }
-
-    fn intersect_coherent<R, A>(&self, count: usize, mask: u32, mut ray: R, mut answer: A)
-    where
-        R: FnMut(usize) -> Ray,
-        A: FnMut(usize, Option<Hit>),
+        C: TraversalCounter,
     {
         let g = &self.geometry;
         match self.tree_for_each() {
             Some(tree) => {
-                tree.intersect_coherent(count, ray, answer, |p, r| g.intersect_other(p, r))
+                tree.closest_hits(batch, ray, answer, |p, r| g.intersect_other(p, r), counter)
             }
-            None => (0..count).for_each(|i| answer(i, self.intersect_masked(&ray(i), mask))),
+            None => (0..batch.count).for_each(|i| answer(i, self.closest(&ray(i), counter))),
         }
     }
 
-    fn occluded_each<R, A>(&self, count: usize, mask: u32, mut ray: R, mut answer: A)
+    fn any_hits<R, A>(&self, batch: RayBatch, mut ray: R, mut answer: A)
     where
         R: FnMut(usize) -> Ray,
         A: FnMut(usize, bool),
     {
         let g = &self.geometry;
         match self.tree_for_each() {
-            Some(tree) => tree.occluded_each(count, ray, answer, |p, r| g.occludes_other(p, r)),
-            None => (0..count).for_each(|i| answer(i, self.occluded_masked(&ray(i), mask))),
-        }
-    }
-
-    fn occluded_coherent<R, A>(&self, count: usize, mask: u32, mut ray: R, mut answer: A)
-    where
-        R: FnMut(usize) -> Ray,
-        A: FnMut(usize, bool),
-    {
-        let g = &self.geometry;
-        match self.tree_for_each() {
-            Some(tree) => tree.occluded_coherent(count, ray, answer, |p, r| g.occludes_other(p, r)),
-            None => (0..count).for_each(|i| answer(i, self.occluded_masked(&ray(i), mask))),
+            Some(tree) => tree.any_hits(batch, ray, answer, |p, r| g.occludes_other(p, r)),
+            None => (0..batch.count).for_each(|i| answer(i, self.any(&ray(i)))),
         }
     }
 

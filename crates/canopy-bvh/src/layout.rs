@@ -2,6 +2,7 @@
 //! one place that matches on the layout; everything else (the renderer, `canopy bvh`, the
 //! benchmarks, pictures of trees) goes through [`Tree`], so a new layout touches only here.
 
+use crate::query::RayBatch;
 use crate::traverse::TraversalCounter;
 use crate::view::{self, TreeView};
 use crate::{
@@ -222,84 +223,55 @@ impl Tree {
         }
     }
 
-    /// Closest hits of rays `0..count` on this thread: `ray(i)` makes ray `i`,
-    /// `answer(i, hit)` takes its hit, in order. The layout (and, for wide trees, the
-    /// instruction set) is chosen once for all the rays; see [`crate::BvhN::intersect_each`].
-    pub fn intersect_each<R, A, F, P>(
+    /// Closest hits of the batch's rays on this thread: `ray(i)` makes ray `i`,
+    /// `answer(i, hit)` takes its hit, in order (the batch's mask is not a tree's
+    /// business). The layout (and, for wide trees, the instruction set) is chosen once
+    /// for all the rays; coherent batches go in packets where the layout has them
+    /// ([`crate::BvhN::intersect_coherent`]). The answers are the same either way.
+    pub fn closest_hits<R, A, F, P, C>(
         &self,
-        count: usize,
+        batch: RayBatch,
         mut ray: R,
         mut answer: A,
         mut hit_prim: F,
+        counter: &mut C,
     ) where
         R: FnMut(usize) -> Ray,
         A: FnMut(usize, Option<Hit>),
         F: FnMut(u32, &Ray) -> Option<P>,
         P: IntoHit,
+        C: TraversalCounter,
     {
-        let mut each = |closest: &mut dyn FnMut(&Ray) -> Option<Hit>| {
-            for i in 0..count {
-                answer(i, closest(&ray(i)));
+        let mut each = |closest: &mut dyn FnMut(&Ray, &mut C) -> Option<Hit>| {
+            for i in 0..batch.count {
+                answer(i, closest(&ray(i), counter));
             }
         };
         match self {
-            Tree::Binary(t) => each(&mut |r| t.intersect(r, &mut hit_prim)),
-            Tree::Gpu(t) => each(&mut |r| t.intersect(r, &mut hit_prim)),
-            Tree::Four(t) => t.intersect_each(count, ray, answer, hit_prim),
-            Tree::Eight(t) => t.intersect_each(count, ray, answer, hit_prim),
+            Tree::Binary(t) => each(&mut |r, c| t.intersect_counted(r, &mut hit_prim, c)),
+            Tree::Gpu(t) => each(&mut |r, c| t.intersect_counted(r, &mut hit_prim, c)),
+            Tree::Four(t) => t.closest_hits(batch, ray, answer, hit_prim, counter),
+            Tree::Eight(t) => t.closest_hits(batch, ray, answer, hit_prim, counter),
         }
     }
 
-    /// [`Tree::intersect_each`] for coherent rays (camera rays of neighbouring pixels):
-    /// wide layouts trace them in packets ([`crate::BvhN::intersect_coherent`]); the
-    /// answers are the same.
-    pub fn intersect_coherent<R, A, F, P>(&self, count: usize, ray: R, answer: A, hit_prim: F)
-    where
-        R: FnMut(usize) -> Ray,
-        A: FnMut(usize, Option<Hit>),
-        F: FnMut(u32, &Ray) -> Option<P>,
-        P: IntoHit,
-    {
-        match self {
-            Tree::Four(t) => t.intersect_coherent(count, ray, answer, hit_prim),
-            Tree::Eight(t) => t.intersect_coherent(count, ray, answer, hit_prim),
-            Tree::Binary(_) | Tree::Gpu(_) => self.intersect_each(count, ray, answer, hit_prim),
-        }
-    }
-
-    /// [`Tree::occluded_each`] for coherent rays (shadow rays from neighbouring points
-    /// towards one light): wide layouts trace them in packets
-    /// ([`crate::BvhN::occluded_coherent`]); the answers are the same.
-    pub fn occluded_coherent<R, A, F>(&self, count: usize, ray: R, answer: A, hit_prim: F)
-    where
-        R: FnMut(usize) -> Ray,
-        A: FnMut(usize, bool),
-        F: FnMut(u32, &Ray) -> bool,
-    {
-        match self {
-            Tree::Four(t) => t.occluded_coherent(count, ray, answer, hit_prim),
-            Tree::Eight(t) => t.occluded_coherent(count, ray, answer, hit_prim),
-            Tree::Binary(_) | Tree::Gpu(_) => self.occluded_each(count, ray, answer, hit_prim),
-        }
-    }
-
-    /// Occlusion of rays `0..count` on this thread, as [`Tree::intersect_each`].
-    pub fn occluded_each<R, A, F>(&self, count: usize, mut ray: R, mut answer: A, mut hit_prim: F)
+    /// Occlusion of the batch's rays on this thread, as [`Tree::closest_hits`].
+    pub fn any_hits<R, A, F>(&self, batch: RayBatch, mut ray: R, mut answer: A, mut hit_prim: F)
     where
         R: FnMut(usize) -> Ray,
         A: FnMut(usize, bool),
         F: FnMut(u32, &Ray) -> bool,
     {
         let mut each = |occluded: &mut dyn FnMut(&Ray) -> bool| {
-            for i in 0..count {
+            for i in 0..batch.count {
                 answer(i, occluded(&ray(i)));
             }
         };
         match self {
             Tree::Binary(t) => each(&mut |r| t.occluded(r, &mut hit_prim)),
             Tree::Gpu(t) => each(&mut |r| t.occluded(r, &mut hit_prim)),
-            Tree::Four(t) => t.occluded_each(count, ray, answer, hit_prim),
-            Tree::Eight(t) => t.occluded_each(count, ray, answer, hit_prim),
+            Tree::Four(t) => t.any_hits(batch, ray, answer, hit_prim),
+            Tree::Eight(t) => t.any_hits(batch, ray, answer, hit_prim),
         }
     }
 }

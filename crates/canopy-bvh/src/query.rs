@@ -12,39 +12,105 @@ pub const ALL_MASKS: u32 = u32::MAX;
 /// enough to balance two to a few dozen threads.
 pub const BATCH_CHUNK: usize = 512;
 
+/// How the rays of a batch relate: a hint for how to trace them. The answers never
+/// depend on it.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Coherence {
+    /// Rays go their own ways (bounces off rough surfaces, random queries): traced one by
+    /// one.
+    #[default]
+    Incoherent,
+    /// Rays `i` and `i + 1` mostly start near each other and run in similar directions
+    /// (camera rays of neighbouring pixels, shadow rays from neighbouring points towards
+    /// one light): structures may trace them as packets.
+    Coherent,
+}
+
+impl Coherence {
+    /// [`Coherence::Coherent`] where `coherent`.
+    #[inline]
+    pub fn hint(coherent: bool) -> Self {
+        match coherent {
+            true => Coherence::Coherent,
+            false => Coherence::Incoherent,
+        }
+    }
+}
+
+/// What a batch of rays asks besides the rays themselves: how many, which instances (a
+/// ray `mask`; a structure without instances ignores it) and how the rays relate.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RayBatch {
+    pub count: usize,
+    pub mask: u32,
+    pub coherence: Coherence,
+}
+
+impl RayBatch {
+    /// `count` incoherent rays that every instance accepts.
+    #[inline]
+    pub fn new(count: usize) -> Self {
+        Self {
+            count,
+            mask: ALL_MASKS,
+            coherence: Coherence::Incoherent,
+        }
+    }
+
+    /// One ray for the instances `mask` accepts.
+    #[inline]
+    pub fn one(mask: u32) -> Self {
+        Self::new(1).masked(mask)
+    }
+
+    /// The batch for the instances `mask` accepts.
+    #[inline]
+    pub fn masked(self, mask: u32) -> Self {
+        Self { mask, ..self }
+    }
+
+    /// The batch with the coherence hint `coherence`.
+    #[inline]
+    pub fn with(self, coherence: Coherence) -> Self {
+        Self { coherence, ..self }
+    }
+}
+
 /// Ray queries of a structure that owns its geometry.
+///
+/// A structure answers batches of rays ([`RayQuery::closest_hits`],
+/// [`RayQuery::any_hits`]): it chooses its layout and kernels once for the batch, and the
+/// callers' closures are compiled into its loop. Everything else — single rays, masks,
+/// counters, parallel batches — is provided on top of those two.
 ///
 /// Closest-hit ties go to the lower instance, then the lower primitive
 /// ([`Hit::is_before`]), so every structure and layout gives brute force's answer. A ray
-/// `mask` skips the instances whose mask shares no bit with it (a structure without
-/// instances ignores it).
+/// mask skips the instances whose mask shares no bit with it.
 pub trait RayQuery: Sync {
     /// Box of everything the structure holds.
     fn bounds(&self) -> Aabb;
 
-    /// Closest hit of `ray` within `[t_min, t_max]` among the instances `mask` accepts.
-    #[inline]
-    fn intersect_masked(&self, ray: &Ray, mask: u32) -> Option<Hit> {
-        self.intersect_counted(ray, mask, &mut ())
-    }
+    /// Closest hits of the batch's rays on this thread: `ray(i)` makes ray `i` (for `i`
+    /// in `0..batch.count`), `answer(i, hit)` takes its closest hit within `[t_min,
+    /// t_max]`, in order. The work (node visits, primitive tests, at every level) goes to
+    /// `counter`.
+    fn closest_hits<R, A, C>(&self, batch: RayBatch, ray: R, answer: A, counter: &mut C)
+    where
+        R: FnMut(usize) -> Ray,
+        A: FnMut(usize, Option<Hit>),
+        C: TraversalCounter;
 
-    /// Whether anything `mask` accepts blocks `ray` within its range (any hit).
-    fn occluded_masked(&self, ray: &Ray, mask: u32) -> bool;
+    /// Occlusion of the batch's rays on this thread: `answer(i, blocked)` says whether
+    /// anything blocks ray `i` within its range (any hit), as [`RayQuery::closest_hits`].
+    fn any_hits<R, A>(&self, batch: RayBatch, ray: R, answer: A)
+    where
+        R: FnMut(usize) -> Ray,
+        A: FnMut(usize, bool);
 
-    /// [`RayQuery::intersect_masked`], reporting its work (node visits, primitive tests,
-    /// at every level) to `counter`.
-    fn intersect_counted<C: TraversalCounter>(
-        &self,
-        ray: &Ray,
-        mask: u32,
-        counter: &mut C,
-    ) -> Option<Hit>;
-
-    /// The work a closest-hit query does for `ray`: node visits and primitive tests.
-    fn traversal_cost(&self, ray: &Ray) -> TraversalStats {
-        let mut stats = TraversalStats::default();
-        self.intersect_counted(ray, ALL_MASKS, &mut stats);
-        stats
+    /// Whether large batches are best traced in the order of their rays' origins
+    /// ([`RayOrder`]): structures larger than a core's cache.
+    fn orders_batches(&self) -> bool {
+        false
     }
 
     /// Closest hit of `ray` within `[t_min, t_max]`.
@@ -59,57 +125,83 @@ pub trait RayQuery: Sync {
         self.occluded_masked(ray, ALL_MASKS)
     }
 
-    /// Closest hits of rays `0..count` on this thread: `ray(i)` makes ray `i`, `answer(i,
-    /// hit)` takes its hit, in order. Structures override it to choose their layout and
-    /// kernels once for all the rays.
-    fn intersect_each<R, A>(&self, count: usize, mask: u32, mut ray: R, mut answer: A)
+    /// Closest hit of `ray` among the instances `mask` accepts.
+    #[inline]
+    fn intersect_masked(&self, ray: &Ray, mask: u32) -> Option<Hit> {
+        self.intersect_counted(ray, mask, &mut ())
+    }
+
+    /// Whether anything `mask` accepts blocks `ray` within its range.
+    #[inline]
+    fn occluded_masked(&self, ray: &Ray, mask: u32) -> bool {
+        let mut blocked = false;
+        self.any_hits(RayBatch::one(mask), |_| *ray, |_, b| blocked = b);
+        blocked
+    }
+
+    /// [`RayQuery::intersect_masked`], reporting its work to `counter`.
+    #[inline]
+    fn intersect_counted<C: TraversalCounter>(
+        &self,
+        ray: &Ray,
+        mask: u32,
+        counter: &mut C,
+    ) -> Option<Hit> {
+        let mut hit = None;
+        self.closest_hits(RayBatch::one(mask), |_| *ray, |_, h| hit = h, counter);
+        hit
+    }
+
+    /// The work a closest-hit query does for `ray`: node visits and primitive tests.
+    fn traversal_cost(&self, ray: &Ray) -> TraversalStats {
+        let mut stats = TraversalStats::default();
+        self.intersect_counted(ray, ALL_MASKS, &mut stats);
+        stats
+    }
+
+    /// Closest hits of `count` incoherent rays ([`RayQuery::closest_hits`]).
+    #[inline]
+    fn intersect_each<R, A>(&self, count: usize, mask: u32, ray: R, answer: A)
     where
         R: FnMut(usize) -> Ray,
         A: FnMut(usize, Option<Hit>),
     {
-        for i in 0..count {
-            answer(i, self.intersect_masked(&ray(i), mask));
-        }
+        self.closest_hits(RayBatch::new(count).masked(mask), ray, answer, &mut ())
     }
 
-    /// [`RayQuery::intersect_each`] for coherent rays: rays `i` and `i + 1` mostly start
-    /// near each other and run in similar directions (camera rays of neighbouring
-    /// pixels or of one pixel's samples). Structures may trace them as packets; the
-    /// answers are the same.
+    /// Closest hits of `count` coherent rays ([`Coherence::Coherent`]).
+    #[inline]
     fn intersect_coherent<R, A>(&self, count: usize, mask: u32, ray: R, answer: A)
     where
         R: FnMut(usize) -> Ray,
         A: FnMut(usize, Option<Hit>),
     {
-        self.intersect_each(count, mask, ray, answer)
+        let batch = RayBatch::new(count).masked(mask).with(Coherence::Coherent);
+        self.closest_hits(batch, ray, answer, &mut ())
     }
 
-    /// Occlusion of rays `0..count` on this thread, as [`RayQuery::intersect_each`].
-    fn occluded_each<R, A>(&self, count: usize, mask: u32, mut ray: R, mut answer: A)
+    /// Occlusion of `count` incoherent rays ([`RayQuery::any_hits`]).
+    #[inline]
+    fn occluded_each<R, A>(&self, count: usize, mask: u32, ray: R, answer: A)
     where
         R: FnMut(usize) -> Ray,
         A: FnMut(usize, bool),
     {
-        for i in 0..count {
-            answer(i, self.occluded_masked(&ray(i), mask));
-        }
+        self.any_hits(RayBatch::new(count).masked(mask), ray, answer)
     }
 
-    /// [`RayQuery::occluded_each`] for coherent rays (shadow rays from neighbouring
-    /// points towards one light): structures may trace them as packets; the answers are
-    /// the same.
+    /// Occlusion of `count` coherent rays ([`Coherence::Coherent`]).
+    #[inline]
     fn occluded_coherent<R, A>(&self, count: usize, mask: u32, ray: R, answer: A)
     where
         R: FnMut(usize) -> Ray,
         A: FnMut(usize, bool),
     {
-        self.occluded_each(count, mask, ray, answer)
-    }
-
-    /// Whether large batches are best traced in the order of their rays' origins
-    /// ([`RayOrder`]): structures larger than a core's cache.
-    fn orders_batches(&self) -> bool {
-        false
+        self.any_hits(
+            RayBatch::new(count).masked(mask).with(Coherence::Coherent),
+            ray,
+            answer,
+        )
     }
 
     /// Closest hits of many rays in parallel (rayon's current pool): `hits[i]` answers
@@ -137,58 +229,51 @@ pub trait RayQuery: Sync {
     }
 }
 
-/// A structure shared (by several top-level trees, or with its owner) answers as itself.
-impl<B: RayQuery + Send> RayQuery for std::sync::Arc<B> {
+/// A structure that answers as another one it holds: its queries forward, whole batches
+/// at a time, to [`Forward::target`]. Implement this instead of [`RayQuery`] for a
+/// wrapper.
+pub trait Forward: Sync {
+    type Target: RayQuery;
+    fn target(&self) -> &Self::Target;
+}
+
+impl<T: Forward> RayQuery for T {
+    #[inline]
     fn bounds(&self) -> Aabb {
-        (**self).bounds()
+        self.target().bounds()
     }
+
     #[inline]
-    fn intersect_masked(&self, ray: &Ray, mask: u32) -> Option<Hit> {
-        (**self).intersect_masked(ray, mask)
-    }
-    #[inline]
-    fn occluded_masked(&self, ray: &Ray, mask: u32) -> bool {
-        (**self).occluded_masked(ray, mask)
-    }
-    #[inline]
-    fn intersect_counted<C: TraversalCounter>(
-        &self,
-        ray: &Ray,
-        mask: u32,
-        counter: &mut C,
-    ) -> Option<Hit> {
-        (**self).intersect_counted(ray, mask, counter)
-    }
-    fn intersect_each<R, A>(&self, count: usize, mask: u32, ray: R, answer: A)
+    fn closest_hits<R, A, C>(&self, batch: RayBatch, ray: R, answer: A, counter: &mut C)
     where
         R: FnMut(usize) -> Ray,
         A: FnMut(usize, Option<Hit>),
+        C: TraversalCounter,
     {
-        (**self).intersect_each(count, mask, ray, answer)
+        self.target().closest_hits(batch, ray, answer, counter)
     }
-    fn intersect_coherent<R, A>(&self, count: usize, mask: u32, ray: R, answer: A)
-    where
-        R: FnMut(usize) -> Ray,
-        A: FnMut(usize, Option<Hit>),
-    {
-        (**self).intersect_coherent(count, mask, ray, answer)
-    }
-    fn occluded_each<R, A>(&self, count: usize, mask: u32, ray: R, answer: A)
+
+    #[inline]
+    fn any_hits<R, A>(&self, batch: RayBatch, ray: R, answer: A)
     where
         R: FnMut(usize) -> Ray,
         A: FnMut(usize, bool),
     {
-        (**self).occluded_each(count, mask, ray, answer)
+        self.target().any_hits(batch, ray, answer)
     }
-    fn occluded_coherent<R, A>(&self, count: usize, mask: u32, ray: R, answer: A)
-    where
-        R: FnMut(usize) -> Ray,
-        A: FnMut(usize, bool),
-    {
-        (**self).occluded_coherent(count, mask, ray, answer)
-    }
+
+    #[inline]
     fn orders_batches(&self) -> bool {
-        (**self).orders_batches()
+        self.target().orders_batches()
+    }
+}
+
+/// A structure shared (by several top-level trees, or with its owner) answers as itself.
+impl<B: RayQuery + Send> Forward for std::sync::Arc<B> {
+    type Target = B;
+    #[inline]
+    fn target(&self) -> &B {
+        self
     }
 }
 

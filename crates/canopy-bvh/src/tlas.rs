@@ -9,7 +9,7 @@
 
 use crate::instance::InstanceError;
 use crate::proximity::Placement;
-use crate::query::RayQuery;
+use crate::query::{RayBatch, RayQuery};
 use crate::{
     build, Aabb, BlasParams, Hit, Instance, IntoHit, Ray, TraversalCounter, TraversalStats, Tree,
 };
@@ -225,36 +225,17 @@ where
     best
 }
 
-impl<B: RayQuery> RayQuery for Tlas<B> {
-    fn bounds(&self) -> Aabb {
-        self.bounds
-    }
-
-    #[inline]
-    fn intersect_masked(&self, ray: &Ray, mask: u32) -> Option<Hit> {
-        self.closest(ray, mask, &mut (), |blas, r| blas.intersect_masked(r, mask))
-    }
-
-    #[inline]
-    fn occluded_masked(&self, ray: &Ray, mask: u32) -> bool {
-        if let Some((blas, _, only)) = self.alone() {
-            return only & mask != 0 && blas.occluded_masked(ray, mask);
-        }
-        let test = |i: u32, r: &Ray| self.occluded_in(i, r, mask);
-        match &self.tree {
-            Some(tree) => tree.occluded(ray, test),
-            None => ray.is_traceable() && (0..self.instances.len() as u32).any(|i| test(i, ray)),
-        }
-    }
-
-    fn intersect_counted<C: TraversalCounter>(
+impl<B: RayQuery> Tlas<B> {
+    /// Closest hit of one ray, every level's work reported to `counter`.
+    #[inline(always)]
+    fn closest_counted<C: TraversalCounter>(
         &self,
         ray: &Ray,
         mask: u32,
         counter: &mut C,
     ) -> Option<Hit> {
         if !C::COUNTS {
-            return self.intersect_masked(ray, mask);
+            return self.closest(ray, mask, &mut (), |blas, r| blas.intersect_masked(r, mask));
         }
         // The structures' work goes to `counter` as it happens, the top tree's to `top`
         // (both cannot borrow it at once), replayed after.
@@ -266,76 +247,65 @@ impl<B: RayQuery> RayQuery for Tlas<B> {
         hit
     }
 
-    fn intersect_each<R, A>(&self, count: usize, mask: u32, mut ray: R, mut answer: A)
+    /// Whether anything `mask` accepts blocks one ray.
+    #[inline(always)]
+    fn any_one(&self, ray: &Ray, mask: u32) -> bool {
+        if let Some((blas, _, only)) = self.alone() {
+            return only & mask != 0 && blas.occluded_masked(ray, mask);
+        }
+        let test = |i: u32, r: &Ray| self.occluded_in(i, r, mask);
+        match &self.tree {
+            Some(tree) => tree.occluded(ray, test),
+            None => ray.is_traceable() && (0..self.instances.len() as u32).any(|i| test(i, ray)),
+        }
+    }
+}
+
+impl<B: RayQuery> RayQuery for Tlas<B> {
+    fn bounds(&self) -> Aabb {
+        self.bounds
+    }
+
+    fn closest_hits<R, A, C>(&self, batch: RayBatch, mut ray: R, mut answer: A, counter: &mut C)
     where
         R: FnMut(usize) -> Ray,
         A: FnMut(usize, Option<Hit>),
+        C: TraversalCounter,
     {
-        if let Some((blas, index, only)) = self.alone() {
-            if only & mask != 0 {
-                return blas.intersect_each(count, mask, ray, |i, h| {
-                    answer(i, h.map(|h| h.into_hit(index)))
-                });
+        let mask = batch.mask;
+        match (self.alone(), &self.tree) {
+            // One structure placed as itself: the whole batch goes to it (packets too).
+            (Some((blas, index, only)), _) if only & mask != 0 => {
+                let answer = |i, h: Option<Hit>| answer(i, h.map(|h| h.into_hit(index)));
+                blas.closest_hits(batch, ray, answer, counter)
             }
-        }
-        match &self.tree {
-            Some(tree) if self.alone().is_none() => {
+            // Instances: each ray goes its own way through the top tree, which chooses
+            // its kernels once for the batch.
+            (None, Some(tree)) if !C::COUNTS => {
                 let test = |i: u32, r: &Ray| {
                     self.closest_in(i, r, mask, |blas, r| blas.intersect_masked(r, mask))
                 };
-                tree.intersect_each(count, ray, answer, test)
+                let one_by_one = RayBatch::new(batch.count);
+                tree.closest_hits(one_by_one, ray, answer, test, &mut ())
             }
-            _ => (0..count).for_each(|i| answer(i, self.intersect_masked(&ray(i), mask))),
+            _ => (0..batch.count)
+                .for_each(|i| answer(i, self.closest_counted(&ray(i), mask, counter))),
         }
     }
 
-    fn intersect_coherent<R, A>(&self, count: usize, mask: u32, ray: R, mut answer: A)
-    where
-        R: FnMut(usize) -> Ray,
-        A: FnMut(usize, Option<Hit>),
-    {
-        match self.alone() {
-            // One structure placed as itself: its packets. Instances leave rays to go
-            // their own ways through the top tree.
-            Some((blas, index, only)) if only & mask != 0 => {
-                blas.intersect_coherent(count, mask, ray, |i, h| {
-                    answer(i, h.map(|h| h.into_hit(index)))
-                })
-            }
-            _ => self.intersect_each(count, mask, ray, answer),
-        }
-    }
-
-    fn occluded_each<R, A>(&self, count: usize, mask: u32, mut ray: R, mut answer: A)
+    fn any_hits<R, A>(&self, batch: RayBatch, mut ray: R, mut answer: A)
     where
         R: FnMut(usize) -> Ray,
         A: FnMut(usize, bool),
     {
-        if let Some((blas, _, only)) = self.alone() {
-            if only & mask != 0 {
-                return blas.occluded_each(count, mask, ray, answer);
-            }
-        }
-        match &self.tree {
-            Some(tree) if self.alone().is_none() => {
+        let mask = batch.mask;
+        match (self.alone(), &self.tree) {
+            (Some((blas, _, only)), _) if only & mask != 0 => blas.any_hits(batch, ray, answer),
+            (None, Some(tree)) => {
                 let test = |i: u32, r: &Ray| self.occluded_in(i, r, mask);
-                tree.occluded_each(count, ray, answer, test)
+                tree.any_hits(RayBatch::new(batch.count), ray, answer, test)
             }
-            _ => (0..count).for_each(|i| answer(i, self.occluded_masked(&ray(i), mask))),
-        }
-    }
-
-    fn occluded_coherent<R, A>(&self, count: usize, mask: u32, ray: R, answer: A)
-    where
-        R: FnMut(usize) -> Ray,
-        A: FnMut(usize, bool),
-    {
-        match self.alone() {
-            // One structure placed as itself: its packets, as for closest hits.
-            Some((blas, _, only)) if only & mask != 0 => {
-                blas.occluded_coherent(count, mask, ray, answer)
-            }
-            _ => self.occluded_each(count, mask, ray, answer),
+            _ => (0..batch.count).for_each(|i| answer(i, self.any_one(&ray(i), mask))),
         }
     }
 

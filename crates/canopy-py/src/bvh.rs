@@ -3,7 +3,7 @@
 use crate::arrays;
 use crate::pools;
 use canopy_bvh::{Aabb, BuildParams, BvhWidth, SahCosts};
-use canopy_bvh::{Hit, Ray, RayOrder, RayQuery, ALL_MASKS};
+use canopy_bvh::{Coherence, Hit, Ray, RayBatch, RayOrder, RayQuery, ALL_MASKS};
 use canopy_render::geometry::{Cuboid, Shape, Triangle};
 use canopy_render::scene::Primitive;
 use canopy_render::{Accel, AccelKind};
@@ -485,12 +485,8 @@ impl Bvh {
                             let answer =
                                 |i: usize, hit: Option<Hit>| write_hit(t, prim, uv, i, hit);
                             let rays = |i: usize| batch.ray(first + i);
-                            match coherent {
-                                true => self
-                                    .accel
-                                    .intersect_coherent(count, ALL_MASKS, rays, answer),
-                                false => self.accel.intersect_each(count, ALL_MASKS, rays, answer),
-                            }
+                            let batch = RayBatch::new(count).with(Coherence::hint(coherent));
+                            self.accel.closest_hits(batch, rays, answer, &mut ())
                         });
                 };
                 let traced = order.trace(
@@ -547,12 +543,8 @@ impl Bvh {
                             let count = out.len();
                             let rays = |i: usize| batch.ray(chunk * CHUNK + i);
                             let answer = |i: usize, blocked: bool| out[i] = blocked;
-                            match coherent {
-                                true => {
-                                    self.accel.occluded_coherent(count, ALL_MASKS, rays, answer)
-                                }
-                                false => self.accel.occluded_each(count, ALL_MASKS, rays, answer),
-                            }
+                            let batch = RayBatch::new(count).with(Coherence::hint(coherent));
+                            self.accel.any_hits(batch, rays, answer)
                         });
                 };
                 let traced = order.trace(

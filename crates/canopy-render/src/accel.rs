@@ -7,8 +7,8 @@ use crate::geometry::{Shape, ShearedRay};
 use crate::scene::{Primitive, Scene};
 use canopy_bvh::{
     split_box, split_triangle, Aabb, Blas, BlasParams, BuildParams, Builder, BvhWidth, Clipper,
-    Geometry, Hit, Instance, OptimizeBudget, PrimHit, Ray, RayQuery, Tlas, TraversalCounter, Tree,
-    TriangleMesh,
+    Forward, Geometry, Hit, Instance, OptimizeBudget, PrimHit, Ray, RayBatch, RayQuery, Tlas,
+    TraversalCounter, Tree, TriangleMesh,
 };
 use glam::{Affine3A, Vec3};
 use std::fmt;
@@ -126,55 +126,22 @@ impl RayQuery for SceneBlas {
     }
 
     #[inline]
-    fn intersect_masked(&self, ray: &Ray, mask: u32) -> Option<Hit> {
-        each_blas!(self, b => b.intersect_masked(ray, mask))
-    }
-
-    #[inline]
-    fn occluded_masked(&self, ray: &Ray, mask: u32) -> bool {
-        each_blas!(self, b => b.occluded_masked(ray, mask))
-    }
-
-    #[inline]
-    fn intersect_counted<C: TraversalCounter>(
-        &self,
-        ray: &Ray,
-        mask: u32,
-        counter: &mut C,
-    ) -> Option<Hit> {
-        each_blas!(self, b => b.intersect_counted(ray, mask, counter))
-    }
-
-    fn intersect_each<R, A>(&self, count: usize, mask: u32, ray: R, answer: A)
+    fn closest_hits<R, A, C>(&self, batch: RayBatch, ray: R, answer: A, counter: &mut C)
     where
         R: FnMut(usize) -> Ray,
         A: FnMut(usize, Option<Hit>),
+        C: TraversalCounter,
     {
-        each_blas!(self, b => b.intersect_each(count, mask, ray, answer))
+        each_blas!(self, b => b.closest_hits(batch, ray, answer, counter))
     }
 
-    fn intersect_coherent<R, A>(&self, count: usize, mask: u32, ray: R, answer: A)
-    where
-        R: FnMut(usize) -> Ray,
-        A: FnMut(usize, Option<Hit>),
-    {
-        each_blas!(self, b => b.intersect_coherent(count, mask, ray, answer))
-    }
-
-    fn occluded_each<R, A>(&self, count: usize, mask: u32, ray: R, answer: A)
+    #[inline]
+    fn any_hits<R, A>(&self, batch: RayBatch, ray: R, answer: A)
     where
         R: FnMut(usize) -> Ray,
         A: FnMut(usize, bool),
     {
-        each_blas!(self, b => b.occluded_each(count, mask, ray, answer))
-    }
-
-    fn occluded_coherent<R, A>(&self, count: usize, mask: u32, ray: R, answer: A)
-    where
-        R: FnMut(usize) -> Ray,
-        A: FnMut(usize, bool),
-    {
-        each_blas!(self, b => b.occluded_coherent(count, mask, ray, answer))
+        each_blas!(self, b => b.any_hits(batch, ray, answer))
     }
 
     fn orders_batches(&self) -> bool {
@@ -332,64 +299,12 @@ impl Accel {
     }
 }
 
-impl RayQuery for Accel {
-    fn bounds(&self) -> Aabb {
-        self.world.bounds()
-    }
+/// The structure answers as its world, the top tree over every structure.
+impl Forward for Accel {
+    type Target = Tlas<SceneBlas>;
 
     #[inline]
-    fn intersect_masked(&self, ray: &Ray, mask: u32) -> Option<Hit> {
-        self.world.intersect_masked(ray, mask)
-    }
-
-    #[inline]
-    fn occluded_masked(&self, ray: &Ray, mask: u32) -> bool {
-        self.world.occluded_masked(ray, mask)
-    }
-
-    #[inline]
-    fn intersect_counted<C: TraversalCounter>(
-        &self,
-        ray: &Ray,
-        mask: u32,
-        counter: &mut C,
-    ) -> Option<Hit> {
-        self.world.intersect_counted(ray, mask, counter)
-    }
-
-    fn intersect_each<R, A>(&self, count: usize, mask: u32, ray: R, answer: A)
-    where
-        R: FnMut(usize) -> Ray,
-        A: FnMut(usize, Option<Hit>),
-    {
-        self.world.intersect_each(count, mask, ray, answer)
-    }
-
-    fn intersect_coherent<R, A>(&self, count: usize, mask: u32, ray: R, answer: A)
-    where
-        R: FnMut(usize) -> Ray,
-        A: FnMut(usize, Option<Hit>),
-    {
-        self.world.intersect_coherent(count, mask, ray, answer)
-    }
-
-    fn occluded_each<R, A>(&self, count: usize, mask: u32, ray: R, answer: A)
-    where
-        R: FnMut(usize) -> Ray,
-        A: FnMut(usize, bool),
-    {
-        self.world.occluded_each(count, mask, ray, answer)
-    }
-
-    fn occluded_coherent<R, A>(&self, count: usize, mask: u32, ray: R, answer: A)
-    where
-        R: FnMut(usize) -> Ray,
-        A: FnMut(usize, bool),
-    {
-        self.world.occluded_coherent(count, mask, ray, answer)
-    }
-
-    fn orders_batches(&self) -> bool {
-        self.world.orders_batches()
+    fn target(&self) -> &Tlas<SceneBlas> {
+        &self.world
     }
 }

@@ -14,6 +14,7 @@ mod packet_packs;
 mod refit;
 mod traverse;
 
+use crate::query::{Coherence, RayBatch};
 use crate::sphere::SphereRecord;
 use crate::traverse::TraversalCounter;
 use crate::triangle::{TrianglePack, NO_PRIM, PACK_LANES};
@@ -533,6 +534,47 @@ impl<const N: usize> BvhN<N>
 where
     WideNode<N>: Dispatch<N>,
 {
+    /// Closest hits of the batch's rays on this thread, as [`crate::Tree::closest_hits`]
+    /// says: coherent batches in packets where the tree traces them and nothing is
+    /// counted (packets report no per-ray work), others ray by ray.
+    pub fn closest_hits<R, A, F, P, C>(
+        &self,
+        batch: RayBatch,
+        ray: R,
+        answer: A,
+        hit_prim: F,
+        counter: &mut C,
+    ) where
+        R: FnMut(usize) -> Ray,
+        A: FnMut(usize, Option<Hit>),
+        F: FnMut(u32, &Ray) -> Option<P>,
+        P: IntoHit,
+        C: TraversalCounter,
+    {
+        let count = batch.count;
+        if batch.coherence == Coherence::Coherent && !C::COUNTS && self.traces_packets() {
+            let packets =
+                Batch::<N, _, _, _, ClosestInPackets>::new(self, count, ray, answer, hit_prim);
+            return WideNode::<N>::dispatch(self.isa, packets);
+        }
+        let each = Batch::<N, _, _, _, ClosestOneByOne>::new(self, count, ray, answer, hit_prim)
+            .counted(counter);
+        WideNode::<N>::dispatch(self.isa, each)
+    }
+
+    /// Occlusion of the batch's rays on this thread, as [`BvhN::closest_hits`].
+    pub fn any_hits<R, A, F>(&self, batch: RayBatch, ray: R, answer: A, hit_prim: F)
+    where
+        R: FnMut(usize) -> Ray,
+        A: FnMut(usize, bool),
+        F: FnMut(u32, &Ray) -> bool,
+    {
+        match batch.coherence {
+            Coherence::Coherent => self.occluded_coherent(batch.count, ray, answer, hit_prim),
+            Coherence::Incoherent => self.occluded_each(batch.count, ray, answer, hit_prim),
+        }
+    }
+
     /// Closest hits of rays `0..count` on this thread: `ray(i)` makes ray `i` and
     /// `answer(i, hit)` takes its hit, in order. Answers are those of
     /// [`BvhN::intersect`]; the instruction set is chosen once for all the rays, and the

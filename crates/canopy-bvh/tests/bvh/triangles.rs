@@ -8,8 +8,9 @@ use common::uniform;
 
 use canopy_bvh::{
     build, build_with_clipper, intersect_triangle, split_box, split_triangle, Aabb, Blas,
-    BlasParams, BuildParams, Builder, Bvh2, Bvh4, Bvh8, BvhN, BvhWidth, Geometry, GpuBvh, Hit, Isa,
-    PrimHit, Ray, RayQuery, ShearedRay, Tree, TreeView, ALL_MASKS, PACKET, PREFETCH_ABOVE_BYTES,
+    BlasParams, BuildParams, Builder, Bvh2, Bvh4, Bvh8, BvhN, BvhWidth, Coherence, Geometry,
+    GpuBvh, Hit, Isa, PrimHit, Ray, RayBatch, RayQuery, ShearedRay, Tree, TreeView, ALL_MASKS,
+    PACKET, PREFETCH_ABOVE_BYTES,
 };
 use glam::Vec3;
 use proptest::prelude::*;
@@ -391,10 +392,11 @@ fn packets_of_awkward_rays_match_brute_force_in_every_layout() {
                     continue;
                 }
                 let mut hits = vec![None; rays.len()];
-                tree.intersect_coherent(rays.len(), |i| rays[i], |i, h| hits[i] = h, test);
+                let coherent = RayBatch::new(rays.len()).with(Coherence::Coherent);
+                tree.closest_hits(coherent, |i| rays[i], |i, h| hits[i] = h, test, &mut ());
                 let mut blocked = vec![false; rays.len()];
                 let blocks = |p: u32, r: &Ray| test(p, r).is_some();
-                tree.occluded_coherent(rays.len(), |i| rays[i], |i, b| blocked[i] = b, blocks);
+                tree.any_hits(coherent, |i| rays[i], |i, b| blocked[i] = b, blocks);
                 for (i, ray) in rays.iter().enumerate() {
                     assert_eq!(
                         blocked[i],
@@ -570,19 +572,20 @@ fn each_calls_equal_single_ray_calls_in_every_layout() {
     for (layout, tree) in every_layout(&bvh, &prims) {
         let mut hits = vec![None; rays.len()];
         let mut order = Vec::new();
-        tree.intersect_each(
-            rays.len(),
+        tree.closest_hits(
+            RayBatch::new(rays.len()),
             |i| rays[i],
             |i, h| {
                 order.push(i);
                 hits[i] = h;
             },
             test,
+            &mut (),
         );
         assert!(order.iter().copied().eq(0..rays.len()), "answers in order");
         let mut blocked = vec![false; rays.len()];
-        tree.occluded_each(
-            rays.len(),
+        tree.any_hits(
+            RayBatch::new(rays.len()),
             |i| rays[i],
             |i, b| blocked[i] = b,
             |p, r| test(p, r).is_some(),

@@ -17,7 +17,7 @@ use super::Probe;
 use crate::aov::AovRow;
 use crate::camera::Camera;
 use crate::rng::Rng;
-use canopy_bvh::{Hit, Ray, RayQuery, ALL_MASKS};
+use canopy_bvh::{Coherence, Hit, Ray, RayBatch, RayQuery};
 use glam::Vec3;
 use std::cell::RefCell;
 use std::ops::Range;
@@ -250,10 +250,8 @@ impl Stream {
         let (paths, hits) = (&self.paths, &mut self.hits);
         let ray = |i: usize| paths[i].path.ray;
         let answer = |i: usize, hit| hits[i] = hit;
-        match coherent {
-            true => tracer.accel.intersect_coherent(n, ALL_MASKS, ray, answer),
-            false => tracer.accel.intersect_each(n, ALL_MASKS, ray, answer),
-        }
+        let batch = RayBatch::new(n).with(Coherence::hint(coherent));
+        tracer.accel.closest_hits(batch, ray, answer, &mut ())
     }
 
     /// Answers the shadow rays of every vertex of the stage, in path order (in packets
@@ -286,10 +284,9 @@ impl Stream {
         // light, are coherent: packets pay over trees that stay in the cache (1.9x on
         // spheres), not over larger ones, whose rays part ways between the leaves
         // (0.6-0.7x on the 202k-triangle dragon, `examples/packet_speed.rs --shadows`).
-        match coherent && !tracer.accel.orders_batches() {
-            true => tracer.accel.occluded_coherent(n, ALL_MASKS, ray, answer),
-            false => tracer.accel.occluded_each(n, ALL_MASKS, ray, answer),
-        }
+        let coherent = coherent && !tracer.accel.orders_batches();
+        let batch = RayBatch::new(n).with(Coherence::hint(coherent));
+        tracer.accel.any_hits(batch, ray, answer)
     }
 }
 
