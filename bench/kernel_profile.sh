@@ -5,6 +5,6 @@
 # compiler. Arguments are passed on (e.g. --meshes a.ply --incoherent 50000 --no-valgrind).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-source bench/venv.sh embreex numpy
+CANOPY_BENCH_WHEEL=0 source bench/venv.sh embreex numpy
 cargo build --release --quiet -p canopy-render --example kernel_profile
 exec bench/.venv/bin/python bench/kernel_profile.py "$@"
