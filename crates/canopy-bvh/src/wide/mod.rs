@@ -482,10 +482,13 @@ where
         C: TraversalCounter,
     {
         let mut hit = None;
-        let one =
-            Batch::<N, _, _, _, ClosestOneByOne>::new(self, 1, |_| *ray, |_, h| hit = h, hit_prim)
-                .counted(counter);
-        WideNode::<N>::dispatch(self.isa, one);
+        self.closest_hits(
+            RayBatch::new(1),
+            |_| *ray,
+            |_, h| hit = h,
+            hit_prim,
+            counter,
+        );
         hit
     }
 
@@ -496,9 +499,7 @@ where
         F: FnMut(u32, &Ray) -> bool,
     {
         let mut blocked = false;
-        let one =
-            Batch::<N, _, _, _, AnyOneByOne>::new(self, 1, |_| *ray, |_, b| blocked = b, hit_prim);
-        WideNode::<N>::dispatch(self.isa, one);
+        self.any_hits(RayBatch::new(1), |_| *ray, |_, b| blocked = b, hit_prim);
         blocked
     }
 }
@@ -569,16 +570,19 @@ where
         A: FnMut(usize, bool),
         F: FnMut(u32, &Ray) -> bool,
     {
-        match batch.coherence {
-            Coherence::Coherent => self.occluded_coherent(batch.count, ray, answer, hit_prim),
-            Coherence::Incoherent => self.occluded_each(batch.count, ray, answer, hit_prim),
+        let count = batch.count;
+        if batch.coherence == Coherence::Coherent && self.traces_packets() {
+            let packets =
+                Batch::<N, _, _, _, AnyInPackets>::new(self, count, ray, answer, hit_prim);
+            return WideNode::<N>::dispatch(self.isa, packets);
         }
+        let each = Batch::<N, _, _, _, AnyOneByOne>::new(self, count, ray, answer, hit_prim);
+        WideNode::<N>::dispatch(self.isa, each)
     }
 
-    /// Closest hits of rays `0..count` on this thread: `ray(i)` makes ray `i` and
-    /// `answer(i, hit)` takes its hit, in order. Answers are those of
-    /// [`BvhN::intersect`]; the instruction set is chosen once for all the rays, and the
-    /// callers' closures are compiled into the loop, so a batch pays no per-ray call.
+    /// Closest hits of rays `0..count` on this thread ([`BvhN::closest_hits`] of an
+    /// incoherent batch): `ray(i)` makes ray `i`, `answer(i, hit)` takes its hit, in order;
+    /// the answers are those of [`BvhN::intersect`].
     pub fn intersect_each<R, A, F, P>(&self, count: usize, ray: R, answer: A, hit_prim: F)
     where
         R: FnMut(usize) -> Ray,
@@ -586,10 +590,7 @@ where
         F: FnMut(u32, &Ray) -> Option<P>,
         P: IntoHit,
     {
-        let mut uncounted = ();
-        let each = Batch::<N, _, _, _, ClosestOneByOne>::new(self, count, ray, answer, hit_prim)
-            .counted(&mut uncounted);
-        WideNode::<N>::dispatch(self.isa, each)
+        self.closest_hits(RayBatch::new(count), ray, answer, hit_prim, &mut ())
     }
 
     /// [`BvhN::intersect_each`] for coherent rays: rays that start near each other and
@@ -605,11 +606,8 @@ where
         F: FnMut(u32, &Ray) -> Option<P>,
         P: IntoHit,
     {
-        if !self.traces_packets() {
-            return self.intersect_each(count, ray, answer, hit_prim);
-        }
-        let each = Batch::<N, _, _, _, ClosestInPackets>::new(self, count, ray, answer, hit_prim);
-        WideNode::<N>::dispatch(self.isa, each)
+        let batch = RayBatch::new(count).with(Coherence::Coherent);
+        self.closest_hits(batch, ray, answer, hit_prim, &mut ())
     }
 
     /// Occlusion of rays `0..count` on this thread, as [`BvhN::intersect_each`].
@@ -619,8 +617,7 @@ where
         A: FnMut(usize, bool),
         F: FnMut(u32, &Ray) -> bool,
     {
-        let each = Batch::<N, _, _, _, AnyOneByOne>::new(self, count, ray, answer, hit_prim);
-        WideNode::<N>::dispatch(self.isa, each)
+        self.any_hits(RayBatch::new(count), ray, answer, hit_prim)
     }
 
     /// [`BvhN::occluded_each`] for coherent rays (shadow rays from neighbouring points
@@ -633,11 +630,12 @@ where
         A: FnMut(usize, bool),
         F: FnMut(u32, &Ray) -> bool,
     {
-        if !self.traces_packets() {
-            return self.occluded_each(count, ray, answer, hit_prim);
-        }
-        let each = Batch::<N, _, _, _, AnyInPackets>::new(self, count, ray, answer, hit_prim);
-        WideNode::<N>::dispatch(self.isa, each)
+        self.any_hits(
+            RayBatch::new(count).with(Coherence::Coherent),
+            ray,
+            answer,
+            hit_prim,
+        )
     }
 }
 
