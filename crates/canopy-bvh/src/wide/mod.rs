@@ -691,6 +691,32 @@ impl<'a, const N: usize, R, A, F, Q> Batch<'a, N, R, A, F, Q> {
     }
 }
 
+/// Runs `$body` with `$leaves` bound to the tree's leaves as its layout stores them — kept
+/// spheres, triangle packs (tested by the pack kernel `$kernel`) or primitives the
+/// caller's `$test` alone tests — so that each query is compiled once for each kind.
+macro_rules! with_leaves {
+    ($bvh:expr, $test:expr, $kernel:ty, |$leaves:ident| $body:expr) => {{
+        let (bvh, test) = ($bvh, $test);
+        if bvh.has_sphere_leaves() {
+            let $leaves = SphereLeaves {
+                prims: &bvh.prim_indices,
+                spheres: &bvh.spheres,
+                test,
+            };
+            $body
+        } else if bvh.packs.is_empty() {
+            let $leaves = ClosureLeaves {
+                prims: &bvh.prim_indices,
+                test,
+            };
+            $body
+        } else {
+            let $leaves = PackedLeaves::<$kernel, _>::new(&bvh.packs, &bvh.spheres, test);
+            $body
+        }
+    }};
+}
+
 /// Closest hits, ray by ray ([`BvhN::intersect_each`]).
 struct ClosestOneByOne;
 /// Closest hits in packets ([`BvhN::intersect_coherent`]).
@@ -725,54 +751,10 @@ where
             return (0..count).for_each(|i| answer(i, None));
         }
         let (nodes, prefetch) = (&bvh.nodes, bvh.prefetches());
-        // SAFETY (all calls): the caller guarantees the instruction sets.
-        if bvh.has_sphere_leaves() {
-            let mut leaves = SphereLeaves {
-                prims: &bvh.prim_indices,
-                spheres: &bvh.spheres,
-                test,
-            };
-            unsafe {
-                closest_each::<N, K, _, _>(
-                    nodes,
-                    count,
-                    ray,
-                    answer,
-                    &mut leaves,
-                    counter,
-                    prefetch,
-                )
-            }
-        } else if bvh.packs.is_empty() {
-            let mut leaves = ClosureLeaves {
-                prims: &bvh.prim_indices,
-                test,
-            };
-            unsafe {
-                closest_each::<N, K, _, _>(
-                    nodes,
-                    count,
-                    ray,
-                    answer,
-                    &mut leaves,
-                    counter,
-                    prefetch,
-                )
-            }
-        } else {
-            let mut leaves = PackedLeaves::<T, F>::new(&bvh.packs, &bvh.spheres, test);
-            unsafe {
-                closest_each::<N, K, _, _>(
-                    nodes,
-                    count,
-                    ray,
-                    answer,
-                    &mut leaves,
-                    counter,
-                    prefetch,
-                )
-            }
-        }
+        // SAFETY: the caller guarantees the instruction sets.
+        with_leaves!(bvh, test, T, |leaves| unsafe {
+            closest_each::<N, K, _, _>(nodes, count, ray, answer, leaves, counter, prefetch)
+        })
     }
 }
 
@@ -824,24 +806,10 @@ where
             return (0..count).for_each(|i| answer(i, false));
         }
         let (nodes, prefetch) = (&bvh.nodes, bvh.prefetches());
-        // SAFETY (all calls): the caller guarantees the instruction sets.
-        if bvh.has_sphere_leaves() {
-            let mut leaves = SphereLeaves {
-                prims: &bvh.prim_indices,
-                spheres: &bvh.spheres,
-                test,
-            };
-            unsafe { any_each::<N, K, _>(nodes, count, ray, answer, &mut leaves, prefetch) }
-        } else if bvh.packs.is_empty() {
-            let mut leaves = ClosureLeaves {
-                prims: &bvh.prim_indices,
-                test,
-            };
-            unsafe { any_each::<N, K, _>(nodes, count, ray, answer, &mut leaves, prefetch) }
-        } else {
-            let mut leaves = PackedLeaves::<T, F>::new(&bvh.packs, &bvh.spheres, test);
-            unsafe { any_each::<N, K, _>(nodes, count, ray, answer, &mut leaves, prefetch) }
-        }
+        // SAFETY: the caller guarantees the instruction sets.
+        with_leaves!(bvh, test, T, |leaves| unsafe {
+            any_each::<N, K, _>(nodes, count, ray, answer, leaves, prefetch)
+        })
     }
 }
 
@@ -897,26 +865,11 @@ where
             test,
             found,
         } = self;
-        let prims = &bvh.prim_indices;
         let (prefetch, stack) = (bvh.prefetches(), &mut AnyStack::new());
-        // SAFETY (all calls): the caller guarantees the instruction sets.
-        if bvh.has_sphere_leaves() {
-            let spheres = &bvh.spheres;
-            let leaves = SphereLeaves {
-                prims,
-                spheres,
-                test,
-            };
+        with_leaves!(bvh, test, T, |leaves| {
             let mut every = EveryHit { leaves, found };
+            // SAFETY: the caller guarantees the instruction sets.
             unsafe { traverse::any::<N, K, _>(&bvh.nodes, ray, &mut every, prefetch, stack) };
-        } else if bvh.packs.is_empty() {
-            let leaves = ClosureLeaves { prims, test };
-            let mut every = EveryHit { leaves, found };
-            unsafe { traverse::any::<N, K, _>(&bvh.nodes, ray, &mut every, prefetch, stack) };
-        } else {
-            let leaves = PackedLeaves::<T, F>::new(&bvh.packs, &bvh.spheres, test);
-            let mut every = EveryHit { leaves, found };
-            unsafe { traverse::any::<N, K, _>(&bvh.nodes, ray, &mut every, prefetch, stack) };
-        }
+        })
     }
 }

@@ -910,7 +910,7 @@ pub(crate) unsafe fn closest_each<const N: usize, K, L, C>(
     count: usize,
     mut ray: impl FnMut(usize) -> Ray,
     mut answer: impl FnMut(usize, Option<Hit>),
-    leaves: &mut L,
+    mut leaves: L,
     counter: &mut C,
     prefetch: bool,
 ) where
@@ -923,8 +923,9 @@ pub(crate) unsafe fn closest_each<const N: usize, K, L, C>(
         let ray = ray(i);
         leaves.new_ray();
         // SAFETY: the caller guarantees the instruction set.
-        let hit =
-            unsafe { closest::<N, K, L, C>(nodes, &ray, leaves, counter, prefetch, &mut stack) };
+        let hit = unsafe {
+            closest::<N, K, L, C>(nodes, &ray, &mut leaves, counter, prefetch, &mut stack)
+        };
         answer(i, hit);
     }
 }
@@ -939,7 +940,7 @@ pub(crate) unsafe fn any_each<const N: usize, K, L>(
     count: usize,
     mut ray: impl FnMut(usize) -> Ray,
     mut answer: impl FnMut(usize, bool),
-    leaves: &mut L,
+    mut leaves: L,
     prefetch: bool,
 ) where
     K: NodeKernel<N>,
@@ -950,7 +951,7 @@ pub(crate) unsafe fn any_each<const N: usize, K, L>(
         let ray = ray(i);
         leaves.new_ray();
         // SAFETY: the caller guarantees the instruction set.
-        let blocked = unsafe { any::<N, K, L>(nodes, &ray, leaves, prefetch, &mut stack) };
+        let blocked = unsafe { any::<N, K, L>(nodes, &ray, &mut leaves, prefetch, &mut stack) };
         answer(i, blocked);
     }
 }
