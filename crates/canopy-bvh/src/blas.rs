@@ -6,7 +6,7 @@ use crate::proximity::PointTree;
 use crate::query::{RayBatch, RayQuery};
 use crate::{
     build_with_clipper, Aabb, BuildParams, Builder, BvhWidth, Geometry, Hit, OptimizeBudget, Ray,
-    RefitError, ShearedRay, TraversalCounter, Tree, PACK_LANES,
+    RefitError, ShearedRay, TraversalCounter, Tree, TriangleTest, PACK_LANES,
 };
 use rayon::prelude::*;
 use std::sync::OnceLock;
@@ -21,6 +21,8 @@ pub struct BlasParams {
     pub build: BuildParams,
     /// Improve the binary tree by reinsertion ([`crate::optimize`]) before collapsing it.
     pub optimize: Option<OptimizeBudget>,
+    /// How triangles are tested, by the tree's packs and by brute force alike.
+    pub triangle_test: TriangleTest,
 }
 
 impl Default for BlasParams {
@@ -30,6 +32,7 @@ impl Default for BlasParams {
             width: BvhWidth::default(),
             build: BuildParams::default(),
             optimize: None,
+            triangle_test: TriangleTest::Watertight,
         }
     }
 }
@@ -158,6 +161,7 @@ impl<G: Geometry> Blas<G> {
             let mut tree = Tree::new(bvh, params.width);
             tree.pack_triangles(|p| geometry.triangle(p));
             tree.store_spheres(|p| geometry.sphere(p));
+            tree.set_triangle_test(params.triangle_test);
             tree
         });
         self.triangles = geometry.has_triangles();
@@ -182,6 +186,20 @@ impl<G: Geometry> Blas<G> {
     /// [`Tree::set_isa`]); `None` for brute force.
     pub fn tree_mut(&mut self) -> Option<&mut Tree> {
         self.tree.as_mut()
+    }
+
+    /// The mode triangles are tested in.
+    pub fn triangle_test(&self) -> TriangleTest {
+        self.params.triangle_test
+    }
+
+    /// Tests triangles in mode `test` from now on, in the tree's packs and in the
+    /// geometry's own tests alike (see [`BlasParams::triangle_test`]).
+    pub fn set_triangle_test(&mut self, test: TriangleTest) {
+        self.params.triangle_test = test;
+        if let Some(tree) = &mut self.tree {
+            tree.set_triangle_test(test);
+        }
     }
 
     /// Wall-clock time of the build (boxes, builder, optimiser, collapse, packs).
@@ -229,7 +247,7 @@ impl<G: Geometry> Blas<G> {
             }
             (Some(tree), true) => {
                 // The shear depends on the direction only: valid as t_max shrinks.
-                let sheared = ShearedRay::new(ray);
+                let sheared = self.shear(ray);
                 tree.intersect_counted(ray, |p, r| g.intersect(p, r, &sheared), counter)
             }
             (None, _) => brute_force_closest(g, ray, &self.sheared(ray), counter),
@@ -242,7 +260,7 @@ impl<G: Geometry> Blas<G> {
         match (&self.tree, self.shears) {
             (Some(tree), false) => tree.occluded(ray, |p, r| g.occludes_other(p, r)),
             (Some(tree), true) => {
-                let sheared = ShearedRay::new(ray);
+                let sheared = self.shear(ray);
                 tree.occluded(ray, |p, r| g.occludes(p, r, &sheared))
             }
             (None, _) => {
@@ -256,9 +274,15 @@ impl<G: Geometry> Blas<G> {
     #[inline(always)]
     fn sheared(&self, ray: &Ray) -> ShearedRay {
         match self.triangles {
-            true => ShearedRay::new(ray),
+            true => self.shear(ray),
             false => ShearedRay::UNUSED,
         }
+    }
+
+    /// The ray prepared for triangle tests in this structure's mode.
+    #[inline(always)]
+    fn shear(&self, ray: &Ray) -> ShearedRay {
+        ShearedRay::with_test(ray, self.params.triangle_test)
     }
 
     /// The tree, where one closure serves every ray (no per-ray preparation).

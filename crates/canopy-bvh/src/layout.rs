@@ -7,6 +7,7 @@ use crate::traverse::TraversalCounter;
 use crate::view::{self, TreeView};
 use crate::{
     Aabb, Bvh2, Bvh4, Bvh8, BvhError, GpuBvh, Hit, IntoHit, Isa, IsaError, Ray, RefitError,
+    TriangleTest,
 };
 use crate::{SahCosts, TreeStats};
 use glam::Vec3;
@@ -138,6 +139,16 @@ impl Tree {
             Tree::Binary(_) | Tree::Gpu(_) => Ok(()),
             Tree::Four(t) => t.set_isa(isa),
             Tree::Eight(t) => t.set_isa(isa),
+        }
+    }
+
+    /// Tests the triangle packs in mode `test` (wide layouts; the other layouts leave
+    /// every primitive to the caller's closure). See [`BvhN::set_triangle_test`].
+    pub fn set_triangle_test(&mut self, test: TriangleTest) {
+        match self {
+            Tree::Binary(_) | Tree::Gpu(_) => {}
+            Tree::Four(t) => t.set_triangle_test(test),
+            Tree::Eight(t) => t.set_triangle_test(test),
         }
     }
 

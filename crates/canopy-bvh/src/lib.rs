@@ -69,7 +69,8 @@ pub use stats::TreeStats;
 pub use tlas::Tlas;
 pub use traverse::{TraversalCounter, TraversalStats};
 pub use triangle::{
-    crosses_triangle, intersect_triangle, ShearedRay, TrianglePack, NO_PRIM, PACK_LANES,
+    crosses_triangle, intersect_triangle, ShearedRay, TrianglePack, TriangleTest, NO_PRIM,
+    PACK_LANES,
 };
 pub use view::TreeView;
 pub use wide::{Bvh4, Bvh8, BvhN, WideNode, EMPTY_SLOT, PACKET, PREFETCH_ABOVE_BYTES};

@@ -91,6 +91,13 @@ impl<B: RayQuery> Tlas<B> {
         Ok(())
     }
 
+    /// Edits every structure in place (`edit` may change what they hold or how they
+    /// test it) and rebuilds the top tree over their bounds as they are then.
+    pub fn edit_blases(&mut self, edit: impl FnMut(&mut B)) {
+        self.blases.iter_mut().for_each(edit);
+        self.rebuild();
+    }
+
     /// Builds the top tree over the instances as they are placed now.
     fn rebuild(&mut self) {
         let start = Instant::now();

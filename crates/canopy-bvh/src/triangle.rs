@@ -4,14 +4,40 @@
 //!
 //! The scalar test and the SIMD kernels (4 lanes: one pack; 8 lanes: two packs of a leaf
 //! at once) perform the same IEEE operations in the same order (no fused multiply-add), so
-//! every kernel returns bit-identical hits.
+//! every kernel returns bit-identical hits, in either [`TriangleTest`] mode.
 
 use crate::{PrimHit, Ray};
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
 
-/// A ray prepared once for watertight triangle tests: the axis along which the ray runs
-/// most steeply becomes z, and a shear maps the ray onto the z axis.
+/// How a triangle test treats a ray that passes within rounding of an edge or a vertex:
+/// where an edge function comes out exactly zero in single precision.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum TriangleTest {
+    /// Watertight (Woop, Benthin and Wald 2013): exactly-zero edge functions are computed
+    /// again in double precision, so a ray through a shared edge or vertex hits the
+    /// triangles the exact signs give, and never misses all of them.
+    #[default]
+    Watertight,
+    /// The same test without the double-precision step: an exactly-zero edge function
+    /// counts as inside. Still closed (a ray through a shared edge or vertex hits at least
+    /// one triangle there) but where the exact signs would send it to one triangle it may
+    /// hit several, at distances that differ in the last bits. Fewer instructions a pack
+    /// test; the trade Embree makes by default (its robust mode is the watertight one).
+    Fast,
+}
+
+impl TriangleTest {
+    /// Whether exactly-zero edge functions are refined in double precision.
+    #[inline(always)]
+    pub fn refines_zeros(self) -> bool {
+        self == TriangleTest::Watertight
+    }
+}
+
+/// A ray prepared once for triangle tests: the axis along which the ray runs most
+/// steeply becomes z, and a shear maps the ray onto the z axis; with the [`TriangleTest`]
+/// mode its tests use.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ShearedRay {
     /// Axis indices: z is the dominant direction axis; x, y keep the winding.
@@ -19,6 +45,7 @@ pub struct ShearedRay {
     pub ky: usize,
     pub kz: usize,
     pub shear: Vec3,
+    pub test: TriangleTest,
 }
 
 impl ShearedRay {
@@ -28,10 +55,18 @@ impl ShearedRay {
         ky: 1,
         kz: 2,
         shear: Vec3::ZERO,
+        test: TriangleTest::Watertight,
     };
 
+    /// `ray` prepared for the watertight test.
     #[inline]
     pub fn new(ray: &Ray) -> Self {
+        Self::with_test(ray, TriangleTest::Watertight)
+    }
+
+    /// `ray` prepared for tests in mode `test`.
+    #[inline]
+    pub fn with_test(ray: &Ray, test: TriangleTest) -> Self {
         // x and y follow z cyclically, swapped when the ray runs down z to keep the
         // winding: `AXES[kz][runs down z]`.
         const AXES: [[[usize; 2]; 2]; 3] = [[[1, 2], [2, 1]], [[2, 0], [0, 2]], [[0, 1], [1, 0]]];
@@ -49,6 +84,7 @@ impl ShearedRay {
             ky,
             kz,
             shear: Vec3::new(d[kx] / dz, d[ky] / dz, 1.0 / dz),
+            test,
         }
     }
 }
@@ -57,11 +93,13 @@ impl ShearedRay {
 /// barycentric weights of `v[1]` (`u`) and `v[2]` (`v`).
 ///
 /// Watertight: a ray through an edge or vertex shared by triangles hits at least one of
-/// them; edge functions that come out exactly zero in single precision are recomputed in
-/// double precision, as the paper prescribes. Both sides of a triangle are hit.
+/// them. In `sheared`'s [`TriangleTest::Watertight`] mode, edge functions that come out
+/// exactly zero in single precision are recomputed in double precision, as the paper
+/// prescribes; [`TriangleTest::Fast`] takes them as they are. Both sides of a triangle
+/// are hit.
 #[inline]
 pub fn intersect_triangle(v: &[Vec3; 3], ray: &Ray, sheared: &ShearedRay) -> Option<PrimHit> {
-    EdgeInput::new(v, ray, sheared).hit(sheared.shear, ray.t_min, ray.t_max)
+    EdgeInput::new(v, ray, sheared).hit(sheared.shear, sheared.test, ray.t_min, ray.t_max)
 }
 
 /// One triangle's vertices relative to the ray origin, axes permuted to (kx, ky, kz).
@@ -92,9 +130,9 @@ impl EdgeInput {
         }
     }
 
-    /// The projection and edge functions as the watertight test computes them.
+    /// The projection and edge functions as the test in mode `test` computes them.
     #[inline(always)]
-    fn project(&self, shear: Vec3) -> Projected {
+    fn project(&self, shear: Vec3, test: TriangleTest) -> Projected {
         let (a, b, c) = (self.a, self.b, self.c);
         let (ax, ay) = (a[0] - shear.x * a[2], a[1] - shear.y * a[2]);
         let (bx, by) = (b[0] - shear.x * b[2], b[1] - shear.y * b[2]);
@@ -102,7 +140,7 @@ impl EdgeInput {
         let mut u = cx * by - cy * bx;
         let mut v = ax * cy - ay * cx;
         let mut w = bx * ay - by * ax;
-        if u == 0.0 || v == 0.0 || w == 0.0 {
+        if test.refines_zeros() && (u == 0.0 || v == 0.0 || w == 0.0) {
             let d =
                 |p: f32, q: f32, r: f32, s: f32| (p as f64 * q as f64 - r as f64 * s as f64) as f32;
             u = d(cx, by, cy, bx);
@@ -117,8 +155,8 @@ impl EdgeInput {
 
     /// The scalar core that the SIMD kernels mirror operation for operation.
     #[inline(always)]
-    fn hit(&self, shear: Vec3, t_min: f32, t_max: f32) -> Option<PrimHit> {
-        self.hit_projected(&self.project(shear), shear, t_min, t_max)
+    fn hit(&self, shear: Vec3, test: TriangleTest, t_min: f32, t_max: f32) -> Option<PrimHit> {
+        self.hit_projected(&self.project(shear, test), shear, t_min, t_max)
     }
 
     /// [`EdgeInput::hit`] from the projection already made.
@@ -192,8 +230,9 @@ pub fn crosses_triangle(v: &[Vec3; 3], ray: &Ray, sheared: &ShearedRay) -> Optio
 /// The hit of a crossing ([`crosses_triangle`]) and the projection it was decided on.
 #[inline(always)]
 fn crossing(v: &[Vec3; 3], ray: &Ray, sheared: &ShearedRay) -> Option<(PrimHit, Projected)> {
+    // Deciding ties needs the exact signs, whatever mode `sheared` was made for.
     let edges = EdgeInput::new(v, ray, sheared);
-    let projected = edges.project(sheared.shear);
+    let projected = edges.project(sheared.shear, TriangleTest::Watertight);
     let hit = edges.hit_projected(&projected, sheared.shear, ray.t_min, ray.t_max)?;
     projected.crossed().then_some((hit, projected))
 }
@@ -289,6 +328,7 @@ impl TrianglePack {
 }
 
 /// A ray prepared for pack tests: the sheared ray's axes and the origin in that order.
+/// (The test's mode is the kernel's: [`PackKernel::TEST`].)
 #[derive(Clone, Copy, Debug)]
 pub struct PackRay {
     k: [usize; 3],
@@ -356,14 +396,17 @@ impl PackHits {
         }
     }
 
-    /// Tests the `lanes` of `pack` one by one in the scalar core, adding their hits at
-    /// lanes `base + lane`; returns the lanes hit (bit `lane`, not shifted by `base`).
+    /// Tests the `lanes` of `pack` one by one in the scalar core in mode `test`, adding
+    /// their hits at lanes `base + lane`; returns the lanes hit (bit `lane`, not shifted
+    /// by `base`).
     #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
     fn add_scalar_lanes(
         &mut self,
         pack: &TrianglePack,
         base: usize,
         ray: &PackRay,
+        test: TriangleTest,
         mut lanes: u32,
         t_min: f32,
         t_max: f32,
@@ -372,7 +415,8 @@ impl PackHits {
         while lanes != 0 {
             let lane = lanes.trailing_zeros() as usize;
             lanes &= lanes - 1;
-            if let Some(hit) = pack.lane_edges(lane, ray).hit(ray.shear, t_min, t_max) {
+            let edges = pack.lane_edges(lane, ray);
+            if let Some(hit) = edges.hit(ray.shear, test, t_min, t_max) {
                 self.set(base + lane, hit);
                 mask |= 1 << lane;
             }
@@ -381,12 +425,20 @@ impl PackHits {
     }
 }
 
-/// A triangle test of one pack (4 lanes) or a pair of packs (8 lanes): [`ScalarPack`],
-/// [`Sse2Pack`] or [`Avx2Pack`], identical in every bit.
+/// A triangle test of one pack (4 lanes) or a pair of packs (8 lanes) in one
+/// [`TriangleTest`] mode: [`ScalarPack`], [`Sse2Pack`] or [`Avx2Pack`], identical in every
+/// bit. The mode is part of the kernel's type, so that the fast one carries no trace of
+/// the watertight one's refinement, not even a branch.
 pub trait PackKernel {
     /// Whether [`PackKernel::test_pair`] costs about one pack test (8-lane registers), so
     /// a leaf's packs are best tested two at a time.
     const PAIRS: bool;
+
+    /// The mode this kernel tests in.
+    const TEST: TriangleTest;
+
+    /// The same kernel in the fast mode.
+    type Fast: PackKernel;
 
     /// The pack's triangle lanes hit within `[t_min, t_max]` (bit `i` for lane `i`).
     /// With `HITS`, their hits are written to lanes 0..4 of `hits` (other lanes are left
@@ -415,11 +467,21 @@ pub trait PackKernel {
     ) -> u32;
 }
 
-/// The portable twin: the scalar core lane by lane.
-pub(crate) struct ScalarPack;
+/// The mode a kernel's `REFINES` parameter stands for.
+const fn mode(refines: bool) -> TriangleTest {
+    match refines {
+        true => TriangleTest::Watertight,
+        false => TriangleTest::Fast,
+    }
+}
 
-impl PackKernel for ScalarPack {
+/// The portable twin: the scalar core lane by lane; `REFINES`: the watertight mode.
+pub(crate) struct ScalarPack<const REFINES: bool = true>;
+
+impl<const REFINES: bool> PackKernel for ScalarPack<REFINES> {
     const PAIRS: bool = false;
+    const TEST: TriangleTest = mode(REFINES);
+    type Fast = ScalarPack<false>;
 
     #[inline(always)]
     unsafe fn test<const HITS: bool>(
@@ -429,7 +491,7 @@ impl PackKernel for ScalarPack {
         t_max: f32,
         hits: &mut PackHits,
     ) -> u32 {
-        hits.add_scalar_lanes(pack, 0, ray, pack.triangles, t_min, t_max)
+        hits.add_scalar_lanes(pack, 0, ray, Self::TEST, pack.triangles, t_min, t_max)
     }
 
     #[inline(always)]
@@ -441,8 +503,9 @@ impl PackKernel for ScalarPack {
         hits: &mut PackHits,
     ) -> u32 {
         let [low, high] = packs;
-        let low = hits.add_scalar_lanes(low, 0, ray, low.triangles, t_min, t_max);
-        let high = hits.add_scalar_lanes(high, PACK_LANES, ray, high.triangles, t_min, t_max);
+        let (test, lanes) = (Self::TEST, PACK_LANES);
+        let low = hits.add_scalar_lanes(low, 0, ray, test, low.triangles, t_min, t_max);
+        let high = hits.add_scalar_lanes(high, lanes, ray, test, high.triangles, t_min, t_max);
         low | high << PACK_LANES
     }
 }
@@ -572,10 +635,10 @@ mod simd {
     }
 
     /// The pack test on `V::PACKS` packs: the scalar core's operations in every lane.
-    /// Lanes whose edge functions come out exactly zero go to the scalar core, which
-    /// redoes them in double precision.
+    /// In the watertight mode, lanes whose edge functions come out exactly zero go to the
+    /// scalar core, which redoes them in double precision.
     #[inline(always)]
-    unsafe fn test_lanes<V: Lanes, const HITS: bool>(
+    unsafe fn test_lanes<V: Lanes, const HITS: bool, const REFINES: bool>(
         packs: &[TrianglePack],
         ray: &PackRay,
         t_min: f32,
@@ -608,12 +671,15 @@ mod simd {
             let v = ax.mul(cy).sub(ay.mul(cx));
             let w = bx.mul(ay).sub(by.mul(ax));
             let zero = V::splat(0.0);
-            let any_zero = u.eq(zero).or(v.eq(zero)).or(w.eq(zero));
             let negative = u.lt(zero).or(v.lt(zero)).or(w.lt(zero));
             let positive = u.gt(zero).or(v.gt(zero)).or(w.gt(zero));
             let lanes = triangle_lanes(&packs[..V::PACKS]);
-            let redo = any_zero.mask() & lanes;
-            // Inside: no edge function of each sign (or all zero, sent to `redo`).
+            let redo = match REFINES {
+                true => u.eq(zero).or(v.eq(zero)).or(w.eq(zero)).mask() & lanes,
+                false => 0,
+            };
+            // Inside: no edge function of each sign (in the fast mode, zero counts as
+            // either; in the watertight one, lanes with a zero go to `redo`).
             let straddles = negative.and(positive).mask();
             let inside = lanes & !straddles & !redo;
             let mut mask = 0;
@@ -636,23 +702,30 @@ mod simd {
                 }
             }
             // Lanes with an exactly-zero edge function go to the scalar core's f64
-            // fallback.
-            for (i, pack) in packs[..V::PACKS].iter().enumerate() {
-                let base = i * PACK_LANES;
-                let lanes = (redo >> base) & ((1 << PACK_LANES) - 1);
-                if lanes != 0 {
-                    mask |= hits.add_scalar_lanes(pack, base, ray, lanes, t_min, t_max) << base;
+            // fallback (rare: one branch skips it).
+            if redo != 0 {
+                for (i, pack) in packs[..V::PACKS].iter().enumerate() {
+                    let base = i * PACK_LANES;
+                    let lanes = (redo >> base) & ((1 << PACK_LANES) - 1);
+                    if lanes != 0 {
+                        let test = TriangleTest::Watertight;
+                        let hit = hits.add_scalar_lanes(pack, base, ray, test, lanes, t_min, t_max);
+                        mask |= hit << base;
+                    }
                 }
             }
             mask
         }
     }
 
-    /// The SSE2 kernel (baseline x86-64): four lanes, one pack at a time.
-    pub(crate) struct Sse2Pack;
+    /// The SSE2 kernel (baseline x86-64): four lanes, one pack at a time; `REFINES`: the
+    /// watertight mode.
+    pub(crate) struct Sse2Pack<const REFINES: bool = true>;
 
-    impl PackKernel for Sse2Pack {
+    impl<const REFINES: bool> PackKernel for Sse2Pack<REFINES> {
         const PAIRS: bool = false;
+        const TEST: TriangleTest = mode(REFINES);
+        type Fast = Sse2Pack<false>;
 
         #[inline(always)]
         unsafe fn test<const HITS: bool>(
@@ -664,7 +737,8 @@ mod simd {
         ) -> u32 {
             // SAFETY: SSE2 is baseline x86-64.
             unsafe {
-                test_lanes::<__m128, HITS>(std::slice::from_ref(pack), ray, t_min, t_max, hits)
+                let pack = std::slice::from_ref(pack);
+                test_lanes::<__m128, HITS, REFINES>(pack, ray, t_min, t_max, hits)
             }
         }
 
@@ -679,9 +753,10 @@ mod simd {
             // SAFETY: SSE2 is baseline x86-64. The second pack's hits land in lanes 0..4
             // of a second record, then move up.
             unsafe {
-                let low = test_lanes::<__m128, HITS>(&packs[..1], ray, t_min, t_max, hits);
+                let low = test_lanes::<__m128, HITS, REFINES>(&packs[..1], ray, t_min, t_max, hits);
                 let mut upper = PackHits::default();
-                let high = test_lanes::<__m128, HITS>(&packs[1..], ray, t_min, t_max, &mut upper);
+                let high =
+                    test_lanes::<__m128, HITS, REFINES>(&packs[1..], ray, t_min, t_max, &mut upper);
                 for lane in 0..PACK_LANES {
                     hits.t[PACK_LANES + lane] = upper.t[lane];
                     hits.u[PACK_LANES + lane] = upper.u[lane];
@@ -692,11 +767,14 @@ mod simd {
         }
     }
 
-    /// The AVX2 kernel: single packs as SSE2 does, pairs of packs in eight lanes.
-    pub(crate) struct Avx2Pack;
+    /// The AVX2 kernel: single packs as SSE2 does, pairs of packs in eight lanes;
+    /// `REFINES`: the watertight mode.
+    pub(crate) struct Avx2Pack<const REFINES: bool = true>;
 
-    impl PackKernel for Avx2Pack {
+    impl<const REFINES: bool> PackKernel for Avx2Pack<REFINES> {
         const PAIRS: bool = true;
+        const TEST: TriangleTest = mode(REFINES);
+        type Fast = Avx2Pack<false>;
 
         #[inline(always)]
         unsafe fn test<const HITS: bool>(
@@ -707,7 +785,7 @@ mod simd {
             hits: &mut PackHits,
         ) -> u32 {
             // SAFETY: SSE2 is baseline x86-64.
-            unsafe { Sse2Pack::test::<HITS>(pack, ray, t_min, t_max, hits) }
+            unsafe { Sse2Pack::<REFINES>::test::<HITS>(pack, ray, t_min, t_max, hits) }
         }
 
         #[inline(always)]
@@ -719,7 +797,7 @@ mod simd {
             hits: &mut PackHits,
         ) -> u32 {
             // SAFETY: the caller guarantees AVX2.
-            unsafe { test_lanes::<__m256, HITS>(packs, ray, t_min, t_max, hits) }
+            unsafe { test_lanes::<__m256, HITS, REFINES>(packs, ray, t_min, t_max, hits) }
         }
     }
 }
@@ -795,15 +873,18 @@ mod tests {
         p
     }
 
-    fn kernels_agree(ray: &Ray) {
+    /// Every 4-lane kernel in the mode `REFINES` stands for gives the scalar test's hits.
+    fn kernels_agree<const REFINES: bool>(ray: &Ray) {
         let pr = PackRay::new(ray);
+        let sheared = ShearedRay::with_test(ray, mode(REFINES));
         let mut scalar = PackHits::default();
-        let scalar_mask =
-            unsafe { ScalarPack::test::<true>(&pack(), &pr, ray.t_min, ray.t_max, &mut scalar) };
+        let scalar_mask = unsafe {
+            ScalarPack::<REFINES>::test::<true>(&pack(), &pr, ray.t_min, ray.t_max, &mut scalar)
+        };
         for lane in 0..PACK_LANES {
             let shift = Vec3::new(0.0, 0.0, lane as f32);
             let expect = (lane < 3)
-                .then(|| intersect_triangle(&tri().map(|v| v - shift), ray, &ShearedRay::new(ray)))
+                .then(|| intersect_triangle(&tri().map(|v| v - shift), ray, &sheared))
                 .flatten();
             let got = (scalar_mask & (1 << lane) != 0).then(|| scalar.lane(lane));
             assert_eq!(got, expect, "lane {lane}");
@@ -811,8 +892,9 @@ mod tests {
         #[cfg(target_arch = "x86_64")]
         {
             let mut simd = PackHits::default();
-            let simd_mask =
-                unsafe { Sse2Pack::test::<true>(&pack(), &pr, ray.t_min, ray.t_max, &mut simd) };
+            let simd_mask = unsafe {
+                Sse2Pack::<REFINES>::test::<true>(&pack(), &pr, ray.t_min, ray.t_max, &mut simd)
+            };
             assert_eq!(simd_mask, scalar_mask);
             for lane in 0..PACK_LANES {
                 if scalar_mask & (1 << lane) != 0 {
@@ -834,7 +916,7 @@ mod tests {
         [pack(), high]
     }
 
-    fn expected_pair_lane(lane: usize, ray: &Ray) -> Option<PrimHit> {
+    fn expected_pair_lane(lane: usize, ray: &Ray, mode: TriangleTest) -> Option<PrimHit> {
         // Lane 3 and lanes 6 and 7 are empty; the others lie `depth` down z.
         let depth = match lane {
             3 | 6 | 7 => return None,
@@ -842,27 +924,42 @@ mod tests {
             _ => lane - 1,
         };
         let shift = Vec3::new(0.0, 0.0, depth as f32);
-        intersect_triangle(&tri().map(|v| v - shift), ray, &ShearedRay::new(ray))
+        intersect_triangle(
+            &tri().map(|v| v - shift),
+            ray,
+            &ShearedRay::with_test(ray, mode),
+        )
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    unsafe fn avx2_pair(packs: &[TrianglePack; 2], ray: &Ray, hits: &mut PackHits) -> u32 {
+    unsafe fn avx2_pair<const REFINES: bool>(
+        packs: &[TrianglePack; 2],
+        ray: &Ray,
+        hits: &mut PackHits,
+    ) -> u32 {
         let pr = PackRay::new(ray);
-        unsafe { Avx2Pack::test_pair::<true>(packs, &pr, ray.t_min, ray.t_max, hits) }
+        unsafe { Avx2Pack::<REFINES>::test_pair::<true>(packs, &pr, ray.t_min, ray.t_max, hits) }
     }
 
     /// Every kernel's pair test (two packs, lanes 0..8) gives the scalar test's hits bit
     /// for bit, the 8-lane AVX2 one included where the CPU has it.
-    fn pair_kernels_agree(ray: &Ray) {
+    fn pair_kernels_agree<const REFINES: bool>(ray: &Ray) {
+        let mode = mode(REFINES);
         let pr = PackRay::new(ray);
         let mut scalar = PackHits::default();
         let scalar_mask = unsafe {
-            ScalarPack::test_pair::<true>(&pair(), &pr, ray.t_min, ray.t_max, &mut scalar)
+            ScalarPack::<REFINES>::test_pair::<true>(
+                &pair(),
+                &pr,
+                ray.t_min,
+                ray.t_max,
+                &mut scalar,
+            )
         };
         for lane in 0..PAIR_LANES {
             let got = (scalar_mask & (1 << lane) != 0).then(|| scalar.lane(lane));
-            assert_eq!(got, expected_pair_lane(lane, ray), "lane {lane}");
+            assert_eq!(got, expected_pair_lane(lane, ray, mode), "lane {lane}");
         }
         #[cfg(target_arch = "x86_64")]
         {
@@ -877,13 +974,19 @@ mod tests {
             };
             let mut sse2 = PackHits::default();
             let mask = unsafe {
-                Sse2Pack::test_pair::<true>(&pair(), &pr, ray.t_min, ray.t_max, &mut sse2)
+                Sse2Pack::<REFINES>::test_pair::<true>(
+                    &pair(),
+                    &pr,
+                    ray.t_min,
+                    ray.t_max,
+                    &mut sse2,
+                )
             };
             same(mask, &sse2, "sse2");
             if std::arch::is_x86_feature_detected!("avx2") {
                 let mut avx2 = PackHits::default();
                 // SAFETY: AVX2 was just detected.
-                let mask = unsafe { avx2_pair(&pair(), ray, &mut avx2) };
+                let mask = unsafe { avx2_pair::<REFINES>(&pair(), ray, &mut avx2) };
                 same(mask, &avx2, "avx2");
             }
         }
@@ -909,14 +1012,43 @@ mod tests {
     #[test]
     fn pair_kernels_match_the_scalar_test_lane_by_lane() {
         for ray in &kernel_test_rays() {
-            pair_kernels_agree(ray);
+            pair_kernels_agree::<true>(ray);
+            pair_kernels_agree::<false>(ray);
         }
     }
 
     #[test]
     fn pack_kernels_match_the_scalar_test_lane_by_lane() {
         for ray in &kernel_test_rays() {
-            kernels_agree(ray);
+            kernels_agree::<true>(ray);
+            kernels_agree::<false>(ray);
         }
+    }
+
+    /// Rays aimed at edge midpoints of random triangles: the fast mode hits wherever the
+    /// watertight one does, and also where a rounded-to-zero edge function would have
+    /// come out negative in double precision (so the mode does change answers there).
+    #[test]
+    fn the_fast_test_hits_a_superset_of_the_watertight_one_at_edges() {
+        let mut state = 11u32;
+        let mut next = move || {
+            state ^= state << 13;
+            state ^= state >> 17;
+            state ^= state << 5;
+            state as f32 / u32::MAX as f32 - 0.5
+        };
+        let (mut differ, mut fast_only) = (0, 0);
+        for _ in 0..20_000 {
+            let v = [0; 3].map(|_| Vec3::new(next(), next(), next()) * 4.0);
+            let o = Vec3::new(next(), next(), next()) * 20.0;
+            let ray = Ray::new(o, (0.5 * (v[0] + v[1]) - o).normalize(), 0.0, f32::INFINITY);
+            let watertight = intersect_triangle(&v, &ray, &ShearedRay::new(&ray));
+            let fast = ShearedRay::with_test(&ray, TriangleTest::Fast);
+            let fast = intersect_triangle(&v, &ray, &fast);
+            assert!(watertight.is_none() || fast.is_some(), "{v:?} {ray:?}");
+            differ += (watertight != fast) as u32;
+            fast_only += (watertight.is_none() && fast.is_some()) as u32;
+        }
+        assert!(fast_only > 20 && differ > fast_only, "{differ} {fast_only}");
     }
 }

@@ -86,6 +86,11 @@ pub struct RenderArgs {
     /// `2s`); see `canopy bvh --optimize`.
     #[arg(long, value_parser = limits::optimize_budget)]
     optimize: Option<canopy_bvh::OptimizeBudget>,
+    /// Test triangles without the watertight test's double-precision step for rays
+    /// through edges (like Embree's default mode): fewer instructions per ray; a ray
+    /// within rounding of a shared edge may hit every triangle there. The CPU only.
+    #[arg(long)]
+    fast_triangles: bool,
     /// Draw the BVH's boxes over the image as wireframes, coloured by tree level.
     #[arg(long)]
     show_bvh: bool,
@@ -366,6 +371,10 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
             width: args.width,
             params: args.build.params(),
             optimize: args.optimize,
+            triangle_test: match args.fast_triangles {
+                true => canopy_bvh::TriangleTest::Fast,
+                false => canopy_bvh::TriangleTest::Watertight,
+            },
         },
         device: args.device,
         schedule: args.schedule,

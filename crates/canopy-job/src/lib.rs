@@ -29,7 +29,7 @@ pub use observer::Observer;
 pub use prepared::{Outcome, Prepared, AOV_BYTES_PER_PIXEL, BYTES_PER_PIXEL, MAX_THREADS};
 pub use resume::Resumed;
 
-use canopy_bvh::{BuildParams, OptimizeBudget};
+use canopy_bvh::{BuildParams, OptimizeBudget, TriangleTest};
 use canopy_render::checkpoint::CheckpointError;
 pub use canopy_render::Schedule;
 use canopy_render::{AccelKind, Accumulator, AovSet, BvhWidth, Region, Scene};
@@ -88,6 +88,8 @@ pub struct Structure {
     pub params: BuildParams,
     /// Improve the tree by reinsertion before rendering.
     pub optimize: Option<OptimizeBudget>,
+    /// How triangles are tested on the CPU (the GPU's kernels are watertight).
+    pub triangle_test: TriangleTest,
 }
 
 impl Default for Structure {
@@ -97,6 +99,7 @@ impl Default for Structure {
             width: BvhWidth::default(),
             params: BuildParams::default(),
             optimize: None,
+            triangle_test: TriangleTest::Watertight,
         }
     }
 }

@@ -167,6 +167,7 @@ impl<'s> RenderJob<'s> {
                     &structure.params,
                     structure.optimize,
                 )
+                .with_triangle_test(structure.triangle_test)
             })),
         };
         Ok(Prepared {

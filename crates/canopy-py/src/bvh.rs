@@ -2,7 +2,7 @@
 
 use crate::arrays;
 use crate::pools;
-use canopy_bvh::{Aabb, BuildParams, BvhWidth, SahCosts};
+use canopy_bvh::{Aabb, BuildParams, BvhWidth, SahCosts, TriangleTest};
 use canopy_bvh::{Coherence, Hit, Ray, RayBatch, RayOrder, RayQuery, ALL_MASKS};
 use canopy_render::geometry::{Cuboid, Shape, Triangle};
 use canopy_render::scene::Primitive;
@@ -39,6 +39,7 @@ struct Options {
     width: BvhWidth,
     params: BuildParams,
     threads: Option<usize>,
+    triangle_test: TriangleTest,
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -52,7 +53,17 @@ fn options(
     max_duplication: Option<f32>,
     optimize: Option<f64>,
     threads: Option<usize>,
+    triangles: &str,
 ) -> PyResult<Options> {
+    let triangle_test = match triangles {
+        "watertight" => TriangleTest::Watertight,
+        "fast" => TriangleTest::Fast,
+        other => {
+            return Err(PyValueError::new_err(format!(
+                "triangles must be 'watertight' or 'fast', not {other:?}"
+            )))
+        }
+    };
     let kind: AccelKind = builder
         .parse()
         .map_err(|e: canopy_bvh::UnknownBuilder| PyValueError::new_err(e.to_string()))?;
@@ -88,6 +99,7 @@ fn options(
         width,
         params,
         threads,
+        triangle_test,
     })
 }
 
@@ -99,11 +111,13 @@ impl Bvh {
             ));
         }
         let (kind, width, params, optimize) = (o.kind, o.width, o.params, o.optimize);
+        let triangle_test = o.triangle_test;
         py.detach(|| {
             pools::install(o.threads, || {
                 let start = Instant::now();
                 let accel =
-                    Accel::build_optimized(kind, width, &primitives.into(), &params, optimize);
+                    Accel::build_optimized(kind, width, &primitives.into(), &params, optimize)
+                        .with_triangle_test(triangle_test);
                 let build_ms = start.elapsed().as_secs_f64() * 1e3;
                 Bvh {
                     accel,
@@ -243,7 +257,7 @@ impl Bvh {
     #[new]
     #[pyo3(signature = (vertices, faces, builder="binned-sah", width=8, max_leaf_size=None,
         sah_traversal=None, sah_intersection=None, ploc_radius=None, max_duplication=None,
-        optimize=None, threads=None))]
+        optimize=None, threads=None, triangles="watertight"))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -258,6 +272,7 @@ impl Bvh {
         max_duplication: Option<f32>,
         optimize: Option<f64>,
         threads: Option<usize>,
+        triangles: &str,
     ) -> PyResult<Self> {
         let o = options(
             builder,
@@ -269,6 +284,7 @@ impl Bvh {
             max_duplication,
             optimize,
             threads,
+            triangles,
         )?;
         let v = arrays::points("vertices", &vertices)?;
         let f = arrays::faces(&faces, v.len())?;
@@ -290,7 +306,7 @@ impl Bvh {
     #[staticmethod]
     #[pyo3(signature = (boxes, builder="binned-sah", width=8, max_leaf_size=None,
         sah_traversal=None, sah_intersection=None, ploc_radius=None, max_duplication=None,
-        optimize=None, threads=None))]
+        optimize=None, threads=None, triangles="watertight"))]
     #[allow(clippy::too_many_arguments)]
     fn from_boxes(
         py: Python<'_>,
@@ -304,6 +320,7 @@ impl Bvh {
         max_duplication: Option<f32>,
         optimize: Option<f64>,
         threads: Option<usize>,
+        triangles: &str,
     ) -> PyResult<Self> {
         let o = options(
             builder,
@@ -315,6 +332,7 @@ impl Bvh {
             max_duplication,
             optimize,
             threads,
+            triangles,
         )?;
         let primitives = arrays::boxes(&boxes)?
             .iter()
@@ -376,6 +394,11 @@ impl Bvh {
         d.set_item("builder", self.name())?;
         d.set_item("primitives", self.accel.primitives().len())?;
         d.set_item("build_ms", self.build_ms)?;
+        let triangles = match self.accel.triangle_test() {
+            TriangleTest::Watertight => "watertight",
+            TriangleTest::Fast => "fast",
+        };
+        d.set_item("triangles", triangles)?;
         let Some(tree) = self.accel.tree() else {
             return Ok(d);
         };

@@ -2,6 +2,7 @@
 reference, for every builder and width; bad input raises; the GIL is released."""
 
 import os
+import pickle
 import sys
 import threading
 import time
@@ -60,6 +61,30 @@ def test_every_builder_and_width_gives_the_brute_force_answer(builder, width):
     stats = bvh.stats()
     assert stats["builder"] == builder and stats["width"] == width
     assert stats["primitives"] == 300 and stats["sah_cost"] > 0 and stats["build_ms"] >= 0
+
+
+@pytest.mark.parametrize("builder", ["none", "binned-sah"])
+@pytest.mark.parametrize("width", [2, 4, 8])
+def test_the_fast_triangle_test_agrees_with_itself_and_hits_wherever_the_watertight_one_does(builder, width):
+    # Rays aimed exactly at edge midpoints, where the two modes can differ.
+    vertices, faces = random_soup(300, 3)
+    rng = np.random.default_rng(4)
+    triangles = vertices[faces]
+    targets = 0.5 * (triangles[:, 0] + triangles[:, 1])
+    origins = (rng.random((len(targets), 3), dtype=np.float32) * 8 - 4).astype(np.float32)
+    directions = targets - origins
+    reference = canopy.Bvh(vertices, faces, builder="none", triangles="fast")
+    fast = canopy.Bvh(vertices, faces, builder=builder, width=width, triangles="fast")
+    watertight = canopy.Bvh(vertices, faces, builder=builder, width=width)
+    assert fast.stats()["triangles"] == "fast" and watertight.stats()["triangles"] == "watertight"
+    hits, expected = fast.intersect(origins, directions), reference.intersect(origins, directions)
+    np.testing.assert_array_equal(hits.prim, expected.prim)
+    np.testing.assert_array_equal(hits.t, expected.t)
+    np.testing.assert_array_equal(fast.occluded(origins, directions), expected.prim >= 0)
+    # Every ray the watertight test stops, the fast one stops too.
+    assert np.all(fast.occluded(origins, directions)[watertight.occluded(origins, directions)])
+    # The mode survives a pickle.
+    assert pickle.loads(pickle.dumps(fast)).stats()["triangles"] == "fast"
 
 
 @pytest.mark.parametrize("width", [2, 4, 8])
@@ -253,6 +278,7 @@ GOOD_V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], dtype=np.float32)
         (lambda: canopy.Bvh(GOOD_V, [[0, 1, 2]], builder="octree"), ValueError, "unknown"),
         (lambda: canopy.Bvh(GOOD_V, [[0, 1, 2]], builder=3), TypeError, "builder must be a name"),
         (lambda: canopy.Bvh(GOOD_V, [[0, 1, 2]], width=3), ValueError, "2, 4 or 8"),
+        (lambda: canopy.Bvh(GOOD_V, [[0, 1, 2]], triangles="robust"), ValueError, "'watertight' or 'fast'"),
         (lambda: canopy.Bvh(GOOD_V, [[0, 1, 2]], max_leaf_size=0), ValueError, "max_leaf_size"),
         (lambda: canopy.Bvh(GOOD_V, [[0, 1, 2]], sah_traversal=-1.0), ValueError, "SAH cost"),
         (lambda: canopy.Bvh(GOOD_V, [[0, 1, 2]], threads=0), ValueError, "threads must be in 1..=1024"),

@@ -8,8 +8,11 @@
 //! (`--collect-atstart=no --toggle-collect='*profiled_*'`); the script runs it with one
 //! pass and `--no-stats` there.
 //!
-//! `kernel_profile MESH RAYS closest|occluded RUNS [--no-stats]`
-use canopy_bvh::{BuildParams, BvhWidth, Hit, Ray, RayQuery, TraversalStats, ALL_MASKS};
+//! `kernel_profile MESH RAYS closest|occluded RUNS [--no-stats] [--fast]` (`--fast`: the
+//! fast triangle test, Embree's default mode's counterpart)
+use canopy_bvh::{
+    BuildParams, BvhWidth, Hit, Ray, RayQuery, TraversalStats, TriangleTest, ALL_MASKS,
+};
 use canopy_render::geometry::{Shape, Triangle};
 use canopy_render::scene::Primitive;
 use canopy_render::{Accel, AccelKind};
@@ -75,7 +78,7 @@ fn read_rays(path: &str) -> Vec<Ray> {
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     if args.len() < 4 {
-        eprintln!("usage: kernel_profile MESH RAYS closest|occluded RUNS [--no-stats]");
+        eprintln!("usage: kernel_profile MESH RAYS closest|occluded RUNS [--no-stats] [--fast]");
         std::process::exit(2);
     }
     let primitives = Arc::new(read_mesh(&args[0]));
@@ -83,9 +86,14 @@ fn main() {
     let closest = args[2] == "closest";
     let runs: usize = args[3].parse().expect("a number of passes");
     let no_stats = args.iter().any(|a| a == "--no-stats");
+    let triangle_test = match args.iter().any(|a| a == "--fast") {
+        true => TriangleTest::Fast,
+        false => TriangleTest::Watertight,
+    };
 
     let kind: AccelKind = "binned-sah".parse().expect("a builder");
-    let accel = Accel::build(kind, BvhWidth::Eight, &primitives, &BuildParams::default());
+    let accel = Accel::build(kind, BvhWidth::Eight, &primitives, &BuildParams::default())
+        .with_triangle_test(triangle_test);
     let mut answered = 0;
     let mut best = f64::MAX;
     for _ in 0..runs.max(1) {

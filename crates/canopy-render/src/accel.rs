@@ -8,7 +8,7 @@ use crate::scene::{Primitive, Scene};
 use canopy_bvh::{
     split_box, split_triangle, Aabb, Blas, BlasParams, BuildParams, Builder, BvhWidth, Clipper,
     Forward, Geometry, Hit, Instance, OptimizeBudget, PrimHit, Ray, RayBatch, RayQuery, Tlas,
-    TraversalCounter, Tree, TriangleMesh,
+    TraversalCounter, Tree, TriangleMesh, TriangleTest,
 };
 use glam::{Affine3A, Vec3};
 use std::fmt;
@@ -117,6 +117,11 @@ macro_rules! each_blas {
 impl SceneBlas {
     pub fn tree(&self) -> Option<&Tree> {
         each_blas!(self, b => b.tree())
+    }
+
+    /// See [`Blas::set_triangle_test`].
+    pub fn set_triangle_test(&mut self, test: TriangleTest) {
+        each_blas!(self, b => b.set_triangle_test(test))
     }
 }
 
@@ -254,6 +259,7 @@ impl Accel {
             width,
             build: *params,
             optimize,
+            triangle_test: TriangleTest::Watertight,
         };
         let shapes = ShapeList(primitives.clone());
         let mut blases = vec![SceneBlas::Shapes(Blas::build(shapes, &blas_params))];
@@ -277,6 +283,21 @@ impl Accel {
         Self {
             world,
             build_time: start.elapsed(),
+        }
+    }
+
+    /// Tests every structure's triangles in mode `test` ([`TriangleTest`]; watertight
+    /// unless set). Images differ only where rays pass within rounding of an edge.
+    pub fn with_triangle_test(mut self, test: TriangleTest) -> Self {
+        self.world.edit_blases(|b| b.set_triangle_test(test));
+        self
+    }
+
+    /// The mode triangles are tested in.
+    pub fn triangle_test(&self) -> TriangleTest {
+        match &self.world.blases()[0] {
+            SceneBlas::Shapes(b) => b.triangle_test(),
+            SceneBlas::Mesh(b) => b.triangle_test(),
         }
     }
 

@@ -239,7 +239,7 @@ fn run_job(
         kind: AccelKind::Bvh(control.tree.builder),
         width: control.tree.width,
         params: control.tree.params(),
-        optimize: None,
+        ..Structure::default()
     };
     job.resume = resume;
     job.aovs = control.view.mode.aovs();

@@ -17,7 +17,7 @@ mod traverse;
 use crate::query::{Coherence, RayBatch};
 use crate::sphere::SphereRecord;
 use crate::traverse::TraversalCounter;
-use crate::triangle::{TrianglePack, NO_PRIM, PACK_LANES};
+use crate::triangle::{TrianglePack, TriangleTest, NO_PRIM, PACK_LANES};
 use crate::view::{Child, ChildKind, TreeView};
 use crate::{Aabb, Bvh2, BvhError, Hit, IntoHit, Isa, IsaError, Ray, SahCosts, TreeStats};
 use bytemuck::{Pod, Zeroable};
@@ -121,6 +121,8 @@ pub struct BvhN<const N: usize> {
     /// packs; see [`BvhN::store_spheres`]).
     spheres: Vec<SphereRecord>,
     isa: Isa,
+    /// The mode the packs' triangles are tested in.
+    triangle_test: TriangleTest,
     /// Taken from the binary tree (see [`Bvh2::has_spatial_splits`]).
     spatial_splits: bool,
 }
@@ -136,6 +138,7 @@ impl<const N: usize> Default for BvhN<N> {
             packs: Vec::new(),
             spheres: Vec::new(),
             isa: Isa::best(),
+            triangle_test: TriangleTest::Watertight,
             spatial_splits: false,
         }
     }
@@ -160,6 +163,17 @@ impl<const N: usize> BvhN<N> {
         }
         self.isa = isa;
         Ok(())
+    }
+
+    /// The mode the triangle packs are tested in (watertight unless set).
+    pub fn triangle_test(&self) -> TriangleTest {
+        self.triangle_test
+    }
+
+    /// Tests the triangle packs in mode `test`. Primitives outside packs are the
+    /// caller's closure's to test, in whatever mode it chooses.
+    pub fn set_triangle_test(&mut self, test: TriangleTest) {
+        self.triangle_test = test;
     }
 
     pub fn nodes(&self) -> &[WideNode<N>] {
@@ -380,7 +394,12 @@ impl<const N: usize> BvhN<N> {
             };
             walk_packet::<N, _, ANY>(&self.nodes, rays, &mut leaves)
         } else {
-            let mut leaves = PackedPacketLeaves::<T, _>::new(&self.packs, &self.spheres, test);
+            let mut leaves = PackedPacketLeaves::<T, _>::new(
+                &self.packs,
+                &self.spheres,
+                self.triangle_test,
+                test,
+            );
             walk_packet::<N, _, ANY>(&self.nodes, rays, &mut leaves)
         }
     }
@@ -709,6 +728,13 @@ macro_rules! with_leaves {
                 prims: &bvh.prim_indices,
                 test,
             };
+            $body
+        } else if bvh.triangle_test == TriangleTest::Fast {
+            let $leaves = PackedLeaves::<<$kernel as crate::triangle::PackKernel>::Fast, _>::new(
+                &bvh.packs,
+                &bvh.spheres,
+                test,
+            );
             $body
         } else {
             let $leaves = PackedLeaves::<$kernel, _>::new(&bvh.packs, &bvh.spheres, test);

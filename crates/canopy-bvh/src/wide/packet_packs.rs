@@ -12,12 +12,11 @@
 use super::packet::{lane_mask, Lanes, PACKET};
 use super::traverse::{lanes, leaf_packs, offer_lane, sphere_packet, PackedLeaves, PacketLeaves};
 use crate::sphere::SphereRecord;
-use crate::triangle::{PackKernel, ShearedRay, TrianglePack, PACK_LANES};
+use crate::triangle::{PackKernel, ShearedRay, TrianglePack, TriangleTest, PACK_LANES};
 use crate::{Hit, IntoHit, PrimHit, Ray};
 use std::marker::PhantomData;
 
-/// A packet's rays prepared for watertight triangle tests, all sheared along the same
-/// axes.
+/// A packet's rays prepared for triangle tests, all sheared along the same axes.
 pub(crate) struct PacketShear {
     /// The axes (kx, ky, kz) every lane is sheared along.
     k: [usize; 3],
@@ -25,17 +24,19 @@ pub(crate) struct PacketShear {
     o: [[f32; PACKET]; 3],
     /// Each lane's shear ([`ShearedRay::shear`]), x, y and z.
     shear: [[f32; PACKET]; 3],
+    test: TriangleTest,
 }
 
 impl PacketShear {
     /// The shears of the traceable rays among `rays`; `None` where they are not all
     /// sheared along the same axes. Other lanes hold zeros and are never tested.
-    fn new(rays: &[Ray]) -> Option<Self> {
+    fn new(rays: &[Ray], test: TriangleTest) -> Option<Self> {
         let mut axes = None;
         let mut packet = Self {
             k: [0, 1, 2],
             o: [[0.0; PACKET]; 3],
             shear: [[0.0; PACKET]; 3],
+            test,
         };
         for (lane, ray) in rays.iter().enumerate().filter(|(_, r)| r.is_traceable()) {
             let s = ShearedRay::new(ray);
@@ -89,9 +90,10 @@ impl PacketShear {
             let v = a[0] * c[1] - a[1] * c[0];
             let w = b[0] * a[1] - b[1] * a[0];
             (edges[0][lane], edges[1][lane], edges[2][lane]) = (u, v, w);
-            zero[lane] = u == 0.0 || v == 0.0 || w == 0.0;
+            zero[lane] = self.test.refines_zeros() && (u == 0.0 || v == 0.0 || w == 0.0);
         }
-        // Edge functions exactly zero in single precision, again in double (rare).
+        // Edge functions exactly zero in single precision, again in double (rare; never
+        // in the fast mode).
         for lane in lanes(lane_mask(&zero) & active) {
             let [a, b, c] = sheared(lane);
             let d =
@@ -134,6 +136,7 @@ pub(crate) struct PackedPacketLeaves<'a, T, F> {
     pub packs: &'a [TrianglePack],
     /// Empty, or the sphere at each lane of `packs` (four a pack).
     pub spheres: &'a [SphereRecord],
+    pub triangle_test: TriangleTest,
     pub test: F,
     /// The packet's shears, made at its first leaf: `Some(None)` where they differ.
     shear: Option<Option<PacketShear>>,
@@ -141,10 +144,16 @@ pub(crate) struct PackedPacketLeaves<'a, T, F> {
 }
 
 impl<'a, T, F> PackedPacketLeaves<'a, T, F> {
-    pub fn new(packs: &'a [TrianglePack], spheres: &'a [SphereRecord], test: F) -> Self {
+    pub fn new(
+        packs: &'a [TrianglePack],
+        spheres: &'a [SphereRecord],
+        triangle_test: TriangleTest,
+        test: F,
+    ) -> Self {
         Self {
             packs,
             spheres,
+            triangle_test,
             test,
             shear: None,
             kernel: PhantomData,
@@ -169,11 +178,20 @@ where
     ) {
         let Some(shear) = self
             .shear
-            .get_or_insert_with(|| PacketShear::new(group.rays))
+            .get_or_insert_with(|| PacketShear::new(group.rays, self.triangle_test))
         else {
             // Rays sheared differently: the single-ray pack test, one lane at a time.
-            let mut single = PackedLeaves::<T, _>::new(self.packs, self.spheres, &mut self.test);
-            group.each(&mut single, first, count, t_max, best);
+            let (packs, spheres, test) = (self.packs, self.spheres, &mut self.test);
+            match self.triangle_test {
+                TriangleTest::Watertight => {
+                    let mut single = PackedLeaves::<T, _>::new(packs, spheres, test);
+                    group.each(&mut single, first, count, t_max, best);
+                }
+                TriangleTest::Fast => {
+                    let mut single = PackedLeaves::<T::Fast, _>::new(packs, spheres, test);
+                    group.each(&mut single, first, count, t_max, best);
+                }
+            }
             return;
         };
         let first_pack = first as usize / PACK_LANES;

@@ -9,8 +9,8 @@ use common::uniform;
 use canopy_bvh::{
     build, build_with_clipper, intersect_triangle, split_box, split_triangle, Aabb, Blas,
     BlasParams, BuildParams, Builder, Bvh2, Bvh4, Bvh8, BvhN, BvhWidth, Coherence, Geometry,
-    GpuBvh, Hit, Isa, PrimHit, Ray, RayBatch, RayQuery, ShearedRay, Tree, TreeView, ALL_MASKS,
-    PACKET, PREFETCH_ABOVE_BYTES,
+    GpuBvh, Hit, Isa, PrimHit, Ray, RayBatch, RayQuery, ShearedRay, Tree, TreeView, TriangleTest,
+    ALL_MASKS, PACKET, PREFETCH_ABOVE_BYTES,
 };
 use glam::Vec3;
 use proptest::prelude::*;
@@ -37,8 +37,13 @@ impl Prim {
     }
 
     fn hit(&self, ray: &Ray) -> Option<PrimHit> {
+        self.hit_in(ray, TriangleTest::Watertight)
+    }
+
+    /// The hit with triangles tested in mode `test`.
+    fn hit_in(&self, ray: &Ray, test: TriangleTest) -> Option<PrimHit> {
         match self {
-            Prim::Triangle(v) => intersect_triangle(v, ray, &ShearedRay::new(ray)),
+            Prim::Triangle(v) => intersect_triangle(v, ray, &ShearedRay::with_test(ray, test)),
             Prim::Box(b) => b.ray_entry(ray).map(PrimHit::from),
         }
     }
@@ -60,15 +65,20 @@ impl Geometry for Prims {
     fn has_triangles(&self) -> bool {
         self.0.iter().any(|p| p.triangle().is_some())
     }
-    fn intersect(&self, prim: u32, ray: &Ray, _: &ShearedRay) -> Option<PrimHit> {
-        self.0[prim as usize].hit(ray)
+    fn intersect(&self, prim: u32, ray: &Ray, sheared: &ShearedRay) -> Option<PrimHit> {
+        self.0[prim as usize].hit_in(ray, sheared.test)
     }
 }
 
 fn brute_force(prims: &[Prim], ray: &Ray) -> Option<Hit> {
+    brute_force_in(prims, ray, TriangleTest::Watertight)
+}
+
+/// The closest hit by a loop over every primitive, triangles tested in mode `test`.
+fn brute_force_in(prims: &[Prim], ray: &Ray, test: TriangleTest) -> Option<Hit> {
     let mut best: Option<Hit> = None;
     for (i, p) in prims.iter().enumerate() {
-        if let Some(h) = p.hit(ray) {
+        if let Some(h) = p.hit_in(ray, test) {
             let hit = Hit::new(i as u32, h);
             if best.is_none_or(|b| hit.is_before(&b)) {
                 best = Some(hit);
@@ -103,11 +113,17 @@ fn bits(hit: Option<Hit>) -> Option<(u32, u32, u32, u32)> {
     hit.map(|h| (h.prim, h.t.to_bits(), h.u.to_bits(), h.v.to_bits()))
 }
 
-fn check_tree<const N: usize>(name: &str, mut wide: BvhN<N>, prims: &[Prim], rays: &[Ray])
-where
+fn check_tree<const N: usize>(
+    name: &str,
+    mut wide: BvhN<N>,
+    prims: &[Prim],
+    rays: &[Ray],
+    mode: TriangleTest,
+) where
     BvhN<N>: Queries,
 {
     wide.pack_triangles(|p| prims[p as usize].triangle());
+    wide.set_triangle_test(mode);
     let boxes: Vec<Aabb> = prims.iter().map(Prim::bounds).collect();
     wide.validate(&boxes)
         .unwrap_or_else(|e| panic!("{name}: {e}"));
@@ -118,7 +134,7 @@ where
         let packets = wide.closest_coherent(prims, rays);
         let blocked = wide.any_coherent(prims, rays);
         for ((ray, packet), blocked) in rays.iter().zip(packets).zip(blocked) {
-            let expected = brute_force(prims, ray);
+            let expected = brute_force_in(prims, ray, mode);
             assert_eq!(
                 blocked,
                 expected.is_some(),
@@ -185,6 +201,7 @@ macro_rules! queries {
 }
 queries!(Bvh4, Bvh8);
 
+/// Every builder's tree, 4 and 8 wide, against brute force, in both triangle modes.
 fn check(prims: &[Prim], rays: &[Ray], params: &BuildParams) {
     let boxes: Vec<Aabb> = prims.iter().map(Prim::bounds).collect();
     // Spatial splits clip triangles (and cut boxes as boxes).
@@ -196,8 +213,11 @@ fn check(prims: &[Prim], rays: &[Ray], params: &BuildParams) {
         let bvh = build_with_clipper(builder, &boxes, params, &clip);
         bvh.validate(&boxes)
             .unwrap_or_else(|e| panic!("{builder}: {e}"));
-        check_tree(&format!("{builder} x4"), Bvh4::from_bvh2(&bvh), prims, rays);
-        check_tree(&format!("{builder} x8"), Bvh8::from_bvh2(&bvh), prims, rays);
+        for mode in [TriangleTest::Watertight, TriangleTest::Fast] {
+            let (four, eight) = (Bvh4::from_bvh2(&bvh), Bvh8::from_bvh2(&bvh));
+            check_tree(&format!("{builder} x4 {mode:?}"), four, prims, rays, mode);
+            check_tree(&format!("{builder} x8 {mode:?}"), eight, prims, rays, mode);
+        }
     }
 }
 
@@ -486,12 +506,14 @@ fn large_builds_validate_and_match_brute_force() {
         let mut packed = Bvh8::from_bvh2(&bvh);
         packed.pack_triangles(|p| prims[p as usize].triangle());
         assert!(TreeView::memory_bytes(&packed) > 2 * PREFETCH_ABOVE_BYTES);
-        check_tree(
-            &format!("{builder} x8"),
-            Bvh8::from_bvh2(&bvh),
-            &prims,
-            &rays,
-        );
+        let modes = match builder {
+            Builder::BinnedSah => &[TriangleTest::Watertight, TriangleTest::Fast][..],
+            _ => &[TriangleTest::Watertight],
+        };
+        for &mode in modes {
+            let name = format!("{builder} x8 {mode:?}");
+            check_tree(&name, Bvh8::from_bvh2(&bvh), &prims, &rays, mode);
+        }
     }
 }
 
@@ -861,6 +883,51 @@ fn mostly_triangles_are_built_for_packs() {
                 expected[i].is_some(),
                 "{context}: ray {i}"
             );
+        }
+    }
+}
+
+/// Every structure a [`Blas`] can be (brute force, every builder at every width) answers
+/// in the fast triangle mode as a loop over the primitives in that mode does: the packs'
+/// kernels and the caller's closures (binary trees, brute force) test alike. The rays
+/// aim at edge midpoints, where the modes differ, and some of them must.
+#[test]
+fn every_structure_answers_in_the_fast_mode_as_brute_force_does() {
+    let mut next = uniform(23);
+    let mut coordinate = move || 8.0 * next() - 4.0;
+    let mut point = move || Vec3::new(coordinate(), coordinate(), coordinate());
+    let mut prims: Vec<Prim> = (0..300)
+        .map(|_| {
+            let a = point();
+            Prim::Triangle([a, a + 0.3 * point(), a + 0.3 * point()])
+        })
+        .collect();
+    prims.push(Prim::Box(Aabb::new(Vec3::ZERO, Vec3::ONE)));
+    let origins: Vec<Vec3> = (0..900).map(|_| 3.0 * point()).collect();
+    let rays = rays_at_features(&prims, &origins);
+    let fast = |ray: &Ray| brute_force_in(&prims, ray, TriangleTest::Fast);
+    let differ = rays
+        .iter()
+        .filter(|r| bits(fast(r)) != bits(brute_force(&prims, r)))
+        .count();
+    assert!(differ > 0, "no ray tells the modes apart");
+    let mut structures = vec![BlasParams::new(None, BvhWidth::Two)];
+    for &builder in Builder::ALL {
+        structures.extend(BvhWidth::ALL.map(|width| BlasParams::new(Some(builder), width)));
+    }
+    for params in structures {
+        let params = BlasParams {
+            triangle_test: TriangleTest::Fast,
+            ..params
+        };
+        let name = format!("{:?} {:?}", params.builder, params.width);
+        let blas = Blas::build(Prims(prims.clone()), &params);
+        let mut hits = vec![None; rays.len()];
+        blas.intersect_each(rays.len(), ALL_MASKS, |i| rays[i], |i, h| hits[i] = h);
+        for (ray, hit) in rays.iter().zip(hits) {
+            let expected = fast(ray);
+            assert_eq!(bits(hit), bits(expected), "{name} {ray:?}");
+            assert_eq!(blas.occluded(ray), expected.is_some(), "{name} {ray:?}");
         }
     }
 }

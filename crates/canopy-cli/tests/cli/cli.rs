@@ -520,6 +520,40 @@ fn wide_render_matches_binary_render() {
     std::fs::remove_dir_all(dir).unwrap();
 }
 
+/// `--fast-triangles` changes only rays within rounding of an edge: a mesh renders to
+/// the same image but for a few pixels, each by little.
+#[test]
+fn fast_triangles_render_the_mesh_as_the_watertight_test_does() {
+    let dir = scratch("fast-triangles");
+    let bunny = bunny();
+    let args = |out: &'static str| {
+        vec![
+            "render",
+            bunny.as_str(),
+            "-o",
+            out,
+            "--size",
+            "32x32",
+            "--spp",
+            "4",
+            "--threads",
+            "2",
+        ]
+    };
+    let run = canopy(&args("watertight.png"), &dir);
+    assert!(run.status.success(), "{}", stderr(&run));
+    let mut fast = args("fast.png");
+    fast.push("--fast-triangles");
+    let run = canopy(&fast, &dir);
+    assert!(run.status.success(), "{}", stderr(&run));
+    let a = image::open(dir.join("watertight.png")).unwrap().to_rgb8();
+    let b = image::open(dir.join("fast.png")).unwrap().to_rgb8();
+    let differing = a.pixels().zip(b.pixels()).filter(|(p, q)| p != q).count();
+    assert!(differing <= 32, "{differing} of 1024 pixels differ");
+    assert!(a.pixels().any(|p| p.0 != [0, 0, 0]), "the bunny is in view");
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
 #[test]
 fn heatmap_and_bvh_overlay_write_images() {
     let dir = scratch("pictures");

@@ -131,9 +131,11 @@ def _ray_batch(origins, directions, tnear, tfar):
 
 
 def _options(builder, width, max_leaf_size, sah_traversal, sah_intersection, ploc_radius, max_duplication,
-             optimize, threads):
+             optimize, threads, triangles):
     if not isinstance(builder, str):
         raise TypeError(f"builder must be a name (see canopy_rt.builders()), not {builder!r}")
+    if triangles not in ("watertight", "fast"):
+        raise ValueError(f"triangles must be 'watertight' or 'fast', not {triangles!r}")
     return dict(
         builder=builder,
         width=int(width),
@@ -144,6 +146,7 @@ def _options(builder, width, max_leaf_size, sah_traversal, sah_intersection, plo
         max_duplication=max_duplication,
         optimize=None if optimize is None else float(optimize),
         threads=threads,
+        triangles=triangles,
     )
 
 
@@ -164,6 +167,11 @@ class Bvh:
     ``max_duplication``, the fraction of extra references ``sbvh`` may make); ``optimize=s``
     improves the tree by reinsertion for ``s`` seconds before it is laid out.
 
+    ``triangles="fast"`` tests triangles without the watertight test's double-precision
+    step for rays that pass within rounding of an edge (Embree's default mode makes the
+    same trade): fewer instructions per ray, and such a ray may hit every triangle at
+    the edge, not only the one the exact signs give. ``"watertight"`` is the default.
+
     A ``Bvh`` pickles (for ``multiprocessing``, Ray's object store): the pickle holds
     its primitives and options, and loading builds the tree again.
     """
@@ -182,12 +190,13 @@ class Bvh:
         max_duplication: Optional[float] = None,
         optimize: Optional[float] = None,
         threads: Optional[int] = None,
+        triangles: str = "watertight",
     ):
         vertices = _array(vertices, "vertices", np.float32, 2, "(V, 3)")
         faces = _array(faces, "faces", np.int64, 2, "(F, 3)")
         options = _options(
             builder, width, max_leaf_size, sah_traversal, sah_intersection, ploc_radius, max_duplication,
-            optimize, threads,
+            optimize, threads, triangles,
         )
         self._native = _canopy.Bvh(vertices, faces, **options)
         self._options = options
@@ -213,7 +222,7 @@ class Bvh:
         self = cls.__new__(cls)
         options = _options(
             builder, width, max_leaf_size, sah_traversal, sah_intersection, ploc_radius, max_duplication,
-            optimize, threads,
+            optimize, threads, "watertight",
         )
         self._native = _canopy.Bvh.from_boxes(boxes, **options)
         self._options = options

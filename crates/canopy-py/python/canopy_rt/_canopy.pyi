@@ -124,6 +124,7 @@ class Bvh:
         max_duplication: Optional[float] = ...,
         optimize: Optional[float] = ...,
         threads: Optional[int] = ...,
+        triangles: str = ...,
     ) -> None: ...
     @staticmethod
     def from_boxes(
@@ -137,6 +138,7 @@ class Bvh:
         max_duplication: Optional[float] = ...,
         optimize: Optional[float] = ...,
         threads: Optional[int] = ...,
+        triangles: str = ...,
     ) -> Bvh: ...
     @property
     def primitive_count(self) -> int: ...
