@@ -16,21 +16,38 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use rayon::prelude::*;
+use std::sync::{PoisonError, RwLock, RwLockReadGuard};
 use std::time::Instant;
 
 /// Rays per parallel task: enough to amortise scheduling, few enough to balance.
 const CHUNK: usize = 1024;
 
-/// A BVH over triangles (a mesh) or boxes, built once, queried with batches of rays.
+/// A BVH over triangles (a mesh) or boxes, built once, queried with batches of rays; a
+/// mesh's vertices may move ([`Bvh::set_vertices`]: the tree is refitted).
+///
+/// The structure sits behind a lock that queries share and a refit takes alone. Both
+/// take it only with the GIL released, so that a thread waiting for the lock never holds
+/// the GIL that the thread holding it needs.
 #[pyclass(frozen, module = "canopy_rt._canopy")]
 pub struct Bvh {
-    accel: Accel,
+    shared: RwLock<Shared>,
+    /// The mesh's triangles as indices into [`Shared::vertices`] (`None`: boxes).
+    faces: Option<Vec<[u32; 3]>>,
     /// A builder, or `none` (brute force: the plain loop every tree is checked against).
     kind: AccelKind,
     width: BvhWidth,
     params: BuildParams,
     build_ms: f64,
 }
+
+/// What a refit changes: the structure, and the mesh's vertices (empty for boxes).
+struct Shared {
+    accel: Accel,
+    vertices: Vec<[f32; 3]>,
+}
+
+/// A mesh as a `Bvh` is given it: vertices, and faces as indices into them.
+type MeshParts = (Vec<[f32; 3]>, Vec<[u32; 3]>);
 
 /// The build options every constructor takes.
 struct Options {
@@ -104,7 +121,13 @@ fn options(
 }
 
 impl Bvh {
-    fn build(py: Python<'_>, primitives: Vec<Primitive>, o: Options) -> PyResult<Self> {
+    /// The structure over `primitives`, made from `mesh` (vertices and faces) or boxes.
+    fn build(
+        py: Python<'_>,
+        primitives: Vec<Primitive>,
+        mesh: Option<MeshParts>,
+        o: Options,
+    ) -> PyResult<Self> {
         if primitives.is_empty() {
             return Err(PyValueError::new_err(
                 "a BVH needs at least one primitive (the input is empty)",
@@ -119,8 +142,13 @@ impl Bvh {
                     Accel::build_optimized(kind, width, &primitives.into(), &params, optimize)
                         .with_triangle_test(triangle_test);
                 let build_ms = start.elapsed().as_secs_f64() * 1e3;
+                let (vertices, faces) = match mesh {
+                    Some((vertices, faces)) => (vertices, Some(faces)),
+                    None => (Vec::new(), None),
+                };
                 Bvh {
-                    accel,
+                    shared: RwLock::new(Shared { accel, vertices }),
+                    faces,
                     kind,
                     width,
                     params,
@@ -134,9 +162,15 @@ impl Bvh {
         self.kind.to_string()
     }
 
+    /// The structure and vertices, shared with other queries. Called with the GIL held,
+    /// it may wait for a refit, which never waits for the GIL (see [`Bvh`]).
+    fn read(&self) -> RwLockReadGuard<'_, Shared> {
+        self.shared.read().unwrap_or_else(PoisonError::into_inner)
+    }
+
     /// The order to trace `batch` in, if not the caller's ([`Accel::orders_batches`]).
-    fn batch_order(&self, batch: &Batch<'_>) -> Option<RayOrder> {
-        self.accel
+    fn batch_order(accel: &Accel, batch: &Batch<'_>) -> Option<RayOrder> {
+        accel
             .orders_batches()
             .then(|| RayOrder::by_origin(batch.len(), |i| Vec3::from(batch.origins[i])))
             .flatten()
@@ -287,19 +321,19 @@ impl Bvh {
             triangles,
         )?;
         let v = arrays::points("vertices", &vertices)?;
-        let f = arrays::faces(&faces, v.len())?;
+        // In range: `arrays::faces` checked every index against the vertex count.
+        let f: Vec<[u32; 3]> = arrays::faces(&faces, v.len())?
+            .iter()
+            .map(|face| face.map(|i| i as u32))
+            .collect();
         let primitives = f
             .iter()
-            .map(|&[a, b, c]| Primitive {
-                shape: Shape::Triangle(Triangle::new(
-                    Vec3::from(v[a as usize]),
-                    Vec3::from(v[b as usize]),
-                    Vec3::from(v[c as usize]),
-                )),
+            .map(|&face| Primitive {
+                shape: Shape::Triangle(triangle(v, face)),
                 material: 0,
             })
             .collect();
-        Self::build(py, primitives, o)
+        Self::build(py, primitives, Some((v.to_vec(), f)), o)
     }
 
     /// See `canopy.Bvh.from_boxes` in the Python package.
@@ -344,16 +378,84 @@ impl Bvh {
                 material: 0,
             })
             .collect();
-        Self::build(py, primitives, o)
+        Self::build(py, primitives, None, o)
     }
 
-    /// The primitives, for pickling: ("triangles", (F, 3, 3) vertices of each) or
-    /// ("boxes", (N, 2, 3) min and max corners), exactly as built.
+    /// Moves the mesh's vertices to `vertices` (as many as it has; the triangles stay)
+    /// and refits the tree: every box recomputed, the topology kept. Refused for boxes,
+    /// for another vertex count, and for a tree with spatial splits (`sbvh`), which
+    /// cannot be refitted; refused, the structure is unchanged.
+    #[pyo3(signature = (vertices, threads=None))]
+    fn set_vertices(
+        &self,
+        py: Python<'_>,
+        vertices: PyReadonlyArray2<'_, f32>,
+        threads: Option<usize>,
+    ) -> PyResult<()> {
+        let Some(faces) = &self.faces else {
+            return Err(PyValueError::new_err(
+                "set_vertices: this Bvh is over boxes, which have no vertices",
+            ));
+        };
+        let v = arrays::points("vertices", &vertices)?;
+        let count = self.read().vertices.len();
+        if v.len() != count {
+            return Err(PyValueError::new_err(format!(
+                "set_vertices: the mesh has {count} vertices, not {}; a mesh with other \
+                 vertices or triangles is a new Bvh",
+                v.len()
+            )));
+        }
+        let refit = py.detach(|| {
+            pools::install(threads, || {
+                let mut shared = self.shared.write().unwrap_or_else(PoisonError::into_inner);
+                shared.accel.update_primitives(|primitives| {
+                    primitives
+                        .par_iter_mut()
+                        .zip(faces.par_iter())
+                        .for_each(|(p, &face)| p.shape = Shape::Triangle(triangle(v, face)));
+                })?;
+                shared.vertices = v.to_vec();
+                Ok(())
+            })
+        })?;
+        refit.map_err(|e: canopy_bvh::RefitError| {
+            PyValueError::new_err(format!(
+                "set_vertices: this tree was built by {} with spatial splits, which cannot \
+                 be refitted ({e}); build a new Bvh over the moved mesh",
+                self.name()
+            ))
+        })
+    }
+
+    /// The mesh as it is now, for pickling: (V, 3) vertices and (F, 3) faces; `None` for
+    /// boxes.
+    #[allow(clippy::type_complexity)]
+    fn mesh<'py>(
+        &self,
+        py: Python<'py>,
+    ) -> PyResult<Option<(Bound<'py, PyArray2<f32>>, Bound<'py, PyArray2<i64>>)>> {
+        let Some(faces) = &self.faces else {
+            return Ok(None);
+        };
+        let vertices: Vec<f32> = self.read().vertices.iter().flatten().copied().collect();
+        let rows = vertices.len() / 3;
+        let indices: Vec<i64> = faces.iter().flatten().map(|&i| i as i64).collect();
+        Ok(Some((
+            PyArray1::from_vec(py, vertices).reshape([rows, 3])?,
+            PyArray1::from_vec(py, indices).reshape([faces.len(), 3])?,
+        )))
+    }
+
+    /// The primitives: ("triangles", (F, 3, 3) vertices of each) or ("boxes", (N, 2, 3)
+    /// min and max corners), as the structure holds them.
     fn primitives<'py>(
         &self,
         py: Python<'py>,
     ) -> PyResult<(&'static str, Bound<'py, PyArray3<f32>>)> {
-        let primitives = self.accel.primitives();
+        let shared = self.read();
+        let accel = &shared.accel;
+        let primitives = accel.primitives();
         let (kind, corners) = match primitives.first().map(|p| &p.shape) {
             Some(Shape::Cuboid(_)) => ("boxes", 2),
             _ => ("triangles", 3),
@@ -376,7 +478,7 @@ impl Bvh {
 
     #[getter]
     fn primitive_count(&self) -> usize {
-        self.accel.primitives().len()
+        self.read().accel.primitives().len()
     }
 
     #[getter]
@@ -391,15 +493,17 @@ impl Bvh {
 
     fn stats<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let d = PyDict::new(py);
+        let shared = self.read();
+        let accel = &shared.accel;
         d.set_item("builder", self.name())?;
-        d.set_item("primitives", self.accel.primitives().len())?;
+        d.set_item("primitives", accel.primitives().len())?;
         d.set_item("build_ms", self.build_ms)?;
-        let triangles = match self.accel.triangle_test() {
+        let triangles = match accel.triangle_test() {
             TriangleTest::Watertight => "watertight",
             TriangleTest::Fast => "fast",
         };
         d.set_item("triangles", triangles)?;
-        let Some(tree) = self.accel.tree() else {
+        let Some(tree) = accel.tree() else {
             return Ok(d);
         };
         let s = tree.stats(&self.params.sah);
@@ -424,12 +528,14 @@ impl Bvh {
     /// EPO (effective parallel overlap) of the tree, with the scene's area normalised to
     /// 1; 0 for brute force.
     fn epo(&self, py: Python<'_>) -> f32 {
-        let Some(tree) = self.accel.tree() else {
-            return 0.0;
-        };
         py.detach(|| {
+            let shared = self.read();
+            let accel = &shared.accel;
+            let Some(tree) = accel.tree() else {
+                return 0.0;
+            };
             canopy_bvh::epo(tree.view(), &self.params.sah, |prim, region| {
-                self.accel.primitives()[prim as usize]
+                shared.accel.primitives()[prim as usize]
                     .shape
                     .area_in_box(region)
                     .unwrap_or(0.0)
@@ -438,11 +544,12 @@ impl Bvh {
     }
 
     fn validate(&self) -> PyResult<()> {
-        match self.accel.tree() {
+        let shared = self.read();
+        let accel = &shared.accel;
+        match accel.tree() {
             Some(tree) => tree
                 .validate(
-                    &self
-                        .accel
+                    &accel
                         .primitives()
                         .iter()
                         .map(|p| p.shape.bounds())
@@ -495,9 +602,11 @@ impl Bvh {
         };
         py.detach(|| {
             pools::install(threads, || {
+                let shared = self.read();
+                let accel = &shared.accel;
                 // Scattered rays (from surfaces, in any order) are traced by where they
                 // start; coherent ones in their own order, in packets.
-                let Some(order) = self.batch_order(&batch).filter(|_| !coherent) else {
+                let Some(order) = Self::batch_order(accel, &batch).filter(|_| !coherent) else {
                     return t
                         .par_chunks_mut(CHUNK)
                         .zip(prim.par_chunks_mut(CHUNK))
@@ -509,7 +618,7 @@ impl Bvh {
                                 |i: usize, hit: Option<Hit>| write_hit(t, prim, uv, i, hit);
                             let rays = |i: usize| batch.ray(first + i);
                             let batch = RayBatch::new(count).with(Coherence::hint(coherent));
-                            self.accel.closest_hits(batch, rays, answer, &mut ())
+                            accel.closest_hits(batch, rays, answer, &mut ())
                         });
                 };
                 let traced = order.trace(
@@ -517,8 +626,7 @@ impl Bvh {
                     |i| batch.ray(i),
                     |rays, out| {
                         let answer = |i: usize, hit: Option<Hit>| out[i] = hit;
-                        self.accel
-                            .intersect_each(rays.len(), ALL_MASKS, |i| rays[i], answer)
+                        accel.intersect_each(rays.len(), ALL_MASKS, |i| rays[i], answer)
                     },
                 );
                 let ranks = order.ranks();
@@ -558,7 +666,9 @@ impl Bvh {
         let blocked = unsafe { out.as_slice_mut().expect("contiguous") };
         py.detach(|| {
             pools::install(threads, || {
-                let Some(order) = self.batch_order(&batch).filter(|_| !coherent) else {
+                let shared = self.read();
+                let accel = &shared.accel;
+                let Some(order) = Self::batch_order(accel, &batch).filter(|_| !coherent) else {
                     return blocked
                         .par_chunks_mut(CHUNK)
                         .enumerate()
@@ -567,7 +677,7 @@ impl Bvh {
                             let rays = |i: usize| batch.ray(chunk * CHUNK + i);
                             let answer = |i: usize, blocked: bool| out[i] = blocked;
                             let batch = RayBatch::new(count).with(Coherence::hint(coherent));
-                            self.accel.any_hits(batch, rays, answer)
+                            accel.any_hits(batch, rays, answer)
                         });
                 };
                 let traced = order.trace(
@@ -575,8 +685,7 @@ impl Bvh {
                     |i| batch.ray(i),
                     |rays, out| {
                         let answer = |i: usize, blocked: bool| out[i] = blocked;
-                        self.accel
-                            .occluded_each(rays.len(), ALL_MASKS, |i| rays[i], answer)
+                        accel.occluded_each(rays.len(), ALL_MASKS, |i| rays[i], answer)
                     },
                 );
                 order.unsort_into(&traced, blocked);
@@ -588,9 +697,15 @@ impl Bvh {
     fn __repr__(&self) -> String {
         format!(
             "Bvh({} primitives, builder={:?}, width={})",
-            self.accel.primitives().len(),
+            self.read().accel.primitives().len(),
             self.name(),
             self.width.children()
         )
     }
+}
+
+/// The triangle `face` of `vertices` (indices checked to be in range).
+fn triangle(vertices: &[[f32; 3]], [a, b, c]: [u32; 3]) -> Triangle {
+    let vertex = |i: u32| Vec3::from(vertices[i as usize]);
+    Triangle::new(vertex(a), vertex(b), vertex(c))
 }

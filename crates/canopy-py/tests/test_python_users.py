@@ -203,3 +203,70 @@ def test_occupancy_of_closed_and_open_meshes_follows_the_winding_number():
     open_scene = scene_of(holed)
     np.testing.assert_array_equal(open_scene.compute_occupancy(points)[clear], (radius < 0.99)[clear])
 
+
+
+@pytest.mark.parametrize("builder, width", [("binned-sah", 8), ("lbvh", 4), ("ploc", 2), ("none", 2)])
+def test_a_bvh_takes_moved_vertices_and_answers_as_a_new_build(builder, width):
+    sphere = trimesh.creation.icosphere(subdivisions=2)
+    bvh = canopy.Bvh(sphere.vertices, sphere.faces, builder=builder, width=width)
+    origins, directions = random_rays(600, 22)
+    before = bvh.intersect(origins, directions)
+    moved = (sphere.vertices * [1.5, 1.0, 0.7] + [0.2, 0.0, 0.0]).astype(np.float32)
+    bvh.set_vertices(moved)
+    bvh.validate()
+    fresh = canopy.Bvh(moved, sphere.faces, builder=builder, width=width)
+    for x, y in zip(bvh.intersect(origins, directions), fresh.intersect(origins, directions)):
+        np.testing.assert_array_equal(x, y)
+    np.testing.assert_array_equal(bvh.occluded(origins, directions), fresh.occluded(origins, directions))
+    assert not np.array_equal(before.t, bvh.intersect(origins, directions).t)
+    # A copy holds the moved mesh, and moves again as the original does.
+    copy = pickle.loads(pickle.dumps(bvh))
+    np.testing.assert_array_equal(copy.intersect(origins, directions).t, fresh.intersect(origins, directions).t)
+    copy.set_vertices(sphere.vertices)
+    np.testing.assert_array_equal(copy.intersect(origins, directions).t, before.t)
+    with pytest.raises(ValueError, match=r"has 162 vertices, not 3"):
+        bvh.set_vertices(moved[:3])
+    with pytest.raises(ValueError, match=r"vertices\[0\].*not finite"):
+        bvh.set_vertices(np.full_like(moved, np.nan))
+
+
+def test_a_bvh_that_cannot_be_refitted_refuses_moved_vertices_and_stays_as_it_was():
+    rng = np.random.default_rng(23)
+    a, b = rng.random((400, 3)), rng.random((400, 3))
+    slivers = np.stack([a, b, a + 0.01 * (b - a) + 0.02], axis=1).reshape(-1, 3).astype(np.float32)
+    faces = np.arange(1200).reshape(400, 3)
+    split = canopy.Bvh(slivers, faces, builder="sbvh")
+    assert split.stats()["references"] > 400, "sbvh split some slivers"
+    with pytest.raises(ValueError, match="sbvh with spatial splits"):
+        split.set_vertices(slivers + 1)
+    origins, directions = random_rays(400, 24)
+    reference = canopy.Bvh(slivers, faces, builder="none").intersect(origins, directions)
+    np.testing.assert_array_equal(split.intersect(origins, directions).t, reference.t)
+    boxes = canopy.Bvh.from_boxes(np.sort(rng.random((20, 2, 3)), axis=1))
+    with pytest.raises(ValueError, match="over boxes"):
+        boxes.set_vertices(slivers)
+
+
+def test_queries_and_refits_from_several_threads_wait_for_each_other():
+    # A refit takes the structure alone; queries share it. Ordered by events, not time:
+    # every answer is that of the mesh before or after a move, never a mixture.
+    sphere = trimesh.creation.icosphere(subdivisions=4)
+    bvh = canopy.Bvh(sphere.vertices, sphere.faces)
+    origins, directions = random_rays(20000, 25)
+    shapes = [sphere.vertices.astype(np.float32), (sphere.vertices * 1.3).astype(np.float32)]
+    expected = [canopy.Bvh(v, sphere.faces).intersect(origins, directions).t for v in shapes]
+    seen = []
+
+    def query():
+        for _ in range(6):
+            t = bvh.intersect(origins, directions).t
+            seen.append(any(np.array_equal(t, e) for e in expected))
+
+    def move():
+        for k in range(6):
+            bvh.set_vertices(shapes[(k + 1) % 2])
+
+    with concurrent.futures.ThreadPoolExecutor(3) as pool:
+        for f in [pool.submit(query), pool.submit(move), pool.submit(query)]:
+            f.result(timeout=300)
+    assert len(seen) == 12 and all(seen)

@@ -7,8 +7,8 @@ use crate::geometry::{Shape, ShearedRay};
 use crate::scene::{Primitive, Scene};
 use canopy_bvh::{
     split_box, split_triangle, Aabb, Blas, BlasParams, BuildParams, Builder, BvhWidth, Clipper,
-    Forward, Geometry, Hit, Instance, OptimizeBudget, PrimHit, Ray, RayBatch, RayQuery, Tlas,
-    TraversalCounter, Tree, TriangleMesh, TriangleTest,
+    Forward, Geometry, Hit, Instance, OptimizeBudget, PrimHit, Ray, RayBatch, RayQuery, RefitError,
+    Tlas, TraversalCounter, Tree, TriangleMesh, TriangleTest,
 };
 use glam::{Affine3A, Vec3};
 use std::fmt;
@@ -291,6 +291,29 @@ impl Accel {
     pub fn with_triangle_test(mut self, test: TriangleTest) -> Self {
         self.world.edit_blases(|b| b.set_triangle_test(test));
         self
+    }
+
+    /// Edits the scene's own primitives in place (moving them, say) and refits their
+    /// tree to them: the topology kept, every box recomputed, the triangle packs
+    /// rewritten; then the top tree is built again. Refused, before `edit` runs, for a
+    /// tree with spatial splits ([`Blas::update`]).
+    pub fn update_primitives(
+        &mut self,
+        edit: impl FnOnce(&mut [Primitive]),
+    ) -> Result<(), RefitError> {
+        let mut edit = Some(edit);
+        let mut updated = Ok(());
+        self.world.edit_blases(|blas| match blas {
+            // The scene's own primitives: the one `Shapes` structure.
+            SceneBlas::Shapes(blas) => {
+                if let Some(edit) = edit.take() {
+                    updated =
+                        blas.update(|shapes| edit(Arc::make_mut(&mut shapes.0).as_mut_slice()));
+                }
+            }
+            SceneBlas::Mesh(_) => {}
+        });
+        updated
     }
 
     /// The mode triangles are tested in.

@@ -229,13 +229,30 @@ class Bvh:
         return self
 
     def __reduce__(self):
-        # A pickle holds the primitives and the options; unpickling builds the tree again
-        # (with all cores), which gives the same answers: ties never depend on the tree.
-        # A serialised tree would load faster but make the pickle three times larger, and
-        # the unsafe traversal would have to trust its bytes (docs/performance.md).
-        kind, primitives = self._native.primitives()
+        # A pickle holds the mesh (or the boxes) and the options; unpickling builds the
+        # tree again (with all cores), which gives the same answers: ties never depend on
+        # the tree. A serialised tree would load faster but make the pickle three times
+        # larger, and the unsafe traversal would have to trust its bytes
+        # (docs/performance.md). The mesh keeps its vertices shared, so that the copy
+        # takes `set_vertices` as the original does.
         options = {k: v for k, v in self._options.items() if k != "threads"}
+        mesh = self._native.mesh()
+        if mesh is not None:
+            return _unpickle_bvh, ("mesh", mesh, options)
+        # Boxes take no triangle mode.
+        options.pop("triangles", None)
+        kind, primitives = self._native.primitives()
         return _unpickle_bvh, (kind, primitives, options)
+
+    def set_vertices(self, vertices, *, threads: Optional[int] = None) -> None:
+        """Moves the mesh's vertices to ``vertices`` ((V, 3), as many as it has; the faces
+        stay) and refits the tree: every box recomputed from the moved triangles, the
+        tree's shape kept (cheaper than a build; a tree refitted over a large motion traces
+        slower than a new one). Refused with ValueError for a ``Bvh`` over boxes, for
+        another vertex count, and for a tree with spatial splits (``sbvh``), whose leaves
+        hold parts of triangles; a refused call changes nothing."""
+        vertices = _array(vertices, "vertices", np.float32, 2, "(V, 3)")
+        self._native.set_vertices(vertices, threads)
 
     @property
     def primitive_count(self) -> int:
@@ -309,9 +326,12 @@ class Bvh:
         return repr(self._native)
 
 
-def _unpickle_bvh(kind: str, primitives: np.ndarray, options: dict) -> Bvh:
+def _unpickle_bvh(kind: str, primitives, options: dict) -> Bvh:
     if kind == "boxes":
         return Bvh.from_boxes(primitives, **options)
+    if kind == "mesh":
+        vertices, faces = primitives
+        return Bvh(vertices, faces, **options)
     # Each triangle's own three vertices: the same triangles, in the same order.
     faces = np.arange(3 * len(primitives), dtype=np.int64).reshape(-1, 3)
     return Bvh(primitives.reshape(-1, 3), faces, **options)

@@ -2,6 +2,7 @@
 //!
 //! One binary for all of them (one link instead of one per file); each file is a module.
 
+mod accel;
 mod aovs;
 mod gltf;
 mod instances;
