@@ -6,7 +6,9 @@ Run it with `bench/kernel_profile.sh`, which builds canopy's side
 (embreex ships Embree's library). For each mesh: primary rays of a pinhole camera and
 incoherent rays from the surface (the rays of `bench/embree_compare.py`, the incoherent ones
 in the order canopy's batch calls trace them, for both), closest hit and occlusion, and
-three kernels: canopy's default (watertight), Embree's default and Embree's robust mode.
+four kernels: canopy's default (watertight) and its fast triangle test, Embree's default
+and Embree's robust mode (the counterparts: canopy fast and Embree, canopy and Embree
+robust).
 
 Per ray it prints
 - ns: the best of `--runs` native passes on one thread, each library with the best kernels
@@ -139,20 +141,24 @@ def main():
                 ray_file = os.path.join(scratch, f"rays-{kind}.bin")
                 write_rays(ray_file, o, d)
                 for query in ("closest", "occluded"):
+                    canopy = [args.canopy, mesh_file, ray_file, query]
+                    # Each side: its command, what follows the pass count, the function counted.
                     sides = {
-                        "canopy": ([args.canopy, mesh_file, ray_file, query], "*profiled_*"),
-                        "Embree": ([embree, mesh_file, ray_file, query, "0"], "trace_range"),
-                        "Embree robust": ([embree, mesh_file, ray_file, query, "1"], "trace_range"),
+                        "canopy": (canopy, [], "*profiled_*"),
+                        "canopy fast": (canopy, ["--fast"], "*profiled_*"),
+                        "Embree": ([embree, mesh_file, ray_file, query, "0"], [], "trace_range"),
+                        "Embree robust": ([embree, mesh_file, ray_file, query, "1"], [], "trace_range"),
                     }
-                    for side, (command, function) in sides.items():
-                        line = subprocess.run(command + [str(args.runs)], check=True,
+                    for side, (command, flags, function) in sides.items():
+                        line = subprocess.run(command + [str(args.runs)] + flags, check=True,
                                               capture_output=True, text=True).stdout
                         native = parse_line(line)
                         cells = [f"{native['ns_per_ray']:.1f}"]
                         if args.no_valgrind:
                             cells += ["", "", "", ""]
                         else:
-                            quiet = command + ["1"] + (["--no-stats"] if side == "canopy" else [])
+                            quiet = command + ["1"] + flags
+                            quiet += ["--no-stats"] if side.startswith("canopy") else []
                             ev = callgrind(quiet, function, scratch)
                             n = len(o)
                             cells += [f"{ev['Ir'] / n:.0f}", f"{(ev['D1mr'] + ev['D1mw']) / n:.2f}",

@@ -25,9 +25,11 @@ const CHUNK: usize = 1024;
 /// A BVH over triangles (a mesh) or boxes, built once, queried with batches of rays; a
 /// mesh's vertices may move ([`Bvh::set_vertices`]: the tree is refitted).
 ///
-/// The structure sits behind a lock that queries share and a refit takes alone. Both
-/// take it only with the GIL released, so that a thread waiting for the lock never holds
-/// the GIL that the thread holding it needs.
+/// The structure sits behind a lock that queries share and a refit takes alone. Queries
+/// and refits take it with the GIL released, and a refit never waits for the GIL while
+/// it holds the lock; so the short reads that take it holding the GIL (statistics,
+/// pickling) wait at most for a refit to end, and no thread waits for a lock while
+/// holding the GIL that the lock's holder needs.
 #[pyclass(frozen, module = "canopy_rt._canopy")]
 pub struct Bvh {
     shared: RwLock<Shared>,

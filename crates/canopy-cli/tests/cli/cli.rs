@@ -551,6 +551,18 @@ fn fast_triangles_render_the_mesh_as_the_watertight_test_does() {
     let differing = a.pixels().zip(b.pixels()).filter(|(p, q)| p != q).count();
     assert!(differing <= 32, "{differing} of 1024 pixels differ");
     assert!(a.pixels().any(|p| p.0 != [0, 0, 0]), "the bunny is in view");
+    // The GPU's kernels have one mode: asking for the other there is refused before work.
+    let mut gpu = fast.clone();
+    gpu[3] = "gpu.png";
+    gpu.extend(["--device", "gpu"]);
+    let run = canopy(&gpu, &dir);
+    assert!(!run.status.success(), "{}", stderr(&run));
+    assert!(
+        stderr(&run).contains("drop --device gpu"),
+        "{}",
+        stderr(&run)
+    );
+    assert!(!dir.join("gpu.png").exists());
     std::fs::remove_dir_all(dir).unwrap();
 }
 
