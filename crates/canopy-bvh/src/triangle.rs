@@ -810,6 +810,16 @@ mod tests {
         [Vec3::ZERO, Vec3::X, Vec3::Y]
     }
 
+    /// A xorshift stream of numbers in [-0.5, 0.5] from `seed`.
+    fn centred(mut state: u32) -> impl FnMut() -> f32 {
+        move || {
+            state ^= state << 13;
+            state ^= state >> 17;
+            state ^= state << 5;
+            state as f32 / u32::MAX as f32 - 0.5
+        }
+    }
+
     fn hit(o: Vec3, d: Vec3, t_max: f32) -> Option<PrimHit> {
         let ray = Ray::new(o, d, 0.0, t_max);
         intersect_triangle(&tri(), &ray, &ShearedRay::new(&ray))
@@ -817,13 +827,7 @@ mod tests {
 
     #[test]
     fn a_crossing_is_signed_by_the_side_the_ray_leaves_through() {
-        let mut state = 7u32;
-        let mut next = move || {
-            state ^= state << 13;
-            state ^= state >> 17;
-            state ^= state << 5;
-            state as f32 / u32::MAX as f32 - 0.5
-        };
+        let mut next = centred(7);
         let mut seen = [0; 2];
         for _ in 0..2000 {
             let v = [0; 3].map(|_| Vec3::new(next(), next(), next()));
@@ -1030,13 +1034,7 @@ mod tests {
     /// come out negative in double precision (so the mode does change answers there).
     #[test]
     fn the_fast_test_hits_a_superset_of_the_watertight_one_at_edges() {
-        let mut state = 11u32;
-        let mut next = move || {
-            state ^= state << 13;
-            state ^= state >> 17;
-            state ^= state << 5;
-            state as f32 / u32::MAX as f32 - 0.5
-        };
+        let mut next = centred(11);
         let (mut differ, mut fast_only) = (0, 0);
         for _ in 0..20_000 {
             let v = [0; 3].map(|_| Vec3::new(next(), next(), next()) * 4.0);

@@ -123,6 +123,11 @@ impl SceneBlas {
     pub fn set_triangle_test(&mut self, test: TriangleTest) {
         each_blas!(self, b => b.set_triangle_test(test))
     }
+
+    /// See [`Blas::triangle_test`].
+    pub fn triangle_test(&self) -> TriangleTest {
+        each_blas!(self, b => b.triangle_test())
+    }
 }
 
 impl RayQuery for SceneBlas {
@@ -318,10 +323,7 @@ impl Accel {
 
     /// The mode triangles are tested in.
     pub fn triangle_test(&self) -> TriangleTest {
-        match &self.world.blases()[0] {
-            SceneBlas::Shapes(b) => b.triangle_test(),
-            SceneBlas::Mesh(b) => b.triangle_test(),
-        }
+        self.world.blases()[0].triangle_test()
     }
 
     /// The tree over the scene's own primitives, unless this is brute force.
