@@ -211,6 +211,35 @@ impl RayOrder {
         traced
     }
 
+    /// Answers of every query in this order, put back in the caller's order: `out[i] =
+    /// answer(query(i))`, in parallel over runs of `chunk` queries in this order. For
+    /// queries that are not rays traced as a batch ([`RayOrder::by_origin`] orders points
+    /// as well: nearest points, inside tests). Each run's queries are gathered first, as
+    /// in [`RayOrder::trace`].
+    ///
+    /// # Panics
+    /// If `out` does not hold one answer per query.
+    pub fn answer_into<Q: Send, T: Copy + Default + Send + Sync>(
+        &self,
+        chunk: usize,
+        query: impl Fn(usize) -> Q + Sync,
+        answer: impl Fn(Q) -> T + Sync,
+        out: &mut [T],
+    ) {
+        let mut traced = vec![T::default(); self.order.len()];
+        traced
+            .par_chunks_mut(chunk)
+            .zip(self.order.par_chunks(chunk))
+            .for_each_init(Vec::new, |queries, (out, indices)| {
+                queries.clear();
+                queries.extend(indices.iter().map(|&i| query(i as usize)));
+                for (o, q) in out.iter_mut().zip(queries.drain(..)) {
+                    *o = answer(q);
+                }
+            });
+        self.unsort_into(&traced, out);
+    }
+
     /// Puts answers traced in this order (`traced[k]` for ray `indices()[k]`) in the
     /// caller's order: `out[i]` answers ray `i`.
     ///
@@ -261,6 +290,15 @@ mod tests {
         let mut back = vec![0; origins.len()];
         order.unsort_into(&traced, &mut back);
         assert!(back.iter().copied().eq(0..origins.len() as u32));
+    }
+
+    #[test]
+    fn answers_made_one_by_one_in_this_order_come_back_in_the_callers_order() {
+        let origins = scattered(20_000);
+        let order = RayOrder::by_origin(origins.len(), |i| origins[i]).expect("reordered");
+        let mut out = vec![Vec3::ZERO; origins.len()];
+        order.answer_into(64, |i| origins[i], |p| p * 2.0, &mut out);
+        assert!(out.iter().zip(&origins).all(|(o, p)| *o == *p * 2.0));
     }
 
     #[test]

@@ -174,7 +174,7 @@ impl Bvh {
     fn batch_order(accel: &Accel, batch: &Batch<'_>) -> Option<RayOrder> {
         accel
             .orders_batches()
-            .then(|| RayOrder::by_origin(batch.len(), |i| Vec3::from(batch.origins[i])))
+            .then(|| RayOrder::by_origin(batch.len(), |i| batch.origin(i)))
             .flatten()
     }
 }
@@ -229,6 +229,11 @@ pub(crate) struct Batch<'a> {
 impl Batch<'_> {
     pub(crate) fn len(&self) -> usize {
         self.origins.len()
+    }
+
+    #[inline]
+    pub(crate) fn origin(&self, i: usize) -> Vec3 {
+        Vec3::from(self.origins[i])
     }
 
     #[inline]

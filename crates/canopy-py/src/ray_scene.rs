@@ -7,8 +7,8 @@ use crate::arrays;
 use crate::bvh::batch;
 use crate::pools;
 use canopy_bvh::{
-    Blas, BlasParams, Hit, HitsAlong, Instance, Nearest, Ray, RayQuery, SurfaceQuery, Tlas,
-    TriangleMesh,
+    Blas, BlasParams, Hit, HitsAlong, Instance, Nearest, Ray, RayOrder, RayQuery, SurfaceQuery,
+    Tlas, TriangleMesh,
 };
 use glam::Vec3;
 use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray2};
@@ -45,27 +45,34 @@ impl RayScene {
         Ok(tlas)
     }
 
-    /// `answer(tlas, i)` for rows `0..n`, in parallel with the GIL released, as a new
-    /// (n,) array.
-    fn per_row<'py, T: numpy::Element + Copy + Send>(
+    /// `answer(tlas, query(i))` for rows `0..n` (`query(i)` reads the caller's row `i`),
+    /// in parallel with the GIL released, as a new (n,) array. Rows are answered in the
+    /// order of `place(i)` (a ray's origin, a query point) where the scene is larger
+    /// than the cache ([`RayQuery::orders_batches`]): queries that start near each other
+    /// walk the same nodes while these are cached.
+    fn per_row<'py, Q: Send, T: numpy::Element + Copy + Default + Send + Sync>(
         &self,
         py: Python<'py>,
         n: usize,
         threads: Option<usize>,
-        answer: impl Fn(&Tlas<MeshBlas>, usize) -> T + Sync + Send,
+        place: impl Fn(usize) -> Vec3 + Sync + Send,
+        query: impl Fn(usize) -> Q + Sync + Send,
+        answer: impl Fn(&Tlas<MeshBlas>, Q) -> T + Sync,
     ) -> PyResult<Bound<'py, PyArray1<T>>> {
         let tlas = py.detach(|| self.tlas(threads))?;
         // SAFETY (both): the array is made here, and every element is written below
         // before it is returned; nothing else refers to it yet.
         let out = unsafe { PyArray1::<T>::new(py, n, false) };
         let values = unsafe { out.as_slice_mut().expect("contiguous") };
+        let answer = |q: Q| answer(&tlas, q);
         py.detach(|| {
-            pools::install(threads, || {
-                values
+            pools::install(threads, || match query_order(&tlas, n, place) {
+                Some(order) => order.answer_into(POINT_CHUNK, query, answer, values),
+                None => values
                     .par_iter_mut()
                     .with_min_len(POINT_CHUNK)
                     .enumerate()
-                    .for_each(|(i, v)| *v = answer(&tlas, i))
+                    .for_each(|(i, v)| *v = answer(query(i))),
             })
         })?;
         Ok(out)
@@ -103,6 +110,18 @@ fn hits_along(per_triangle: bool) -> HitsAlong {
         true => HitsAlong::Triangles,
         false => HitsAlong::Crossings,
     }
+}
+
+/// The order to answer `n` queries in, if not the caller's: by `place(i)`, where the
+/// scene is larger than the cache ([`RayOrder::by_origin`]).
+fn query_order(
+    tlas: &Tlas<MeshBlas>,
+    n: usize,
+    place: impl Fn(usize) -> Vec3 + Sync,
+) -> Option<RayOrder> {
+    tlas.orders_batches()
+        .then(|| RayOrder::by_origin(n, place))
+        .flatten()
 }
 
 /// Points per parallel task of the point queries.
@@ -533,11 +552,17 @@ impl RayScene {
         };
         py.detach(|| {
             pools::install(threads, || {
-                let nearest: Vec<Option<Nearest>> = queries
-                    .par_iter()
-                    .with_min_len(POINT_CHUNK)
-                    .map(|&q| tlas.closest_point(q.into(), max_distance))
-                    .collect();
+                let query = |i: usize| Vec3::from(queries[i]);
+                let nearest_to = |q: Vec3| tlas.closest_point(q, max_distance);
+                let mut nearest: Vec<Option<Nearest>> = vec![None; n];
+                match query_order(&tlas, n, query) {
+                    Some(order) => order.answer_into(POINT_CHUNK, query, nearest_to, &mut nearest),
+                    None => nearest
+                        .par_iter_mut()
+                        .with_min_len(POINT_CHUNK)
+                        .enumerate()
+                        .for_each(|(i, v)| *v = nearest_to(query(i))),
+                }
                 for (i, found) in nearest.iter().enumerate() {
                     all.write(&tlas, i, found.as_ref().map(as_hit));
                     let (p, d) =
@@ -561,13 +586,18 @@ impl RayScene {
         threads: Option<usize>,
     ) -> PyResult<Bound<'py, PyArray1<f32>>> {
         let queries = arrays::points("points", &points)?;
-        self.per_row(py, queries.len(), threads, |tlas, i| {
-            let q = queries[i].into();
-            match signed {
+        let point = |i: usize| Vec3::from(queries[i]);
+        self.per_row(
+            py,
+            queries.len(),
+            threads,
+            point,
+            point,
+            |tlas, q| match signed {
                 true => tlas.signed_distance(q),
                 false => tlas.distance(q),
-            }
-        })
+            },
+        )
     }
 
     /// Whether each point lies inside (a winding number above one half).
@@ -579,8 +609,9 @@ impl RayScene {
         threads: Option<usize>,
     ) -> PyResult<Bound<'py, PyArray1<bool>>> {
         let queries = arrays::points("points", &points)?;
-        self.per_row(py, queries.len(), threads, |tlas, i| {
-            tlas.contains(queries[i].into())
+        let point = |i: usize| Vec3::from(queries[i]);
+        self.per_row(py, queries.len(), threads, point, point, |tlas, q| {
+            tlas.contains(q)
         })
     }
 
@@ -594,8 +625,9 @@ impl RayScene {
         threads: Option<usize>,
     ) -> PyResult<Bound<'py, PyArray1<f64>>> {
         let queries = arrays::points("points", &points)?;
-        self.per_row(py, queries.len(), threads, |tlas, i| {
-            tlas.winding_number(queries[i].into())
+        let point = |i: usize| Vec3::from(queries[i]);
+        self.per_row(py, queries.len(), threads, point, point, |tlas, q| {
+            tlas.winding_number(q)
         })
     }
 
@@ -617,8 +649,9 @@ impl RayScene {
         let (mut near, mut far) = (None, None);
         let batch = batch(&origins, &directions, &tnear, &mut near, &tfar, &mut far)?;
         let along = hits_along(per_triangle);
-        self.per_row(py, batch.len(), threads, |tlas, i| {
-            tlas.count_hits(&batch.ray(i), mask, along) as i64
+        let (origin, ray) = (|i| batch.origin(i), |i| batch.ray(i));
+        self.per_row(py, batch.len(), threads, origin, ray, |tlas, ray| {
+            tlas.count_hits(&ray, mask, along) as i64
         })
     }
 
@@ -648,26 +681,40 @@ impl RayScene {
         let along = hits_along(per_triangle);
         let n = batch.len();
         let tlas = py.detach(|| self.tlas(threads))?;
-        // Each task lists its rays' hits in one vector (no allocation per ray); the
-        // tasks' lists are then written out in ray order.
-        let per_task: Vec<(usize, Vec<u32>, Vec<Hit>)> = py.detach(|| {
+        // Rays are traced in the order of their origins where that pays (as `per_row`
+        // answers them). Each task lists its rays' hits in one vector (no allocation per
+        // ray); the hits are then written out in the caller's order of rays.
+        let order =
+            py.detach(|| pools::install(threads, || query_order(&tlas, n, |i| batch.origin(i))))?;
+        let ray_at = |k: usize| order.as_ref().map_or(k, |o| o.indices()[k] as usize);
+        let per_task: Vec<(Vec<u32>, Vec<Hit>)> = py.detach(|| {
             pools::install(threads, || {
                 (0..n.div_ceil(POINT_CHUNK))
                     .into_par_iter()
                     .map_init(Vec::new, |scratch, task| {
-                        let rays = task * POINT_CHUNK..((task + 1) * POINT_CHUNK).min(n);
-                        let (mut counts, mut hits) = (Vec::with_capacity(rays.len()), Vec::new());
-                        for i in rays {
-                            tlas.hits_into(&batch.ray(i), mask, along, scratch);
+                        let traced = task * POINT_CHUNK..((task + 1) * POINT_CHUNK).min(n);
+                        // Gathered first, as `RayOrder::answer_into` does.
+                        let rays: Vec<Ray> = traced.map(|k| batch.ray(ray_at(k))).collect();
+                        let mut counts = Vec::with_capacity(rays.len());
+                        let mut hits = Vec::new();
+                        for ray in &rays {
+                            tlas.hits_into(ray, mask, along, scratch);
                             counts.push(scratch.len() as u32);
                             hits.extend_from_slice(scratch);
                         }
-                        (task * POINT_CHUNK, counts, hits)
+                        (counts, hits)
                     })
                     .collect()
             })
         })?;
-        let total: usize = per_task.iter().map(|(_, _, hits)| hits.len()).sum();
+        // Where the k-th traced ray's hits start in the tasks' lists, one after another.
+        let mut first_hit = Vec::with_capacity(n + 1);
+        first_hit.push(0usize);
+        for count in per_task.iter().flat_map(|(counts, _)| counts) {
+            first_hit.push(first_hit.last().expect("not empty") + *count as usize);
+        }
+        let hits: Vec<Hit> = per_task.into_iter().flat_map(|(_, hits)| hits).collect();
+        let total = hits.len();
         let splits_out = PyArray1::<i64>::zeros(py, n + 1, false);
         let ray_out = PyArray1::<i64>::zeros(py, total, false);
         let t_out = PyArray1::<f32>::zeros(py, total, false);
@@ -682,16 +729,13 @@ impl RayScene {
             )
         };
         let mut row = 0;
-        for (first, counts, hits) in &per_task {
-            let mut hits = hits.iter();
-            for (k, &count) in counts.iter().enumerate() {
-                let i = first + k;
-                splits[i] = row as i64;
-                for hit in hits.by_ref().take(count as usize) {
-                    (ray[row], t[row]) = (i as i64, hit.t);
-                    all.write(&tlas, row, Some(*hit));
-                    row += 1;
-                }
+        for i in 0..n {
+            let k = order.as_ref().map_or(i, |o| o.ranks()[i] as usize);
+            splits[i] = row as i64;
+            for hit in &hits[first_hit[k]..first_hit[k + 1]] {
+                (ray[row], t[row]) = (i as i64, hit.t);
+                all.write(&tlas, row, Some(*hit));
+                row += 1;
             }
         }
         splits[n] = row as i64;

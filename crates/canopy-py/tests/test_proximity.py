@@ -143,6 +143,44 @@ def test_counts_match_brute_force_on_random_rays():
     assert counts.sum() > 300
 
 
+def test_large_batches_answer_every_row_as_small_ones_do():
+    # A mesh whose tree outgrows the cache (32k triangles, more than 1 MiB of nodes and
+    # packs) and batches above 4096 rows are answered in the order of their origins;
+    # the answers must come back to their rows, as batches of 1000 (in the caller's
+    # order) give them.
+    mesh = trimesh.creation.torus(major_radius=1.0, minor_radius=0.35, major_sections=256,
+                                  minor_sections=64)
+    assert len(mesh.faces) >= 32_000
+    scene = scene_of((mesh, None))
+    rng = np.random.default_rng(8)
+    points = query_points(rng, 9000, 1.6)
+    directions = rng.normal(size=points.shape).astype(np.float32)
+
+    def in_pieces(call, *arrays):
+        pieces = [call(*(a[i:i + 1000] for a in arrays)) for i in range(0, len(points), 1000)]
+        return pieces
+
+    def same(whole, pieces):
+        np.testing.assert_array_equal(whole, np.concatenate(pieces))
+
+    same(scene.compute_distance(points), in_pieces(scene.compute_distance, points))
+    same(scene.compute_occupancy(points), in_pieces(scene.compute_occupancy, points))
+    same(scene.winding_number(points), in_pieces(scene.winding_number, points))
+    whole = scene.compute_closest_points(points)
+    pieces = in_pieces(scene.compute_closest_points, points)
+    for field in ("point", "distance", "prim", "uv", "normal"):
+        same(getattr(whole, field), [getattr(p, field) for p in pieces])
+    counts = scene.count_intersections(points, directions)
+    same(counts, in_pieces(scene.count_intersections, points, directions))
+    assert counts.sum() > 1000
+    lists = scene.list_intersections(points, directions)
+    np.testing.assert_array_equal(np.diff(lists.ray_splits), counts)
+    pieces = in_pieces(scene.list_intersections, points, directions)
+    same(lists.t, [p.t for p in pieces])
+    same(lists.prim, [p.prim for p in pieces])
+    same(lists.ray, [p.ray + 1000 * i for i, p in enumerate(pieces)])
+
+
 def test_threads_give_the_same_answers():
     mesh = torus()
     scene = scene_of((mesh, None))
