@@ -729,9 +729,9 @@ impl RayScene {
             )
         };
         let mut row = 0;
-        for i in 0..n {
+        for (i, split) in splits[..n].iter_mut().enumerate() {
             let k = order.as_ref().map_or(i, |o| o.ranks()[i] as usize);
-            splits[i] = row as i64;
+            *split = row as i64;
             for hit in &hits[first_hit[k]..first_hit[k + 1]] {
                 (ray[row], t[row]) = (i as i64, hit.t);
                 all.write(&tlas, row, Some(*hit));
