@@ -169,28 +169,19 @@ pub fn stats(view: &dyn TreeView, costs: &SahCosts) -> TreeStats {
         return stats;
     };
     let root_area = root.bounds.surface_area();
-    let relative = |b: &Aabb| {
-        if root_area > 0.0 {
-            (b.surface_area() / root_area) as f64
-        } else {
-            1.0
-        }
-    };
     let mut cost = 0.0f64;
     let mut children = Vec::new();
     let mut stack = vec![(root, 1usize)];
     while let Some((child, depth)) = stack.pop() {
         stats.max_depth = stats.max_depth.max(depth);
-        let area = relative(&child.bounds);
+        cost += sah_contribution(&child, root_area, costs);
         match child.kind {
             ChildKind::Leaf { count, .. } => {
                 stats.leaves += 1;
                 stats.references += count;
                 stats.max_leaf_size = stats.max_leaf_size.max(count);
-                cost += area * count as f64 * costs.intersection as f64;
             }
             ChildKind::Inner(node) => {
-                cost += area * costs.traversal as f64;
                 view.children(node, &mut children);
                 stack.extend(children.iter().map(|&c| (c, depth + 1)));
             }
@@ -198,6 +189,20 @@ pub fn stats(view: &dyn TreeView, costs: &SahCosts) -> TreeStats {
     }
     stats.sah_cost = cost as f32;
     stats
+}
+
+/// What one box adds to a tree's SAH cost ([`stats`]): an inner node's box a traversal
+/// step, a leaf's its primitives' tests, weighted by its area relative to the root's
+/// (`root_area`; every box counts in full where the root has no area).
+pub fn sah_contribution(child: &Child, root_area: f32, costs: &SahCosts) -> f64 {
+    let area = match root_area > 0.0 {
+        true => (child.bounds.surface_area() / root_area) as f64,
+        false => 1.0,
+    };
+    match child.kind {
+        ChildKind::Leaf { count, .. } => area * count as f64 * costs.intersection as f64,
+        ChildKind::Inner(_) => area * costs.traversal as f64,
+    }
 }
 
 /// Every box whose level is in `first..=last` (the root's is level 0), with its level,

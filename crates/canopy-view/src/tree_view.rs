@@ -3,8 +3,8 @@
 //! descend to where a builder spends its cost.
 
 use crate::protocol::{corners, NodeChild, NodeReport};
-use canopy_bvh::view::{Child, ChildKind, TreeView};
-use canopy_bvh::{Aabb, SahCosts};
+use canopy_bvh::view::{sah_contribution, Child, ChildKind, TreeView};
+use canopy_bvh::SahCosts;
 
 /// Node `index` (an inner node's, as a report's child gives it; `None`: the root) and its
 /// children, or why there is none such.
@@ -74,26 +74,21 @@ struct Subtree {
     leaves: usize,
 }
 
-/// The SAH cost of `top`'s subtree as `canopy_bvh::view::stats` counts it (areas
-/// relative to the root's), and its size.
+/// The SAH cost of `top`'s subtree (each box's [`sah_contribution`], as the whole tree's
+/// statistics sum them), and its size.
 fn subtree(view: &dyn TreeView, top: Child, costs: &SahCosts, root_area: f32) -> Subtree {
-    let relative = |b: &Aabb| match root_area > 0.0 {
-        true => (b.surface_area() / root_area) as f64,
-        false => 1.0,
-    };
     let mut s = Subtree::default();
     let mut children = Vec::new();
     let mut stack = vec![top];
     while let Some(c) = stack.pop() {
         s.nodes += 1;
+        s.cost += sah_contribution(&c, root_area, costs);
         match c.kind {
             ChildKind::Leaf { count, .. } => {
                 s.leaves += 1;
                 s.primitives += count;
-                s.cost += relative(&c.bounds) * count as f64 * costs.intersection as f64;
             }
             ChildKind::Inner(i) => {
-                s.cost += relative(&c.bounds) * costs.traversal as f64;
                 view.children(i, &mut children);
                 stack.extend_from_slice(&children);
             }
@@ -105,7 +100,7 @@ fn subtree(view: &dyn TreeView, top: Child, costs: &SahCosts, root_area: f32) ->
 #[cfg(test)]
 mod tests {
     use super::*;
-    use canopy_bvh::{build, BuildParams, Builder, BvhWidth, Tree};
+    use canopy_bvh::{build, Aabb, BuildParams, Builder, BvhWidth, Tree};
     use glam::Vec3;
 
     fn tree(width: BvhWidth) -> Tree {
