@@ -169,14 +169,20 @@ impl Bvh {
     fn read(&self) -> RwLockReadGuard<'_, Shared> {
         self.shared.read().unwrap_or_else(PoisonError::into_inner)
     }
+}
 
-    /// The order to trace `batch` in, if not the caller's ([`Accel::orders_batches`]).
-    fn batch_order(accel: &Accel, batch: &Batch<'_>) -> Option<RayOrder> {
-        accel
-            .orders_batches()
-            .then(|| RayOrder::by_origin(batch.len(), |i| batch.origin(i)))
-            .flatten()
-    }
+/// The order to answer `n` queries of `structure` in, if not the caller's: by `place(i)`
+/// (a ray's origin, a query point), where the structure is larger than the cache
+/// ([`RayQuery::orders_batches`], [`RayOrder::by_origin`]).
+pub(crate) fn query_order(
+    structure: &impl RayQuery,
+    n: usize,
+    place: impl Fn(usize) -> Vec3 + Sync,
+) -> Option<RayOrder> {
+    structure
+        .orders_batches()
+        .then(|| RayOrder::by_origin(n, place))
+        .flatten()
 }
 
 /// `tnear` or `tfar`: one value for every ray, or one each.
@@ -542,7 +548,7 @@ impl Bvh {
                 return 0.0;
             };
             canopy_bvh::epo(tree.view(), &self.params.sah, |prim, region| {
-                shared.accel.primitives()[prim as usize]
+                accel.primitives()[prim as usize]
                     .shape
                     .area_in_box(region)
                     .unwrap_or(0.0)
@@ -613,7 +619,9 @@ impl Bvh {
                 let accel = &shared.accel;
                 // Scattered rays (from surfaces, in any order) are traced by where they
                 // start; coherent ones in their own order, in packets.
-                let Some(order) = Self::batch_order(accel, &batch).filter(|_| !coherent) else {
+                let Some(order) =
+                    query_order(accel, batch.len(), |i| batch.origin(i)).filter(|_| !coherent)
+                else {
                     return t
                         .par_chunks_mut(CHUNK)
                         .zip(prim.par_chunks_mut(CHUNK))
@@ -675,7 +683,9 @@ impl Bvh {
             pools::install(threads, || {
                 let shared = self.read();
                 let accel = &shared.accel;
-                let Some(order) = Self::batch_order(accel, &batch).filter(|_| !coherent) else {
+                let Some(order) =
+                    query_order(accel, batch.len(), |i| batch.origin(i)).filter(|_| !coherent)
+                else {
                     return blocked
                         .par_chunks_mut(CHUNK)
                         .enumerate()

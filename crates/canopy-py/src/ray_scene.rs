@@ -4,11 +4,11 @@
 //! world space.
 
 use crate::arrays;
-use crate::bvh::batch;
+use crate::bvh::{batch, query_order};
 use crate::pools;
 use canopy_bvh::{
-    Blas, BlasParams, Hit, HitsAlong, Instance, Nearest, Ray, RayOrder, RayQuery, SurfaceQuery,
-    Tlas, TriangleMesh,
+    Blas, BlasParams, Hit, HitsAlong, Instance, Nearest, Ray, RayQuery, SurfaceQuery, Tlas,
+    TriangleMesh,
 };
 use glam::Vec3;
 use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray2};
@@ -110,18 +110,6 @@ fn hits_along(per_triangle: bool) -> HitsAlong {
         true => HitsAlong::Triangles,
         false => HitsAlong::Crossings,
     }
-}
-
-/// The order to answer `n` queries in, if not the caller's: by `place(i)`, where the
-/// scene is larger than the cache ([`RayOrder::by_origin`]).
-fn query_order(
-    tlas: &Tlas<MeshBlas>,
-    n: usize,
-    place: impl Fn(usize) -> Vec3 + Sync,
-) -> Option<RayOrder> {
-    tlas.orders_batches()
-        .then(|| RayOrder::by_origin(n, place))
-        .flatten()
 }
 
 /// Points per parallel task of the point queries.
