@@ -8,7 +8,9 @@ use crate::scene_facts::SceneFacts;
 use crate::signals;
 use crate::Interrupted;
 use anyhow::bail;
-use canopy_job::{CheckpointPolicy, Device, Observer, RenderJob, Schedule, Structure};
+use canopy_job::{
+    CheckpointPolicy, Device, Observer, RenderJob, RenderOptions, Schedule, Structure,
+};
 use canopy_render::camera::Camera;
 use canopy_render::visualize::{draw_bvh, render_heatmap, LevelRange};
 use canopy_render::{
@@ -139,6 +141,30 @@ pub struct RenderArgs {
     json: bool,
 }
 
+impl RenderArgs {
+    /// The render's options as the flags give them: the type every front end makes, so
+    /// the flags and Python's keywords set the same things, checked the same way (a
+    /// field added to it fails to compile here until a flag sets it).
+    fn options(&self) -> RenderOptions {
+        RenderOptions {
+            size: self.size.map(|(width, height)| [width, height]),
+            spp: self.spp,
+            max_depth: self.depth,
+            seed: self.seed,
+            integrator: self.integrator,
+            russian_roulette: self.no_roulette.then_some(false),
+            sampler: self.sampler,
+            bvh: Some(self.bvh),
+            width: Some(self.width),
+            max_leaf_size: Some(self.build.max_leaf_size),
+            fast_triangles: Some(self.fast_triangles),
+            device: Some(self.device),
+            schedule: Some(self.schedule),
+            threads: self.threads.map(|n| n as usize),
+        }
+    }
+}
+
 fn parse_device(s: &str) -> Result<Device, String> {
     s.parse()
 }
@@ -236,7 +262,9 @@ fn load_job(args: &RenderArgs) -> anyhow::Result<Job> {
         .as_deref()
         .expect("clap requires a scene without --resume");
     let mut scene = canopy_render::load_scene_allowing(arg, &args.allow_path)?;
-    apply_overrides(&mut scene, args)?;
+    args.options()
+        .apply_to_settings(&mut scene.settings)
+        .map_err(anyhow::Error::msg)?;
     Ok(Job {
         source: canopy_render::scene_source(arg)?,
         scene,
@@ -360,28 +388,14 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     if args.device == Device::Gpu && args.heatmap {
         bail!("--heatmap counts CPU traversal work; drop --device gpu");
     }
-    if args.device == Device::Gpu && args.fast_triangles {
-        bail!("--fast-triangles chooses the CPU's triangle test (the GPU's is watertight); drop --device gpu");
-    }
-    if args.device == Device::Gpu && args.bvh == AccelKind::None {
-        bail!("--device gpu traces through a BVH; choose a builder with --bvh");
-    }
-    let render_job = RenderJob {
+    let mut render_job = RenderJob {
         scene,
         source: job.source.clone(),
         structure: Structure {
-            kind: args.bvh,
-            width: args.width,
             params: args.build.params(),
             optimize: args.optimize,
-            triangle_test: match args.fast_triangles {
-                true => canopy_bvh::TriangleTest::Fast,
-                false => canopy_bvh::TriangleTest::Watertight,
-            },
+            ..Structure::default()
         },
-        device: args.device,
-        schedule: args.schedule,
-        threads: Some(args.threads.unwrap_or(0) as usize).filter(|&n| n > 0),
         region,
         aovs,
         checkpoint: CheckpointPolicy {
@@ -391,7 +405,11 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         },
         resume: job.accumulator.clone(),
         resume_owner: job.resume_owner,
+        ..RenderJob::new(scene, "")
     };
+    args.options()
+        .apply_to_job(&mut render_job)
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
     let prepared = render_job.prepare()?;
     let accel = prepared.accel();
     if args.show_bvh && accel.tree().is_none() {
@@ -676,21 +694,6 @@ fn print_scene_summary(s: &Summary, json: bool) {
     }
 }
 
-fn apply_overrides(scene: &mut Scene, args: &RenderArgs) -> anyhow::Result<()> {
-    let s = &mut scene.settings;
-    if let Some((w, h)) = args.size {
-        (s.width, s.height) = (w, h);
-    }
-    s.spp = args.spp.unwrap_or(s.spp);
-    s.max_depth = args.depth.unwrap_or(s.max_depth);
-    s.seed = args.seed.unwrap_or(s.seed);
-    s.integrator = args.integrator.unwrap_or(s.integrator);
-    s.russian_roulette &= !args.no_roulette;
-    s.sampler = args.sampler.unwrap_or(s.sampler);
-    s.check().map_err(anyhow::Error::msg)?;
-    Ok(())
-}
-
 /// `<scene name>.png` in the current directory, the name made into a plain file name
 /// (a scene from a stranger cannot direct the image elsewhere).
 fn default_output(arg: &str, scene: &Scene) -> PathBuf {
@@ -703,4 +706,57 @@ fn default_output(arg: &str, scene: &Scene) -> PathBuf {
         scene.name.clone()
     };
     PathBuf::from(format!("{}.png", file_stem_from_name(&name)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::{FromArgMatches, Parser};
+
+    #[derive(Parser)]
+    struct Render {
+        #[command(flatten)]
+        args: RenderArgs,
+    }
+
+    /// Every render option has a flag: a command line giving them all gives every one.
+    #[test]
+    fn every_render_option_has_a_flag() {
+        let line = [
+            "render",
+            "paper-1",
+            "--size",
+            "8x6",
+            "--spp",
+            "2",
+            "--depth",
+            "3",
+            "--seed",
+            "4",
+            "--integrator",
+            "bsdf",
+            "--no-roulette",
+            "--sampler",
+            "independent",
+            "--bvh",
+            "sweep-sah",
+            "--width",
+            "4",
+            "--max-leaf-size",
+            "2",
+            "--fast-triangles",
+            "--device",
+            "cpu",
+            "--schedule",
+            "depth",
+            "--threads",
+            "1",
+        ];
+        let matches = <Render as clap::CommandFactory>::command().get_matches_from(line);
+        let options = Render::from_arg_matches(&matches).unwrap().args.options();
+        assert_eq!(options.given(), RenderOptions::names());
+        assert_eq!(options.size, Some([8, 6]));
+        assert_eq!(options.russian_roulette, Some(false));
+        assert_eq!(options.max_leaf_size, Some(2));
+    }
 }

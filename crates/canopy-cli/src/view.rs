@@ -3,8 +3,9 @@
 
 use crate::limits;
 use canopy_bvh::{BuildParams, Builder};
-use canopy_render::BvhWidth;
-use canopy_view::{Reload, TreeSettings, ViewOptions, ViewServer};
+use canopy_job::RenderOptions;
+use canopy_render::{AccelKind, BvhWidth};
+use canopy_view::{Reload, ViewOptions, ViewServer};
 use clap::Args;
 use std::net::SocketAddr;
 use std::path::PathBuf;
@@ -53,15 +54,24 @@ pub struct ViewArgs {
     no_reload: bool,
 }
 
-pub fn run(args: &ViewArgs) -> anyhow::Result<()> {
-    let mut scene = canopy_render::load_scene_allowing(&args.scene, &args.allow_path)?;
-    let s = &mut scene.settings;
-    if let Some((w, h)) = args.size {
-        (s.width, s.height) = (w, h);
+impl ViewArgs {
+    /// The render options the viewer starts with, as the flags give them.
+    fn options(&self) -> RenderOptions {
+        RenderOptions {
+            size: self.size.map(|(width, height)| [width, height]),
+            spp: self.spp,
+            max_depth: self.depth,
+            bvh: Some(AccelKind::Bvh(self.bvh)),
+            width: Some(self.width),
+            max_leaf_size: Some(self.max_leaf_size),
+            threads: self.threads.map(|n| n as usize),
+            ..RenderOptions::default()
+        }
     }
-    s.spp = args.spp.unwrap_or(s.spp);
-    s.max_depth = args.depth.unwrap_or(s.max_depth);
-    s.check().map_err(anyhow::Error::msg)?;
+}
+
+pub fn run(args: &ViewArgs) -> anyhow::Result<()> {
+    let scene = canopy_render::load_scene_allowing(&args.scene, &args.allow_path)?;
     // Found now, not at the first save (a folder that is not writable is told then).
     if !args.output_dir.is_dir() {
         anyhow::bail!(
@@ -79,12 +89,7 @@ pub fn run(args: &ViewArgs) -> anyhow::Result<()> {
         bind: args.bind,
         save_dir: args.output_dir.clone(),
         reload,
-        threads: args.threads.map(|n| n as usize),
-        tree: TreeSettings {
-            builder: args.bvh,
-            width: args.width,
-            max_leaf_size: args.max_leaf_size,
-        },
+        render: args.options(),
     };
     let server = ViewServer::start(scene, options)?;
     let url = server.url();

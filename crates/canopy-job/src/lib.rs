@@ -20,12 +20,14 @@
 mod denoise;
 mod engine;
 mod observer;
+mod options;
 mod prepared;
 mod resume;
 
 pub use canopy_denoise::{DenoiseError, Oidn, Options as DenoiseOptions};
 pub use denoise::denoise_film;
 pub use observer::Observer;
+pub use options::{RenderOptions, MAX_LEAF_SIZE};
 pub use prepared::{Outcome, Prepared, AOV_BYTES_PER_PIXEL, BYTES_PER_PIXEL, MAX_THREADS};
 pub use resume::Resumed;
 

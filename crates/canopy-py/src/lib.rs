@@ -57,5 +57,11 @@ fn _canopy(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(view::view, m)?)?;
     m.add_function(wrap_pyfunction!(scene::eval_material, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    // The names of canopy's render options (one type, `canopy_job::RenderOptions`):
+    // `render()`, `view()` and the Ray driver take them as keywords by these names.
+    m.add(
+        "RENDER_OPTIONS",
+        canopy_job::RenderOptions::names().to_vec(),
+    )?;
     Ok(())
 }

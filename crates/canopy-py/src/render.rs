@@ -2,12 +2,9 @@
 
 use crate::pools;
 use crate::scene::PyScene;
-use canopy_bvh::BvhWidth;
-use canopy_job::{
-    CheckpointPolicy, Device, JobError, Observer, RenderJob, Resumed, Schedule, Structure,
-};
+use canopy_job::{CheckpointPolicy, JobError, Observer, RenderJob, RenderOptions, Resumed};
 use canopy_render::mesh::{parse_mesh, MeshFormat};
-use canopy_render::{load_scene_allowing as load, AccelKind, Accumulator, AovSet, Region, Scene};
+use canopy_render::{load_scene_allowing as load, Accumulator, AovSet, Region, Scene};
 use numpy::ndarray::Array2;
 use numpy::{IntoPyArray, PyArray2, PyArray3, PyReadonlyArray2, ToPyArray};
 use pyo3::exceptions::{PyOSError, PyRuntimeError, PyValueError};
@@ -144,42 +141,30 @@ pub fn load_scene(py: Python<'_>, scene: &str, allow_paths: Vec<PathBuf>) -> PyR
 
 /// Renders a scene to a linear float32 image of shape (height, width, 3), or of the
 /// region's shape when one is given (`region=(x, y, width, height)`: exactly those
-/// pixels of the whole image). Samples are added one per pixel per pass; between passes
-/// `progress(done, total)` is called and Ctrl-C is honoured (KeyboardInterrupt). With
-/// `checkpoint=path` the render is saved there every `checkpoint_every` seconds and when
-/// interrupted, and `resume=path` continues such a render (its scene and settings come
-/// from the file). `samples=(first, count)` renders only samples `first .. first + count`
-/// of every pixel and returns their mean. `camera={...}` moves the camera (any of
-/// look_from, look_at, up, vfov, aperture, focus_distance) and `instances={k: (3, 4)
-/// matrix}` moves mesh instances: a frame of an animation. `schedule` is the order CPU workers trace paths in, "wavefront" or
-/// "depth": the image is the same.
+/// pixels of the whole image). `options` holds canopy's render options
+/// (`canopy_job::RenderOptions`: spp, size, seed, max_depth, integrator, ..., by those
+/// names; see `RENDER_OPTIONS`). Samples are added one per pixel per pass; between
+/// passes `progress(done, total)` is called and Ctrl-C is honoured (KeyboardInterrupt).
+/// With `checkpoint=path` the render is saved there every `checkpoint_every` seconds and
+/// when interrupted, and `resume=path` continues such a render (its scene and settings
+/// come from the file). `samples=(first, count)` renders only samples `first .. first +
+/// count` of every pixel and returns their mean. `camera={...}` moves the camera (any
+/// of look_from, look_at, up, vfov, aperture, focus_distance) and `instances={k: (3, 4)
+/// matrix}` moves mesh instances: a frame of an animation.
 #[pyfunction]
-#[pyo3(signature = (scene=None, spp=None, size=None, seed=None, max_depth=None, integrator=None,
-    russian_roulette=None, sampler=None, device="cpu", bvh="binned-sah", width=8, threads=None, progress=None,
-    region=None, checkpoint=None, checkpoint_every=60.0, resume=None, schedule="wavefront",
-    samples=None, camera=None, instances=None, allow_paths=Vec::new(), aovs=None, denoise=false,
-    oidn_paths=Vec::new()))]
+#[pyo3(signature = (scene=None, options=None, progress=None, region=None, checkpoint=None,
+    checkpoint_every=60.0, resume=None, samples=None, camera=None, instances=None,
+    allow_paths=Vec::new(), aovs=None, denoise=false, oidn_paths=Vec::new()))]
 #[allow(clippy::too_many_arguments)]
 pub fn render<'py>(
     py: Python<'py>,
     scene: Option<SceneArg<'py>>,
-    spp: Option<u32>,
-    size: Option<(u32, u32)>,
-    seed: Option<u64>,
-    max_depth: Option<u32>,
-    integrator: Option<&str>,
-    russian_roulette: Option<bool>,
-    sampler: Option<&str>,
-    device: &str,
-    bvh: &str,
-    width: u32,
-    threads: Option<usize>,
+    options: Option<Bound<'py, PyAny>>,
     progress: Option<Py<PyAny>>,
     region: Option<(u32, u32, u32, u32)>,
     checkpoint: Option<PathBuf>,
     checkpoint_every: f64,
     resume: Option<PathBuf>,
-    schedule: &str,
     samples: Option<(u32, u32)>,
     camera: Option<Bound<'py, PyDict>>,
     instances: Option<std::collections::HashMap<u32, PyReadonlyArray2<'py, f32>>>,
@@ -188,6 +173,7 @@ pub fn render<'py>(
     denoise: bool,
     oidn_paths: Vec<PathBuf>,
 ) -> PyResult<Bound<'py, PyAny>> {
+    let options = render_options(options.as_ref())?;
     let asked_aovs: Option<AovSet> = aovs
         .as_deref()
         .map(str::parse)
@@ -202,31 +188,27 @@ pub fn render<'py>(
     let oidn = denoise
         .then(|| crate::denoise::load_oidn(&oidn_paths))
         .transpose()?;
-    let device: Device = device.parse().map_err(PyValueError::new_err)?;
-    let schedule: Schedule = schedule.parse().map_err(PyValueError::new_err)?;
-    let kind: AccelKind = bvh
-        .parse()
-        .map_err(|e: canopy_bvh::UnknownBuilder| PyValueError::new_err(e.to_string()))?;
-    let layout: BvhWidth = width.to_string().parse().map_err(PyValueError::new_err)?;
+    options.check().map_err(PyValueError::new_err)?;
     if !(checkpoint_every.is_finite() && checkpoint_every >= 0.0) {
         return Err(PyValueError::new_err(format!(
             "checkpoint_every must be a number of seconds >= 0, not {checkpoint_every}"
         )));
     }
-    let overrides = spp.is_some()
-        || size.is_some()
-        || seed.is_some()
-        || max_depth.is_some()
-        || integrator.is_some()
-        || russian_roulette.is_some()
-        || sampler.is_some()
-        || region.is_some()
-        || camera.is_some()
-        || instances.is_some();
-    if resume.is_some() && overrides {
-        return Err(PyValueError::new_err(
-            "a resumed render keeps its checkpoint's settings: drop spp, size, seed, max_depth, integrator, russian_roulette, sampler, region, camera and instances",
-        ));
+    let mut overrides = options.given_scene_settings();
+    for (given, name) in [
+        (region.is_some(), "region"),
+        (camera.is_some(), "camera"),
+        (instances.is_some(), "instances"),
+    ] {
+        if given {
+            overrides.push(name);
+        }
+    }
+    if resume.is_some() && !overrides.is_empty() {
+        return Err(PyValueError::new_err(format!(
+            "a resumed render keeps its checkpoint's settings: drop {}",
+            overrides.join(", ")
+        )));
     }
     if let Some((first, count)) = samples {
         if resume.is_some() || checkpoint.is_some() {
@@ -234,7 +216,7 @@ pub fn render<'py>(
                 "samples= renders a part of a render's samples: drop resume and checkpoint",
             ));
         }
-        if spp.is_some() {
+        if options.spp.is_some() {
             return Err(PyValueError::new_err(
                 "give spp (all samples) or samples=(first, count), not both",
             ));
@@ -277,24 +259,13 @@ pub fn render<'py>(
         (Some((scene, source)), None) => (scene, source, None),
     };
     if resumed.is_none() {
-        let s = &mut scene.settings;
-        if let Some((w, h)) = size {
-            (s.width, s.height) = (w, h);
-        }
-        s.spp = match samples {
-            Some((first, count)) => first + count,
-            None => spp.unwrap_or(s.spp),
+        let settings_options = RenderOptions {
+            spp: samples.map(|(first, count)| first + count).or(options.spp),
+            ..options.clone()
         };
-        s.seed = seed.unwrap_or(s.seed);
-        s.max_depth = max_depth.unwrap_or(s.max_depth);
-        if let Some(name) = integrator {
-            s.integrator = name.parse().map_err(PyValueError::new_err)?;
-        }
-        s.russian_roulette = russian_roulette.unwrap_or(s.russian_roulette);
-        if let Some(name) = sampler {
-            s.sampler = name.parse().map_err(PyValueError::new_err)?;
-        }
-        s.check().map_err(PyValueError::new_err)?;
+        settings_options
+            .apply_to_settings(&mut scene.settings)
+            .map_err(PyValueError::new_err)?;
         if let Some(changes) = &camera {
             let moved = moved_camera(scene.camera, changes)?;
             scene
@@ -311,14 +282,9 @@ pub fn render<'py>(
         }
     }
     let mut job = RenderJob::new(&scene, source);
-    job.structure = Structure {
-        kind,
-        width: layout,
-        ..Structure::default()
-    };
-    job.device = device;
-    job.schedule = schedule;
-    job.threads = threads;
+    options
+        .apply_to_job(&mut job)
+        .map_err(PyValueError::new_err)?;
     if let Some((x, y, width, height)) = region {
         job.region = Region {
             x,
@@ -376,11 +342,11 @@ pub fn render<'py>(
     if let Some(oidn) = &oidn {
         film = py
             .detach(|| {
-                let options = canopy_job::DenoiseOptions {
-                    threads,
+                let denoise_options = canopy_job::DenoiseOptions {
+                    threads: options.threads,
                     prefilter: false,
                 };
-                canopy_job::denoise_film(oidn, &film, &aov_images, &options)
+                canopy_job::denoise_film(oidn, &film, &aov_images, &denoise_options)
             })
             .map_err(crate::denoise::denoise_error)?;
     }
@@ -397,6 +363,18 @@ pub fn render<'py>(
         Some(set) => {
             let layers = crate::denoise::aov_arrays(py, &aov_images.only(set), done.region)?;
             Ok((image, layers).into_pyobject(py)?.into_any())
+        }
+    }
+}
+
+/// canopy's render options from a dict of them (`None`: none given), refusing a name
+/// that is none of them or a value out of its type.
+pub(crate) fn render_options(options: Option<&Bound<'_, PyAny>>) -> PyResult<RenderOptions> {
+    match options {
+        None => Ok(RenderOptions::default()),
+        Some(given) => {
+            RenderOptions::deserialize_named(&mut pythonize::Depythonizer::from_object(given))
+                .map_err(PyValueError::new_err)
         }
     }
 }

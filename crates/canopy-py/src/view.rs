@@ -1,9 +1,8 @@
 //! `canopy_rt.view`: the interactive viewer (canopy-view) for a scene from Python.
 
 use crate::render::{scene_error, SceneArg};
-use canopy_bvh::Builder;
-use canopy_render::{load_scene_allowing, RenderSettings};
-use canopy_view::{Reload, TreeSettings, ViewOptions, ViewServer};
+use canopy_render::load_scene_allowing;
+use canopy_view::{Reload, ViewOptions, ViewServer};
 use pyo3::exceptions::{PyOSError, PyValueError};
 use pyo3::prelude::*;
 use std::net::SocketAddr;
@@ -51,46 +50,30 @@ impl PyViewer {
     }
 }
 
-/// Serves `scene` (a name, a file, or a `Scene` built in Python) in the browser; see
-/// `canopy_rt.view`.
+/// Serves `scene` (a name, a file, or a `Scene` built in Python) in the browser, starting
+/// with the render `options` (a dict, as `render` takes them); see `canopy_rt.view`.
 #[pyfunction]
-#[pyo3(signature = (scene, *, bind, size, spp, max_depth, threads, bvh, width, max_leaf_size, output_dir, allow_paths, reload))]
-#[allow(clippy::too_many_arguments)]
+#[pyo3(signature = (scene, options=None, *, bind, output_dir, allow_paths, reload))]
 pub fn view(
     py: Python<'_>,
     scene: SceneArg<'_>,
+    options: Option<Bound<'_, PyAny>>,
     bind: &str,
-    size: Option<(u32, u32)>,
-    spp: Option<u32>,
-    max_depth: Option<u32>,
-    threads: Option<usize>,
-    bvh: &str,
-    width: u32,
-    max_leaf_size: u32,
     output_dir: PathBuf,
     allow_paths: Vec<PathBuf>,
     reload: bool,
 ) -> PyResult<PyViewer> {
+    let render = crate::render::render_options(options.as_ref())?;
     let bind: SocketAddr = bind
         .parse()
         .map_err(|e| PyValueError::new_err(format!("bind: {bind:?} is no address ({e})")))?;
-    let builder: Builder = bvh
-        .parse()
-        .map_err(|e| PyValueError::new_err(format!("bvh: {e}")))?;
-    let tree = TreeSettings::new(builder, width, max_leaf_size).map_err(PyValueError::new_err)?;
-    if threads.is_some_and(|n| !(1..=canopy_job::MAX_THREADS).contains(&n)) {
-        return Err(PyValueError::new_err(format!(
-            "threads must be in 1..={}",
-            canopy_job::MAX_THREADS
-        )));
-    }
     if !output_dir.is_dir() {
         return Err(PyValueError::new_err(format!(
             "output_dir: {} is not an existing folder",
             output_dir.display()
         )));
     }
-    let (mut scene, reload) = match scene {
+    let (scene, reload) = match scene {
         SceneArg::Named(name) => {
             let scene = py
                 .detach(|| load_scene_allowing(&name, &allow_paths))
@@ -105,17 +88,9 @@ pub fn view(
         // Built in code: no file to follow.
         SceneArg::Built(built) => (built.borrow().scene.clone(), None),
     };
-    let s = &mut scene.settings;
-    if let Some((w, h)) = size {
-        (s.width, s.height) = (w, h);
-    }
-    s.spp = spp.unwrap_or(s.spp);
-    s.max_depth = max_depth.unwrap_or(s.max_depth);
-    RenderSettings::check(s).map_err(PyValueError::new_err)?;
     let options = ViewOptions {
         bind,
-        threads,
-        tree,
+        render,
         save_dir: output_dir,
         reload,
     };

@@ -72,7 +72,10 @@ async fn measure(name: &str, size: (u32, u32), threads: Option<usize>) {
     let server = ViewServer::start(
         scene,
         ViewOptions {
-            threads,
+            render: canopy_job::RenderOptions {
+                threads,
+                ..Default::default()
+            },
             ..ViewOptions::default()
         },
     )

@@ -34,6 +34,7 @@ pub use settings::{Mode, TreeSettings, ViewSettings};
 pub use watcher::Reload;
 
 use axum::serve::ListenerExt;
+use canopy_job::RenderOptions;
 use canopy_render::Scene;
 use session::Session;
 use std::net::{SocketAddr, TcpListener};
@@ -53,10 +54,11 @@ pub struct ViewOptions {
     /// Where to listen: loopback, a free port, by default. Another address exposes the
     /// viewer (still behind its token) on purpose.
     pub bind: SocketAddr,
-    /// Worker threads rendering; `None` is every core.
-    pub threads: Option<usize>,
-    /// The tree to start with.
-    pub tree: TreeSettings,
+    /// The render options to start with, canopy's as `canopy render` takes them: the
+    /// scene's settings (size, spp, ...) overridden, the tree (builder, width, leaf size,
+    /// triangle test), the schedule, and the worker threads (every core by default).
+    /// The viewer renders on the CPU.
+    pub render: RenderOptions,
     /// Where the page's "save" writes images.
     pub save_dir: PathBuf,
     /// Loads the scene again when one of its files ([`Scene::inputs`]) changes on disk;
@@ -68,8 +70,7 @@ impl Default for ViewOptions {
     fn default() -> Self {
         Self {
             bind: SocketAddr::from(([127, 0, 0, 1], 0)),
-            threads: None,
-            tree: TreeSettings::default(),
+            render: RenderOptions::default(),
             save_dir: PathBuf::from("."),
             reload: None,
         }
@@ -88,6 +89,8 @@ pub enum ViewError {
     Threads(String),
     #[error("{0}")]
     Scene(String),
+    #[error("{0}")]
+    Options(String),
 }
 
 /// A running viewer: its server and render thread. Dropping it shuts both down.
@@ -104,8 +107,18 @@ pub struct ViewServer {
 impl ViewServer {
     /// Checks the scene, listens on `options.bind` and starts serving and rendering
     /// (rendering waits for the first page).
-    pub fn start(scene: Scene, options: ViewOptions) -> Result<ViewServer, ViewError> {
+    pub fn start(mut scene: Scene, options: ViewOptions) -> Result<ViewServer, ViewError> {
         scene.validate().map_err(ViewError::Scene)?;
+        options
+            .render
+            .apply_to_settings(&mut scene.settings)
+            .map_err(ViewError::Options)?;
+        let (view, tree) = settings::starting_options(
+            &ViewSettings::of_scene(&scene),
+            &TreeSettings::default(),
+            &options.render,
+        )
+        .map_err(ViewError::Options)?;
         let bind_error = |cause| ViewError::Bind {
             addr: options.bind,
             cause,
@@ -115,9 +128,9 @@ impl ViewServer {
         let addr = listener.local_addr().map_err(bind_error)?;
         let token: Arc<str> = new_token().into();
         let inputs = scene.inputs.clone();
-        let session = Arc::new(Session::new(scene, options.tree));
+        let session = Arc::new(Session::new(scene, view, tree));
 
-        let pool = match options.threads {
+        let pool = match options.render.threads {
             Some(n) => Some(
                 rayon::ThreadPoolBuilder::new()
                     .num_threads(n)

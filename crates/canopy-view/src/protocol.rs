@@ -5,9 +5,9 @@
 //! is not JSON, names no known command, or holds a value out of range gets an
 //! [`ServerMessage::Error`] reply and changes nothing.
 
-use crate::settings::{Mode, TreeSettings, ViewSettings};
+use crate::settings::{with_options, Mode, TreeSettings, ViewSettings};
+use canopy_job::RenderOptions;
 use canopy_render::camera::CameraSpec;
-use canopy_render::{Integrator, RenderSettings};
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
@@ -30,21 +30,18 @@ pub enum Command {
         up: [f32; 3],
         vfov: f32,
     },
-    /// Render settings; a field left out keeps its value. Restarts accumulation.
+    /// Settings; a field left out keeps its value. `render` holds canopy's render
+    /// options (those of `canopy render` and Python's `render()`, by the same names):
+    /// a change of the tree's (`bvh`, `width`, `max_leaf_size`, `fast_triangles`)
+    /// rebuilds it, any other restarts accumulation (or continues it where the samples
+    /// stay valid). `size`, `device` and `threads` are fixed while the viewer runs.
     Settings {
-        spp: Option<u32>,
-        max_depth: Option<u32>,
-        integrator: Option<String>,
+        #[serde(default)]
+        render: RenderOptions,
         exposure: Option<f32>,
         mode: Option<Mode>,
         /// The tree levels the `boxes` mode draws, first and last (the root is 0).
         levels: Option<[u32; 2]>,
-    },
-    /// Build the tree again with this builder, width and leaf size.
-    Rebuild {
-        builder: String,
-        width: u32,
-        max_leaf_size: u32,
     },
     /// The walk of the primary ray through pixel (x, y) of the full-size image.
     Pick { x: u32, y: u32 },
@@ -63,8 +60,15 @@ fn up_y() -> [f32; 3] {
 #[derive(Clone, Debug, PartialEq)]
 pub enum Change {
     View(ViewSettings),
-    Rebuild(TreeSettings),
-    Pick { x: u32, y: u32 },
+    /// New settings, and the tree to render through (built again where it changed).
+    Settings {
+        view: ViewSettings,
+        tree: TreeSettings,
+    },
+    Pick {
+        x: u32,
+        y: u32,
+    },
     Save(crate::save::SaveFormat),
     Node(Option<usize>),
 }
@@ -81,9 +85,15 @@ impl Command {
         serde_json::from_str(text).map_err(|e| format!("not a command: {e}"))
     }
 
-    /// What the command changes in `current`, or why it cannot be done (`width` and
-    /// `height` are the image's, for picks).
-    pub fn apply(self, current: &ViewSettings, width: u32, height: u32) -> Result<Change, String> {
+    /// What the command changes in the `current` view and `tree`, or why it cannot be
+    /// done (`width` and `height` are the image's, for picks).
+    pub fn apply(
+        self,
+        current: &ViewSettings,
+        tree: &TreeSettings,
+        width: u32,
+        height: u32,
+    ) -> Result<Change, String> {
         match self {
             Command::Camera {
                 look_from,
@@ -105,25 +115,12 @@ impl Command {
                 }))
             }
             Command::Settings {
-                spp,
-                max_depth,
-                integrator,
+                render,
                 exposure,
                 mode,
                 levels,
             } => {
-                let mut next = current.clone();
-                if let Some(spp) = spp {
-                    check_range("spp", spp, 1, RenderSettings::MAX_SPP)?;
-                    next.spp = spp;
-                }
-                if let Some(depth) = max_depth {
-                    check_range("max_depth", depth, 1, RenderSettings::MAX_DEPTH)?;
-                    next.max_depth = depth;
-                }
-                if let Some(name) = integrator {
-                    next.integrator = name.parse::<Integrator>()?;
-                }
+                let (mut next, tree) = with_options(current, tree, &render)?;
                 if let Some(exposure) = exposure {
                     if !(-20.0..=20.0).contains(&exposure) {
                         return Err(format!(
@@ -143,15 +140,7 @@ impl Command {
                     }
                     next.levels = [first, last];
                 }
-                Ok(Change::View(next))
-            }
-            Command::Rebuild {
-                builder,
-                width,
-                max_leaf_size,
-            } => {
-                let builder = builder.parse().map_err(|e| format!("{e}"))?;
-                TreeSettings::new(builder, width, max_leaf_size).map(Change::Rebuild)
+                Ok(Change::Settings { view: next, tree })
             }
             Command::Pick { x, y } => {
                 if x >= width || y >= height {
@@ -171,13 +160,6 @@ fn finite_vec(name: &str, v: [f32; 3]) -> Result<Vec3, String> {
     match v.iter().all(|c| c.is_finite() && c.abs() < 1e30) {
         true => Ok(Vec3::from(v)),
         false => Err(format!("{name} must be three finite numbers, not {v:?}")),
-    }
-}
-
-fn check_range(name: &str, value: u32, min: u32, max: u32) -> Result<(), String> {
-    match (min..=max).contains(&value) {
-        true => Ok(()),
-        false => Err(format!("{name} must be in {min}..={max}, not {value}")),
     }
 }
 
@@ -241,6 +223,8 @@ pub struct TreeReport {
     pub instances: usize,
     pub width: u32,
     pub max_leaf_size: u32,
+    /// Triangles tested without the watertight test's double-precision step.
+    pub fast_triangles: bool,
     pub build_ms: f64,
     /// SAH cost with the root's area as 1 (the scene's own primitives' tree).
     pub sah: f32,
@@ -296,6 +280,7 @@ pub enum ServerMessage {
         widths: [u32; 3],
         modes: Vec<Mode>,
         integrators: Vec<String>,
+        samplers: Vec<String>,
     },
     /// The tree after a build.
     Tree(TreeReport),
@@ -347,18 +332,14 @@ pub struct NodeChild {
     pub sah_share: f32,
 }
 
-/// The settings as the page shows them.
+/// The settings as the page shows them: the render options the viewer changes (the
+/// others left out), and what only the viewer has.
 #[derive(Clone, Debug, Serialize)]
 pub struct ViewSettingsState {
-    pub spp: u32,
-    pub max_depth: u32,
-    pub integrator: String,
+    pub render: RenderOptions,
     pub exposure: f32,
     pub mode: Mode,
     pub levels: [u32; 2],
-    pub builder: String,
-    pub width: u32,
-    pub max_leaf_size: u32,
 }
 
 /// What a frame shows.

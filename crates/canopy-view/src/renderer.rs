@@ -93,7 +93,8 @@ fn build(session: &Session, tree: &TreeSettings) -> TreeReport {
         tree.width,
         &tree.params(),
         None,
-    );
+    )
+    .with_triangle_test(tree.triangle_test);
     let report = tree_report(&scene, &accel, tree);
     *session.accel.lock().unwrap_or_else(|e| e.into_inner()) = Some(Arc::new(accel));
     report
@@ -133,6 +134,7 @@ fn tree_report(scene: &Scene, accel: &Accel, settings: &TreeSettings) -> TreeRep
         instances: scene.instances.len(),
         width: settings.width.children(),
         max_leaf_size: settings.max_leaf_size,
+        fast_triangles: settings.triangle_test == canopy_bvh::TriangleTest::Fast,
         build_ms: accel.build_time.as_secs_f64() * 1e3,
         sah: stats.sah_cost,
         epo,
@@ -157,6 +159,9 @@ fn apply_view(session: &Session, view: &ViewSettings, size: Option<(u32, u32)>) 
     s.spp = view.spp;
     s.max_depth = view.max_depth;
     s.integrator = view.integrator;
+    s.seed = view.seed;
+    s.russian_roulette = view.russian_roulette;
+    s.sampler = view.sampler;
 }
 
 fn heatmap(session: &Session, control: &Control, accel: &Accel) {
@@ -239,8 +244,10 @@ fn run_job(
         kind: AccelKind::Bvh(control.tree.builder),
         width: control.tree.width,
         params: control.tree.params(),
+        triangle_test: control.tree.triangle_test,
         ..Structure::default()
     };
+    job.schedule = control.view.schedule;
     job.resume = resume;
     job.aovs = control.view.mode.aovs();
     let samples_before = job.resume.as_ref().map_or(0, |a| a.samples);

@@ -8,7 +8,7 @@ use crate::protocol::{
 };
 use crate::save::save;
 use crate::session::Session;
-use crate::settings::Mode;
+use crate::settings::{current_options, Mode};
 use crate::tree_view::node_report;
 use crate::walk::{primary_ray, walk};
 use axum::extract::ws::{Message, WebSocket, WebSocketUpgrade};
@@ -18,7 +18,7 @@ use axum::response::{IntoResponse, Response};
 use axum::routing::get;
 use axum::Router;
 use canopy_bvh::Builder;
-use canopy_render::Integrator;
+use canopy_render::{Integrator, Sampler};
 use serde::Deserialize;
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -170,16 +170,19 @@ async fn talk(ws: &mut WebSocket, app: &App) -> Result<(), Closed> {
 async fn command(app: &App, text: &str) -> Option<ServerMessage> {
     let session = &app.session;
     let current = session.control();
-    let change =
-        Command::parse(text).and_then(|c| c.apply(&current.view, session.width, session.height));
+    let change = Command::parse(text)
+        .and_then(|c| c.apply(&current.view, &current.tree, session.width, session.height));
     match change {
         Err(message) => Some(ServerMessage::Error { message }),
         Ok(Change::View(view)) => {
             session.set_view(view);
             None
         }
-        Ok(Change::Rebuild(tree)) => {
-            session.set_tree(tree);
+        Ok(Change::Settings { view, tree }) => {
+            if tree != current.tree {
+                session.set_tree(tree);
+            }
+            session.set_view(view);
             None
         }
         Ok(Change::Pick { x, y }) => {
@@ -282,15 +285,10 @@ fn hello(session: &Session) -> ServerMessage {
         height: session.height,
         camera: CameraState::from(&v.camera),
         settings: ViewSettingsState {
-            spp: v.spp,
-            max_depth: v.max_depth,
-            integrator: v.integrator.name().into(),
+            render: current_options(v, &c.tree),
             exposure: v.exposure,
             mode: v.mode,
             levels: v.levels,
-            builder: c.tree.builder.name().into(),
-            width: c.tree.width.children(),
-            max_leaf_size: c.tree.max_leaf_size,
         },
         builders: Builder::ALL
             .iter()
@@ -302,5 +300,6 @@ fn hello(session: &Session) -> ServerMessage {
         widths: [2, 4, 8],
         modes: Mode::ALL.to_vec(),
         integrators: Integrator::ALL.iter().map(|i| i.name().into()).collect(),
+        samplers: Sampler::ALL.iter().map(|s| s.name().into()).collect(),
     }
 }

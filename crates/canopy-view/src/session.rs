@@ -65,8 +65,7 @@ pub(crate) struct Session {
 }
 
 impl Session {
-    pub fn new(scene: Scene, tree: TreeSettings) -> Self {
-        let view = ViewSettings::of_scene(&scene);
+    pub fn new(scene: Scene, view: ViewSettings, tree: TreeSettings) -> Self {
         Self {
             name: scene.name.clone(),
             width: scene.settings.width,

@@ -2,9 +2,10 @@
 //! tree (builder, width, leaf size). A change of the view restarts accumulation; a change
 //! of the tree rebuilds it first.
 
-use canopy_bvh::{BuildParams, Builder, BvhWidth};
+use canopy_bvh::{BuildParams, Builder, BvhWidth, TriangleTest};
+use canopy_job::{Device, RenderOptions};
 use canopy_render::camera::CameraSpec;
-use canopy_render::{AovSet, Integrator, Scene};
+use canopy_render::{AccelKind, AovSet, Integrator, Sampler, Scene, Schedule};
 use serde::{Deserialize, Serialize};
 
 /// What the image shows.
@@ -50,6 +51,11 @@ pub struct ViewSettings {
     pub spp: u32,
     pub max_depth: u32,
     pub integrator: Integrator,
+    pub seed: u64,
+    pub russian_roulette: bool,
+    pub sampler: Sampler,
+    /// The order paths are traced in (the image is the same in each).
+    pub schedule: Schedule,
     /// Stops of exposure applied to the image shown (not to the samples).
     pub exposure: f32,
     pub mode: Mode,
@@ -66,6 +72,10 @@ impl ViewSettings {
             spp: s.spp,
             max_depth: s.max_depth,
             integrator: s.integrator,
+            seed: s.seed,
+            russian_roulette: s.russian_roulette,
+            sampler: s.sampler,
+            schedule: Schedule::default(),
             exposure: 0.0,
             mode: Mode::Render,
             levels: [0, 3],
@@ -73,13 +83,16 @@ impl ViewSettings {
     }
 
     /// Whether going from `self` to `next` leaves the accumulated samples valid: only
-    /// the exposure, the target spp, the boxes drawn over the render or their levels, or
-    /// the layer shown of the same layers changed (the caller checks that the samples
-    /// are not more than the new target).
+    /// the exposure, the target spp, the schedule, the boxes drawn over the render or
+    /// their levels, or the layer shown of the same layers changed (the caller checks
+    /// that the samples are not more than the new target).
     pub fn keeps_samples(&self, next: &ViewSettings) -> bool {
         self.camera == next.camera
             && self.max_depth == next.max_depth
             && self.integrator == next.integrator
+            && self.seed == next.seed
+            && self.russian_roulette == next.russian_roulette
+            && self.sampler == next.sampler
             && self.mode != Mode::Heatmap
             && next.mode != Mode::Heatmap
             && self.mode.aovs() == next.mode.aovs()
@@ -92,6 +105,7 @@ pub struct TreeSettings {
     pub builder: Builder,
     pub width: BvhWidth,
     pub max_leaf_size: u32,
+    pub triangle_test: TriangleTest,
 }
 
 impl Default for TreeSettings {
@@ -100,31 +114,170 @@ impl Default for TreeSettings {
             builder: Builder::default(),
             width: BvhWidth::default(),
             max_leaf_size: BuildParams::default().max_leaf_size,
+            triangle_test: TriangleTest::default(),
         }
     }
 }
 
 impl TreeSettings {
-    /// A tree of `builder` with a width and a leaf size as a page or a caller gives
-    /// them (children per node; primitives), or why there is none such.
-    pub fn new(builder: Builder, width: u32, max_leaf_size: u32) -> Result<Self, String> {
-        let width: BvhWidth = width.to_string().parse()?;
-        if !(1..=256).contains(&max_leaf_size) {
-            return Err(format!(
-                "max_leaf_size must be in 1..=256, not {max_leaf_size}"
-            ));
-        }
-        Ok(Self {
-            builder,
-            width,
-            max_leaf_size,
-        })
-    }
-
     pub fn params(&self) -> BuildParams {
         BuildParams {
             max_leaf_size: self.max_leaf_size,
             ..BuildParams::default()
         }
+    }
+}
+
+/// Options a running viewer cannot change: they are given when it starts.
+const FIXED_OPTIONS: [&str; 3] = ["size", "device", "threads"];
+
+/// The view and tree with `options` put in, or why they cannot be: an option out of
+/// range, one the viewer cannot change while it runs (`size`, `device`, `threads`), or
+/// no tree (`bvh = "none"`: the viewer walks a tree).
+pub fn with_options(
+    view: &ViewSettings,
+    tree: &TreeSettings,
+    options: &RenderOptions,
+) -> Result<(ViewSettings, TreeSettings), String> {
+    if let Some(name) = options
+        .given()
+        .into_iter()
+        .find(|n| FIXED_OPTIONS.contains(n))
+    {
+        return Err(format!(
+            "`{name}` is set when the viewer starts and cannot change while it runs"
+        ));
+    }
+    starting_options(view, tree, options)
+}
+
+/// As [`with_options`], for the options a viewer starts with: any, where the size and
+/// threads are the caller's to apply and the device is the CPU.
+pub fn starting_options(
+    view: &ViewSettings,
+    tree: &TreeSettings,
+    options: &RenderOptions,
+) -> Result<(ViewSettings, TreeSettings), String> {
+    options.check()?;
+    if options.device == Some(Device::Gpu) {
+        return Err("the viewer renders on the CPU: drop device=\"gpu\"".into());
+    }
+    let mut settings = canopy_render::RenderSettings {
+        spp: view.spp,
+        max_depth: view.max_depth,
+        seed: view.seed,
+        integrator: view.integrator,
+        russian_roulette: view.russian_roulette,
+        sampler: view.sampler,
+        ..canopy_render::RenderSettings::default()
+    };
+    let without_size = RenderOptions {
+        size: None,
+        ..options.clone()
+    };
+    without_size.apply_to_settings(&mut settings)?;
+    let next_view = ViewSettings {
+        spp: settings.spp,
+        max_depth: settings.max_depth,
+        seed: settings.seed,
+        integrator: settings.integrator,
+        russian_roulette: settings.russian_roulette,
+        sampler: settings.sampler,
+        schedule: options.schedule.unwrap_or(view.schedule),
+        ..view.clone()
+    };
+    let builder = match options.bvh {
+        None => tree.builder,
+        Some(AccelKind::Bvh(builder)) => builder,
+        Some(AccelKind::None) => {
+            return Err("the viewer renders through a tree: choose a builder, not `none`".into())
+        }
+    };
+    let next_tree = TreeSettings {
+        builder,
+        width: options.width.unwrap_or(tree.width),
+        max_leaf_size: options.max_leaf_size.unwrap_or(tree.max_leaf_size),
+        triangle_test: match options.fast_triangles {
+            None => tree.triangle_test,
+            Some(true) => TriangleTest::Fast,
+            Some(false) => TriangleTest::Watertight,
+        },
+    };
+    Ok((next_view, next_tree))
+}
+
+/// The options a page shows: every one the viewer changes, as they are now.
+pub fn current_options(view: &ViewSettings, tree: &TreeSettings) -> RenderOptions {
+    RenderOptions {
+        spp: Some(view.spp),
+        max_depth: Some(view.max_depth),
+        seed: Some(view.seed),
+        integrator: Some(view.integrator),
+        russian_roulette: Some(view.russian_roulette),
+        sampler: Some(view.sampler),
+        bvh: Some(AccelKind::Bvh(tree.builder)),
+        width: Some(tree.width),
+        max_leaf_size: Some(tree.max_leaf_size),
+        fast_triangles: Some(tree.triangle_test == TriangleTest::Fast),
+        schedule: Some(view.schedule),
+        ..RenderOptions::default()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn start() -> (ViewSettings, TreeSettings) {
+        let scene = canopy_render::load_scene("paper-1").unwrap();
+        (ViewSettings::of_scene(&scene), TreeSettings::default())
+    }
+
+    #[test]
+    fn options_a_running_viewer_cannot_change_are_refused_by_name() {
+        let (view, tree) = start();
+        for name in FIXED_OPTIONS {
+            let options = RenderOptions::from_json(&match name {
+                "size" => r#"{"size": [8, 8]}"#.to_string(),
+                "device" => r#"{"device": "cpu"}"#.to_string(),
+                _ => format!(r#"{{"{name}": 1}}"#),
+            })
+            .unwrap();
+            let e = with_options(&view, &tree, &options).unwrap_err();
+            assert!(e.contains(name), "{e}");
+        }
+    }
+
+    #[test]
+    fn what_changes_the_samples_restarts_them_and_the_tree_options_go_to_the_tree() {
+        let (view, tree) = start();
+        let change = |json: &str| {
+            let options = RenderOptions::from_json(json).unwrap();
+            with_options(&view, &tree, &options).unwrap()
+        };
+        for restarts in [
+            r#"{"seed": 5}"#,
+            r#"{"sampler": "independent"}"#,
+            r#"{"russian_roulette": false}"#,
+            r#"{"max_depth": 2}"#,
+        ] {
+            let (next, next_tree) = change(restarts);
+            assert!(!view.keeps_samples(&next), "{restarts}");
+            assert_eq!(next_tree, tree, "{restarts}");
+        }
+        let (next, next_tree) = change(r#"{"spp": 99, "schedule": "depth"}"#);
+        assert!(view.keeps_samples(&next));
+        assert_eq!((next.spp, next.schedule), (99, Schedule::Depth));
+        assert_eq!(next_tree, tree);
+        let (next, next_tree) = change(r#"{"bvh": "lbvh", "fast_triangles": true}"#);
+        assert_eq!(next, view);
+        assert_eq!(next_tree.builder, Builder::Lbvh);
+        assert_eq!(next_tree.triangle_test, TriangleTest::Fast);
+        // What the page is shown reads back as the same view and tree.
+        let shown = current_options(&next, &next_tree);
+        assert_eq!(
+            with_options(&view, &tree, &shown).unwrap(),
+            (next, next_tree)
+        );
     }
 }

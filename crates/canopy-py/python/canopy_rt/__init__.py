@@ -24,7 +24,7 @@ from typing import Callable, List, NamedTuple, Optional, Sequence, Tuple, Union
 import numpy as np
 
 from . import _canopy
-from ._arguments import naming_arguments, naming_arguments_of_methods
+from ._arguments import _fault, naming_arguments, naming_arguments_of_methods
 from .scene import Scene, _transform, dielectric, emissive, eval_material, lambertian, metal, pbr
 from .ray_scene import ClosestPoints, RayHitLists, RayHits, RayScene
 from .view import Viewer
@@ -54,6 +54,7 @@ __all__ = [
     "load_scene",
     "read_image",
     "render",
+    "RENDER_OPTIONS",
     "view",
     "Viewer",
     "denoise",
@@ -374,6 +375,31 @@ def load_scene(scene: str, *, allow_paths: Sequence = ()) -> SceneInfo:
     return _canopy.load_scene(str(scene), [str(p) for p in allow_paths])
 
 
+#: The names of canopy's render options: one type in the library (the settings
+#: ``canopy render``'s flags, :func:`render`'s, :func:`view`'s and
+#: :func:`canopy_rt.distributed.render`'s keywords and the viewer's page all set).
+RENDER_OPTIONS: Tuple[str, ...] = tuple(_canopy.RENDER_OPTIONS)
+
+
+# The render options held in 64 bits (the other integers are 32-bit).
+_WIDE_OPTIONS = frozenset({"seed", "threads"})
+
+
+def _render_options(given: dict) -> dict:
+    """The render options among a function's arguments, those left as None dropped;
+    a size is made a pair of ints. An integer no option can hold is named as
+    :func:`naming_arguments` names it (the native error would say only "overflow")."""
+    options = {name: given[name] for name in RENDER_OPTIONS if given.get(name) is not None}
+    for name, value in options.items():
+        fault = _fault(value)
+        if fault is not None and (fault[0] < 2 or name not in _WIDE_OPTIONS):
+            raise ValueError(f"{name}={value!r} {fault[1]}")
+    if "size" in options:
+        size = options["size"]
+        options["size"] = (int(size[0]), int(size[1]))
+    return options
+
+
 @naming_arguments
 def render(
     scene=None,
@@ -388,13 +414,15 @@ def render(
     device: str = "cpu",
     bvh: str = "binned-sah",
     width: int = 8,
+    max_leaf_size: Optional[int] = None,
+    fast_triangles: bool = False,
     threads: Optional[int] = None,
+    schedule: str = "wavefront",
     progress: Optional[Callable[[int, int], None]] = None,
     region: Optional[Tuple[int, int, int, int]] = None,
     checkpoint=None,
     checkpoint_every: float = 60.0,
     resume=None,
-    schedule: str = "wavefront",
     samples: Optional[Tuple[int, int]] = None,
     camera: Optional[dict] = None,
     instances: Optional[dict] = None,
@@ -433,6 +461,13 @@ def render(
     ``schedule`` is the order the CPU traces paths in: ``"wavefront"`` (many at a time,
     stage by stage) or ``"depth"`` (one at a time); the image is the same bit for bit.
 
+    ``bvh`` (``"none"`` or a builder of :func:`builders`), ``width`` (children per node:
+    2, 4 or 8) and ``max_leaf_size`` choose the tree; ``fast_triangles=True`` tests
+    triangles without the watertight test's double-precision step (Embree's default
+    mode: fewer instructions; a ray within rounding of a shared edge may hit every
+    triangle there), on the CPU only. The render options (``RENDER_OPTIONS``) are those
+    ``canopy render`` takes as flags, by the same names.
+
     A scene file reads only the files in its own folder (and below); ``allow_paths``
     lists further folders its meshes, models and maps may come from.
 
@@ -448,31 +483,19 @@ def render(
     :func:`denoise`), guided by the albedo and normal it renders for it; it fails before
     rendering when OIDN is not installed.
     """
-    if size is not None:
-        size = (int(size[0]), int(size[1]))
+    options = _render_options(locals())
     if region is not None:
         region = tuple(int(v) for v in region)
         if len(region) != 4:
             raise ValueError(f"region must be (x, y, width, height), not {region!r}")
     return _canopy.render(
         None if scene is None else scene._native.native if isinstance(scene, Scene) else str(scene),
-        spp=spp,
-        size=size,
-        seed=seed,
-        max_depth=max_depth,
-        integrator=integrator,
-        russian_roulette=russian_roulette,
-        sampler=sampler,
-        device=device,
-        bvh=bvh,
-        width=int(width),
-        threads=threads,
+        options,
         progress=progress,
         region=region,
         checkpoint=None if checkpoint is None else str(checkpoint),
         checkpoint_every=float(checkpoint_every),
         resume=None if resume is None else str(resume),
-        schedule=str(schedule),
         samples=None if samples is None else (int(samples[0]), int(samples[1])),
         camera=None if camera is None else dict(camera),
         instances=None if instances is None else {int(k): _transform(v) for k, v in instances.items()},
@@ -536,10 +559,16 @@ def view(
     size: Optional[Tuple[int, int]] = None,
     spp: Optional[int] = None,
     max_depth: Optional[int] = None,
-    threads: Optional[int] = None,
+    seed: Optional[int] = None,
+    integrator: Optional[str] = None,
+    russian_roulette: Optional[bool] = None,
+    sampler: Optional[str] = None,
     bvh: str = "binned-sah",
     width: int = 8,
     max_leaf_size: int = 4,
+    fast_triangles: bool = False,
+    schedule: str = "wavefront",
+    threads: Optional[int] = None,
     output_dir=".",
     allow_paths: Sequence = (),
     reload: bool = True,
@@ -554,19 +583,15 @@ def view(
     clicked pixel's ray through the tree, and saves images into ``output_dir``. It is
     served on ``bind`` (this machine only, a free port, by default) behind a random token
     that ``url`` carries. A scene read from files is loaded again when they change
-    (``reload=False``: not). ``size`` is (width, height); the others start as named and
-    the page changes them. The call returns at once: the viewer runs on threads of its
-    own until stopped."""
+    (``reload=False``: not). ``size`` is (width, height); the render options start as
+    :func:`render` takes them (the viewer renders on the CPU) and the page changes them,
+    all but ``size`` and ``threads``. The call returns at once: the viewer runs on
+    threads of its own until stopped."""
+    options = _render_options(locals())
     native = _canopy.view(
         scene._native.native if isinstance(scene, Scene) else str(scene),
+        options,
         bind=str(bind),
-        size=None if size is None else (int(size[0]), int(size[1])),
-        spp=spp,
-        max_depth=max_depth,
-        threads=threads,
-        bvh=str(bvh),
-        width=int(width),
-        max_leaf_size=int(max_leaf_size),
         output_dir=str(output_dir),
         allow_paths=[str(p) for p in allow_paths],
         reload=bool(reload),

@@ -15,25 +15,16 @@ def load_mesh(path: str) -> Tuple[np.ndarray, np.ndarray]: ...
 def eval_material(material: dict, wo: np.ndarray, wi: np.ndarray) -> Tuple[np.ndarray, np.ndarray]: ...
 def read_image(path: str) -> np.ndarray: ...
 def write_image(path: str, image: np.ndarray) -> None: ...
+RENDER_OPTIONS: list[str]
+
 def render(
     scene: Union[str, Scene, None],
-    spp: Optional[int] = ...,
-    size: Optional[Tuple[int, int]] = ...,
-    seed: Optional[int] = ...,
-    max_depth: Optional[int] = ...,
-    integrator: Optional[str] = ...,
-    russian_roulette: Optional[bool] = ...,
-    sampler: Optional[str] = ...,
-    device: str = ...,
-    bvh: str = ...,
-    width: int = ...,
-    threads: Optional[int] = ...,
+    options: Optional[dict] = ...,
     progress: Optional[Callable[[int, int], None]] = ...,
     region: Optional[Tuple[int, int, int, int]] = ...,
     checkpoint: Optional[str] = ...,
     checkpoint_every: float = ...,
     resume: Optional[str] = ...,
-    schedule: str = ...,
     samples: Optional[Tuple[int, int]] = ...,
     camera: Optional[dict] = ...,
     instances: Optional[dict] = ...,

@@ -49,7 +49,7 @@ from typing import Callable, Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from . import _canopy
-from . import Scene, __version__, load_scene, read_image, scenes, write_image
+from . import Scene, __version__, _render_options, load_scene, read_image, scenes, write_image
 from .scene import _transform
 from . import denoise as denoise_image
 from . import render as render_locally
@@ -299,6 +299,9 @@ def render(
     sampler: Optional[str] = None,
     bvh: str = "binned-sah",
     width: int = 8,
+    max_leaf_size: Optional[int] = None,
+    fast_triangles: bool = False,
+    schedule: str = "wavefront",
     device: str = "cpu",
     tile: int = 64,
     samples_per_task: Optional[int] = None,
@@ -336,11 +339,16 @@ def render(
     render`` checks its ``-o``: its format, its folder, that it is none of the scene's
     files (links count) and holds no render's checkpoint.
 
+    The render options (``spp`` to ``schedule``, :data:`canopy_rt.RENDER_OPTIONS`) are
+    :func:`canopy_rt.render`'s, but for ``threads``: each task's are
+    ``threads_per_task``.
+
     ``denoise=True`` has every tile render its albedo and normal too, and denoises the
     whole image on the driver once the tiles are in (a tile denoised alone would show
     seams): the image :func:`canopy_rt.render` gives with ``denoise=True``. Open Image
     Denoise must be found on the driver (checked before any tile); tiles cannot be split
     into sample ranges then."""
+    given = _render_options(locals())
     if int(tile) < 1:
         raise ValueError(f"tile must be at least 1 pixel, not {tile}")
     if samples_per_task is not None and int(samples_per_task) < 1:
@@ -357,13 +365,9 @@ def render(
     image_width, image_height = (int(size[0]), int(size[1])) if size else (settings["width"], settings["height"])
     if device not in ("cpu", "gpu"):
         raise ValueError(f'device must be "cpu" or "gpu", not {device!r}')
-    options = dict(spp=spp, size=(image_width, image_height), seed=seed, max_depth=max_depth,
-                   integrator=integrator, russian_roulette=russian_roulette, sampler=sampler, bvh=bvh,
-                   width=width, threads=int(threads_per_task))
+    options = dict(given, size=(image_width, image_height), threads=int(threads_per_task))
     if allow_paths:
         options["allow_paths"] = allow_paths
-    if device == "gpu":
-        options["device"] = "gpu"
 
     total_spp = int(spp) if spp is not None else settings["spp"]
     step = int(samples_per_task) if samples_per_task else total_spp
@@ -526,6 +530,9 @@ def render_frames(
     sampler: Optional[str] = None,
     bvh: str = "binned-sah",
     width: int = 8,
+    max_leaf_size: Optional[int] = None,
+    fast_triangles: bool = False,
+    schedule: str = "wavefront",
     device: str = "cpu",
     threads_per_task: int = 1,
     address: Optional[str] = None,
@@ -544,6 +551,7 @@ def render_frames(
     is already there are skipped, so running again after a failure renders only the
     rest. ``progress(done, total)`` is called as frames are written. ``allow_paths``
     is as for :func:`render`."""
+    given = _render_options(locals())
     allow_paths = [os.path.abspath(p) for p in allow_paths]
     info = _described(scene, allow_paths)
     changes = [_frame_changes(i, f, info.counts["instances"]) for i, f in enumerate(frames)]
@@ -558,13 +566,9 @@ def render_frames(
     if device not in ("cpu", "gpu"):
         raise ValueError(f'device must be "cpu" or "gpu", not {device!r}')
     bundle = _bundle(scene, info)
-    options = dict(spp=spp, size=size, seed=seed, max_depth=max_depth, integrator=integrator,
-                   russian_roulette=russian_roulette, sampler=sampler, bvh=bvh, width=width,
-                   threads=int(threads_per_task))
+    options = dict(given, threads=int(threads_per_task))
     if allow_paths:
         options["allow_paths"] = allow_paths
-    if device == "gpu":
-        options["device"] = "gpu"
     todo = [i for i, path in enumerate(paths) if not os.path.exists(path)]
     done = len(paths) - len(todo)
     if progress is not None and done:
@@ -708,11 +712,10 @@ def bench_paper(
     return os.path.join(str(out), "results.md")
 
 
-def main(argv=None) -> int:
-    """``python -m canopy_rt.distributed render SCENE -o IMAGE [options]``, or
-    ``... frames SCENE --frames FRAMES.json -o 'f{frame:04d}.exr' [options]``."""
+def _parser():
+    """The command line's parser: canopy's render options as ``canopy render``'s flags
+    (each task's threads are ``--threads-per-task``)."""
     import argparse
-    import sys
 
     parser = argparse.ArgumentParser(prog="python -m canopy_rt.distributed",
                                      description="Render a canopy scene on a Ray cluster.")
@@ -727,6 +730,15 @@ def main(argv=None) -> int:
         command.add_argument("--seed", type=int)
         command.add_argument("--depth", type=int, dest="max_depth")
         command.add_argument("--integrator", choices=["path", "bsdf"])
+        command.add_argument("--no-roulette", dest="russian_roulette", action="store_const",
+                             const=False, help="never end paths early by Russian roulette")
+        command.add_argument("--sampler", help="sobol or independent")
+        command.add_argument("--bvh", default="binned-sah", help="BVH builder (canopy builders)")
+        command.add_argument("--width", type=int, default=8, help="children per node: 2, 4 or 8")
+        command.add_argument("--max-leaf-size", type=int)
+        command.add_argument("--fast-triangles", action="store_true",
+                             help="triangles without the watertight test's double-precision step")
+        command.add_argument("--schedule", default="wavefront", help="wavefront or depth")
         command.add_argument("--device", choices=["cpu", "gpu"], default="cpu")
         command.add_argument("--threads-per-task", type=int, default=1)
         command.add_argument("--address", help="Ray cluster address ('auto': this machine's "
@@ -749,6 +761,15 @@ def main(argv=None) -> int:
     frames_command.add_argument("-o", "--output", required=True,
                                 help="file of each frame by its number, as f{frame:04d}.exr; "
                                 "frames already there are skipped")
+    return parser
+
+
+def main(argv=None) -> int:
+    """``python -m canopy_rt.distributed render SCENE -o IMAGE [options]``, or
+    ``... frames SCENE --frames FRAMES.json -o 'f{frame:04d}.exr' [options]``."""
+    import sys
+
+    parser = _parser()
     args = parser.parse_args(argv)
     size = None
     if args.size:
@@ -762,10 +783,9 @@ def main(argv=None) -> int:
     def show(done: int, total: int) -> None:
         print(f"\r{unit} {done}/{total}", end="" if done < total else "\n", file=sys.stderr)
 
-    common = dict(spp=args.spp, size=size, seed=args.seed, max_depth=args.max_depth,
-                  integrator=args.integrator, device=args.device,
-                  threads_per_task=args.threads_per_task, address=args.address, progress=show,
-                  allow_paths=args.allow_path)
+    options = {name: getattr(args, name) for name in _canopy.RENDER_OPTIONS if name != "threads"}
+    common = dict(options, size=size, threads_per_task=args.threads_per_task,
+                  address=args.address, progress=show, allow_paths=args.allow_path)
     try:
         if args.command == "render":
             render(args.scene, tile=args.tile, samples_per_task=args.samples_per_task,

@@ -2,6 +2,7 @@
 //! picks, hostile messages, slow clients and the last page closing. Every wait is on a
 //! message or a state, never a fixed time (the timeouts only end a failing test).
 
+use canopy_job::RenderOptions;
 use canopy_view::{ViewOptions, ViewServer};
 use futures_util::{SinkExt, StreamExt};
 use serde_json::{json, Value};
@@ -14,6 +15,14 @@ use tokio_tungstenite::{MaybeTlsStream, WebSocketStream};
 /// Long enough for a loaded machine; only a failing test waits this long.
 const PATIENCE: Duration = Duration::from_secs(120);
 
+/// Options that render on two threads.
+fn two_threads() -> RenderOptions {
+    RenderOptions {
+        threads: Some(2),
+        ..RenderOptions::default()
+    }
+}
+
 /// A small image of the first reference scene (spheres, a few lights).
 fn server(width: u32, height: u32, spp: u32) -> ViewServer {
     let mut scene = canopy_render::load_scene("paper-1").unwrap();
@@ -22,7 +31,7 @@ fn server(width: u32, height: u32, spp: u32) -> ViewServer {
     scene.settings.spp = spp;
     scene.settings.max_depth = 4;
     let options = ViewOptions {
-        threads: Some(2),
+        render: two_threads(),
         ..ViewOptions::default()
     };
     ViewServer::start(scene, options).unwrap()
@@ -187,7 +196,8 @@ fn frames_arrive_and_refine_to_the_target() {
     runtime().block_on(async {
         let mut page = Client::connect(&server).await;
         assert_eq!(page.hello["width"], 48);
-        assert_eq!(page.hello["settings"]["spp"], 6);
+        assert_eq!(page.hello["settings"]["render"]["spp"], 6);
+        assert_eq!(page.hello["settings"]["render"]["bvh"], "binned-sah");
         // A preview at a quarter of the size first, then full-size passes 1..=6. (A
         // page that reads more slowly than passes are made skips frames, the preview
         // among them: only what arrives is checked.)
@@ -254,7 +264,7 @@ fn a_rebuild_changes_the_tree_statistics() {
         assert_eq!(first["width"], 8);
         assert!(first["nodes"].as_u64() > Some(0));
         assert!(first["sah"].as_f64() > Some(0.0));
-        page.send(json!({"type": "rebuild", "builder": "sort-x", "width": 2, "max_leaf_size": 1}))
+        page.send(json!({"type": "settings", "render": {"bvh": "sort-x", "width": 2, "max_leaf_size": 1}}))
             .await;
         let second = page.next_of("tree").await;
         assert_eq!(second["builder"], "sort-x");
@@ -268,6 +278,63 @@ fn a_rebuild_changes_the_tree_statistics() {
         // Frames go on through the new tree.
         page.frame().await;
     });
+}
+
+/// The viewer starts with the render options every front end takes, shows them, and
+/// refuses, before it listens, those it cannot honour.
+#[test]
+fn the_viewer_starts_with_the_render_options_it_is_given() {
+    let scene = canopy_render::load_scene("paper-1").unwrap();
+    let options = |render: RenderOptions| ViewOptions {
+        render: RenderOptions {
+            threads: Some(2),
+            ..render
+        },
+        ..ViewOptions::default()
+    };
+    let given = RenderOptions::from_json(
+        r#"{"size": [24, 16], "spp": 5, "seed": 9, "sampler": "independent", "bvh": "sweep-sah", "width": 4, "max_leaf_size": 2, "fast_triangles": true, "schedule": "depth"}"#,
+    )
+    .unwrap();
+    let server = ViewServer::start(scene.clone(), options(given)).unwrap();
+    runtime().block_on(async {
+        let mut page = Client::connect(&server).await;
+        assert_eq!(
+            (page.hello["width"].clone(), page.hello["height"].clone()),
+            (json!(24), json!(16))
+        );
+        let shown = &page.hello["settings"]["render"];
+        for (name, value) in [
+            ("spp", json!(5)),
+            ("seed", json!(9)),
+            ("sampler", json!("independent")),
+            ("bvh", json!("sweep-sah")),
+            ("width", json!(4)),
+            ("max_leaf_size", json!(2)),
+            ("fast_triangles", json!(true)),
+            ("schedule", json!("depth")),
+        ] {
+            assert_eq!(shown[name], value, "{name}");
+        }
+        let tree = page.next_of("tree").await;
+        assert_eq!(
+            (tree["builder"].clone(), tree["width"].clone()),
+            (json!("sweep-sah"), json!(4))
+        );
+    });
+    drop(server);
+    for refused in [
+        r#"{"device": "gpu"}"#,
+        r#"{"bvh": "none"}"#,
+        r#"{"spp": 0}"#,
+        r#"{"max_leaf_size": 1000}"#,
+    ] {
+        let render = RenderOptions::from_json(refused).unwrap();
+        assert!(
+            ViewServer::start(scene.clone(), options(render)).is_err(),
+            "{refused}"
+        );
+    }
 }
 
 #[test]
@@ -307,17 +374,22 @@ fn hostile_messages_get_an_error_and_change_nothing() {
             json!("not an object").to_string(),
             "{\"type\":".to_string(),
             json!({"type": "format_disk"}).to_string(),
-            json!({"type": "settings", "spp": 0}).to_string(),
-            json!({"type": "settings", "max_depth": 100000}).to_string(),
-            json!({"type": "settings", "integrator": "magic"}).to_string(),
+            json!({"type": "settings", "render": {"spp": 0}}).to_string(),
+            json!({"type": "settings", "render": {"max_depth": 100000}}).to_string(),
+            json!({"type": "settings", "render": {"integrator": "magic"}}).to_string(),
             json!({"type": "settings", "exposure": 1e30}).to_string(),
             json!({"type": "settings", "levels": [5, 2]}).to_string(),
-            json!({"type": "settings", "spp": 4, "extra": true}).to_string(),
-            json!({"type": "rebuild", "builder": "nope", "width": 8, "max_leaf_size": 4})
-                .to_string(),
-            json!({"type": "rebuild", "builder": "lbvh", "width": 3, "max_leaf_size": 4})
-                .to_string(),
-            json!({"type": "rebuild", "builder": "lbvh", "width": 8, "max_leaf_size": 0})
+            json!({"type": "settings", "render": {"spp": 4}, "extra": true}).to_string(),
+            json!({"type": "settings", "render": {"spp": 4, "extra": true}}).to_string(),
+            json!({"type": "settings", "spp": 4}).to_string(),
+            json!({"type": "settings", "render": {"bvh": "nope"}}).to_string(),
+            json!({"type": "settings", "render": {"bvh": "none"}}).to_string(),
+            json!({"type": "settings", "render": {"width": 3}}).to_string(),
+            json!({"type": "settings", "render": {"max_leaf_size": 0}}).to_string(),
+            json!({"type": "settings", "render": {"size": [8, 8]}}).to_string(),
+            json!({"type": "settings", "render": {"device": "gpu"}}).to_string(),
+            json!({"type": "settings", "render": {"threads": 1}}).to_string(),
+            json!({"type": "rebuild", "builder": "lbvh", "width": 8, "max_leaf_size": 4})
                 .to_string(),
             json!({"type": "camera", "look_from": [0, 0, 0], "look_at": [0, 0, 0], "vfov": 40})
                 .to_string(),
@@ -353,7 +425,8 @@ fn hostile_messages_get_an_error_and_change_nothing() {
         // Nothing changed: the same generation renders on.
         assert_eq!(server_generation(&mut page).await, generation_before);
         // And the session still obeys a good command.
-        page.send(json!({"type": "settings", "spp": 3})).await;
+        page.send(json!({"type": "settings", "render": {"spp": 3}}))
+            .await;
         page.frame_until(|f| f["target_spp"] == 3).await;
     });
 }
@@ -445,7 +518,7 @@ fn save_writes_new_files_and_never_replaces_one() {
         scene.settings.spp,
     ) = (40, 30, 3);
     let options = ViewOptions {
-        threads: Some(2),
+        render: two_threads(),
         save_dir: dir.clone(),
         ..ViewOptions::default()
     };
@@ -568,7 +641,7 @@ fn a_changed_scene_file_is_reloaded_with_the_camera_kept() {
         move || canopy_render::load_scene(&path).map_err(|e| e.to_string())
     };
     let options = ViewOptions {
-        threads: Some(2),
+        render: two_threads(),
         save_dir: dir.clone(),
         reload: Some(canopy_view::Reload::new(load.clone())),
         ..ViewOptions::default()
