@@ -388,6 +388,13 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     if args.device == Device::Gpu && args.heatmap {
         bail!("--heatmap counts CPU traversal work; drop --device gpu");
     }
+    // Told in the flags' words before the options' own check says it in theirs.
+    if args.device == Device::Gpu && args.fast_triangles {
+        bail!("--fast-triangles chooses the CPU's triangle test (the GPU's is watertight); drop --device gpu");
+    }
+    if args.device == Device::Gpu && args.bvh == AccelKind::None {
+        bail!("--device gpu traces through a BVH; choose a builder with --bvh");
+    }
     let mut render_job = RenderJob {
         scene,
         source: job.source.clone(),

@@ -245,11 +245,18 @@ pub(crate) fn corners(b: &canopy_bvh::Aabb) -> [[f32; 3]; 2] {
 /// One node of a primary ray's walk, in the order visited.
 #[derive(Clone, Debug, Serialize, PartialEq)]
 pub struct WalkStep {
-    /// Tree level (the root is 0).
+    /// The tree the node is in: `None`, the top tree over the instances; `Some(k)`, the
+    /// tree of instance `k`'s structure (0: the scene's own primitives; from 1, the mesh
+    /// instances).
+    pub instance: Option<u32>,
+    /// Level from the top of the whole walk (the top tree's root is 0; an instance's
+    /// tree starts one below the top tree's leaf that holds it).
     pub level: u32,
-    /// The node's box, min and max corners.
+    /// The node's box in the world, min and max corners (a box of an instance's tree is
+    /// the world box of its placed corners).
     pub bounds: [[f32; 3]; 2],
-    /// A leaf: the primitives it tested, in order.
+    /// A leaf: what it holds, in order — instances in the top tree, primitives (tested)
+    /// in an instance's tree.
     pub leaf: Option<Vec<u32>>,
     /// An inner node: how many of its children the ray entered and skipped.
     pub entered: u32,
@@ -290,7 +297,7 @@ pub enum ServerMessage {
     Walk {
         x: u32,
         y: u32,
-        /// A scene with mesh instances: the walk of its primitives' own tree only.
+        /// Some structure the ray reached has no tree to show.
         partial: bool,
         steps: Vec<WalkStep>,
         primitives_tested: u32,

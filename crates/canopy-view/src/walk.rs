@@ -1,11 +1,14 @@
-//! The BVH explorer's answer: the walk of one primary ray through the tree of the scene's
-//! own primitives, node by node, as a closest-hit traversal makes it (nearest child
-//! first, subtrees beyond the hit so far skipped), over any layout through its
-//! [`TreeView`].
+//! The BVH explorer's answer: the walk of one primary ray through the whole structure,
+//! node by node, as a closest-hit traversal makes it (nearest child first, subtrees
+//! beyond the hit so far skipped): the top tree over the instances, where the scene has
+//! one, and into each instance it reaches, the tree of that instance's structure (the
+//! scene's own primitives, or a mesh), in the instance's space, over any layout through
+//! its [`TreeView`].
 
 use crate::protocol::{corners, PickHit, WalkStep};
 use canopy_bvh::view::{ChildKind, TreeView};
-use canopy_bvh::{Ray, RayQuery};
+use canopy_bvh::{Geometry, Instance, Ray, RayQuery, ShearedRay, TriangleTest};
+use canopy_render::accel::SceneBlas;
 use canopy_render::camera::{Camera, CameraSpec};
 use canopy_render::{Accel, RenderSettings, Scene};
 
@@ -17,9 +20,10 @@ pub const MAX_STEPS: usize = 4096;
 pub struct Walk {
     pub steps: Vec<WalkStep>,
     pub primitives_tested: u32,
-    /// The closest hit in the whole scene (mesh instances included).
+    /// The closest hit in the whole scene.
     pub hit: Option<PickHit>,
-    /// Whether the scene has mesh instances, whose trees the walk does not enter.
+    /// Whether some structure the ray reached has no tree to show (its primitives are
+    /// then not listed).
     pub partial: bool,
 }
 
@@ -29,12 +33,23 @@ pub fn primary_ray(camera: &CameraSpec, s: &RenderSettings, x: u32, y: u32) -> R
     Camera::new(camera, s.width, s.height).pixel_centre_ray(x, y, s.seed)
 }
 
-/// Walks `ray` through the tree over the scene's own primitives in `accel`.
+/// Walks `ray` through `accel`: its top tree, then each instance's tree it reaches.
 pub fn walk(scene: &Scene, accel: &Accel, ray: &Ray) -> Walk {
-    let mut steps = Vec::new();
-    let mut tested = 0;
-    if let Some(tree) = accel.tree() {
-        walk_view(tree.view(), accel, ray, &mut steps, &mut tested);
+    let world = accel.world();
+    let mut walker = Walker {
+        ray: *ray,
+        closest: ray.t_max,
+        steps: Vec::new(),
+        tested: 0,
+        partial: false,
+        blases: world.blases(),
+        instances: world.instances(),
+        triangle_test: accel.triangle_test(),
+    };
+    match world.tree() {
+        Some(top) => walker.tree(top.view(), None, 0),
+        // Every instance is tested.
+        None => (0..walker.instances.len() as u32).for_each(|k| walker.instance(k, 0)),
     }
     let hit = accel.intersect(ray).map(|h| {
         let material = match h.inst {
@@ -51,10 +66,10 @@ pub fn walk(scene: &Scene, accel: &Accel, ray: &Ray) -> Walk {
         }
     });
     Walk {
-        steps,
-        primitives_tested: tested,
+        steps: walker.steps,
+        primitives_tested: walker.tested,
         hit,
-        partial: !scene.instances.is_empty(),
+        partial: walker.partial,
     }
 }
 
@@ -68,62 +83,146 @@ fn material_kind(material: &canopy_render::material::Material) -> String {
         .to_owned()
 }
 
-fn walk_view(
-    view: &dyn TreeView,
-    accel: &Accel,
-    ray: &Ray,
-    steps: &mut Vec<WalkStep>,
-    tested: &mut u32,
-) {
-    let Some(root) = view.root() else {
-        return;
-    };
-    let primitives = accel.primitives();
-    let mut closest = ray.t_max;
-    let mut children = Vec::new();
-    // (child, its level, its entry distance)
-    let mut stack = vec![(root, 0u32, 0.0f32)];
-    while let Some((node, level, entry)) = stack.pop() {
-        if entry > closest || steps.len() >= MAX_STEPS {
-            continue;
-        }
-        let bounds = corners(&node.bounds);
-        match node.kind {
-            ChildKind::Leaf { first, count } => {
-                let prims = view.prim_indices()[first..first + count].to_vec();
-                for &p in &prims {
-                    *tested += 1;
-                    let within = Ray::new(ray.origin, ray.dir, ray.t_min, closest);
-                    if let Some(t) = primitives[p as usize].shape.intersect(&within) {
-                        closest = closest.min(t);
+/// A walk in progress: the world ray, its closest hit so far, and the steps made.
+struct Walker<'a> {
+    ray: Ray,
+    /// The closest hit so far, as the world ray's `t` (an instance's ray shares it).
+    closest: f32,
+    steps: Vec<WalkStep>,
+    tested: u32,
+    partial: bool,
+    blases: &'a [SceneBlas],
+    instances: &'a [Instance],
+    triangle_test: TriangleTest,
+}
+
+impl<'a> Walker<'a> {
+    /// Walks one tree: the top one (`instance` `None`: its leaves hold instances) or the
+    /// tree of instance `instance`'s structure (its leaves hold primitives, tested in the
+    /// instance's space). `level` is its root's level.
+    fn tree(&mut self, view: &dyn TreeView, instance: Option<u32>, level: u32) {
+        let Some(root) = view.root() else {
+            return;
+        };
+        let (instances, world_ray) = (self.instances, self.ray);
+        let placed = instance.map(|k| &instances[k as usize]);
+        // The ray in this tree's space, up to the closest hit so far.
+        let ray = |closest: f32| {
+            let world = Ray::new(world_ray.origin, world_ray.dir, world_ray.t_min, closest);
+            placed.map_or(world, |p| p.ray_to_local(&world))
+        };
+        let to_world = |b: &canopy_bvh::Aabb| corners(&placed.map_or(*b, |p| p.world_bounds(*b)));
+        let mut children = Vec::new();
+        // (child, its level, its entry distance)
+        let mut stack = vec![(root, level, 0.0f32)];
+        while let Some((node, level, entry)) = stack.pop() {
+            if entry > self.closest || self.steps.len() >= MAX_STEPS {
+                continue;
+            }
+            match node.kind {
+                ChildKind::Leaf { first, count } => {
+                    let held = view.prim_indices()[first..first + count].to_vec();
+                    self.steps.push(WalkStep {
+                        instance,
+                        level,
+                        bounds: to_world(&node.bounds),
+                        leaf: Some(held.clone()),
+                        entered: 0,
+                        skipped: 0,
+                    });
+                    for item in held {
+                        match instance {
+                            None => self.instance(item, level + 1),
+                            Some(k) => self.primitive(k, item, &ray(self.closest)),
+                        }
                     }
                 }
-                steps.push(WalkStep {
-                    level,
-                    bounds,
-                    leaf: Some(prims),
-                    entered: 0,
-                    skipped: 0,
-                });
+                ChildKind::Inner(index) => {
+                    view.children(index, &mut children);
+                    let within = ray(self.closest);
+                    let mut entered: Vec<_> = children
+                        .iter()
+                        .filter_map(|c| c.bounds.ray_entry(&within).map(|t| (*c, t)))
+                        .collect();
+                    self.steps.push(WalkStep {
+                        instance,
+                        level,
+                        bounds: to_world(&node.bounds),
+                        leaf: None,
+                        entered: entered.len() as u32,
+                        skipped: (children.len() - entered.len()) as u32,
+                    });
+                    // Nearest on top of the stack.
+                    entered.sort_by(|a, b| b.1.total_cmp(&a.1));
+                    stack.extend(entered.into_iter().map(|(c, t)| (c, level + 1, t)));
+                }
             }
-            ChildKind::Inner(index) => {
-                view.children(index, &mut children);
-                let within = Ray::new(ray.origin, ray.dir, ray.t_min, closest);
-                let mut entered: Vec<_> = children
-                    .iter()
-                    .filter_map(|c| c.bounds.ray_entry(&within).map(|t| (*c, t)))
-                    .collect();
-                steps.push(WalkStep {
-                    level,
-                    bounds,
-                    leaf: None,
-                    entered: entered.len() as u32,
-                    skipped: (children.len() - entered.len()) as u32,
-                });
-                // Nearest on top of the stack.
-                entered.sort_by(|a, b| b.1.total_cmp(&a.1));
-                stack.extend(entered.into_iter().map(|(c, t)| (c, level + 1, t)));
+        }
+    }
+
+    /// Walks the tree of instance `k`'s structure, its root at `level`.
+    fn instance(&mut self, k: u32, level: u32) {
+        let blas = &self.blases[self.instances[k as usize].blas as usize];
+        match blas.tree() {
+            Some(tree) => self.tree(tree.view(), Some(k), level),
+            None => self.partial = true,
+        }
+    }
+
+    /// Tests primitive `prim` of instance `k`'s structure against `ray` (in its space).
+    fn primitive(&mut self, k: u32, prim: u32, ray: &Ray) {
+        self.tested += 1;
+        let sheared = ShearedRay::with_test(ray, self.triangle_test);
+        let hit = match &self.blases[self.instances[k as usize].blas as usize] {
+            SceneBlas::Shapes(b) => b.geometry().intersect(prim, ray, &sheared),
+            SceneBlas::Mesh(b) => b.geometry().intersect(prim, ray, &sheared),
+        };
+        if let Some(hit) = hit {
+            self.closest = self.closest.min(hit.t);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use canopy_bvh::{BuildParams, Builder};
+    use canopy_render::{AccelKind, BvhWidth};
+
+    /// Over a scene of mesh instances, in every layout: each pixel's hit is a primitive
+    /// of a leaf the walk tested, in the hit instance's own tree, reached through the top
+    /// tree's leaf that holds that instance.
+    #[test]
+    fn every_hit_is_in_a_leaf_the_walk_tested_instances_included() {
+        let mut scene = canopy_render::load_scene("teapots").unwrap();
+        (scene.settings.width, scene.settings.height) = (32, 24);
+        for width in [BvhWidth::Two, BvhWidth::Eight] {
+            let accel = Accel::for_scene(
+                &scene,
+                AccelKind::Bvh(Builder::default()),
+                width,
+                &BuildParams::default(),
+                None,
+            );
+            let mut in_meshes = 0;
+            for (x, y) in (0..24).flat_map(|y| (0..32).map(move |x| (x, y))) {
+                let ray = primary_ray(&scene.camera, &scene.settings, x, y);
+                let walk = walk(&scene, &accel, &ray);
+                assert!(!walk.partial);
+                let Some(hit) = walk.hit else { continue };
+                let holds = |tree: Option<u32>, item: u32| {
+                    walk.steps.iter().any(|s| {
+                        s.instance == tree && s.leaf.as_ref().is_some_and(|l| l.contains(&item))
+                    })
+                };
+                assert!(
+                    holds(Some(hit.instance), hit.primitive),
+                    "({x}, {y}): {hit:?}"
+                );
+                assert!(holds(None, hit.instance), "({x}, {y}): {hit:?}");
+                in_meshes += u32::from(hit.instance > 0);
             }
+            assert!(in_meshes > 50, "{in_meshes} pixels hit a teapot");
         }
     }
 }

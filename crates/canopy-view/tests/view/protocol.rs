@@ -365,6 +365,42 @@ fn a_pick_walks_the_tree_to_the_hit() {
     });
 }
 
+/// In a scene of mesh instances the walk goes through the top tree over the instances
+/// and on into the trees of the instances it reaches.
+#[test]
+fn a_pick_walks_into_mesh_instances() {
+    let mut scene = canopy_render::load_scene("teapots").unwrap();
+    (scene.settings.width, scene.settings.height) = (48, 32);
+    let options = ViewOptions {
+        render: two_threads(),
+        ..ViewOptions::default()
+    };
+    let server = ViewServer::start(scene, options).unwrap();
+    runtime().block_on(async {
+        let mut page = Client::connect(&server).await;
+        page.next_of("tree").await;
+        page.send(json!({"type": "pick", "x": 24, "y": 16})).await;
+        let walk = page.next_of("walk").await;
+        assert_eq!(walk["partial"], false);
+        let steps = walk["steps"].as_array().unwrap();
+        assert!(
+            steps[0]["instance"].is_null(),
+            "the walk starts in the top tree"
+        );
+        let tree = |s: &Value| s["instance"].as_u64();
+        assert!(
+            steps.iter().any(|s| tree(s) > Some(0)),
+            "the walk enters a mesh instance's tree"
+        );
+        let hit = &walk["hit"];
+        let (instance, prim) = (hit["instance"].as_u64(), hit["primitive"].as_u64());
+        assert!(steps.iter().any(|s| tree(s) == instance
+            && s["leaf"]
+                .as_array()
+                .is_some_and(|l| l.iter().any(|p| p.as_u64() == prim))));
+    });
+}
+
 #[test]
 fn hostile_messages_get_an_error_and_change_nothing() {
     let server = server(32, 24, 1000);
