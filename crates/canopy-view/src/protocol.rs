@@ -47,9 +47,29 @@ pub enum Command {
     Pick { x: u32, y: u32 },
     /// Write the image shown (`png`, as shown, or `exr`, linear) into the viewer's folder.
     Save { format: String },
-    /// The children of a node of the tree over the scene's own primitives (`None`: the
-    /// root), for the tree's view.
-    Node { index: Option<usize> },
+    /// The children of a node (`None`: the root) of a tree (`None`: the one over the
+    /// scene's own primitives), for the tree's view.
+    Node {
+        #[serde(default)]
+        tree: Option<TreeRef>,
+        index: Option<usize>,
+    },
+}
+
+/// One of the structure's trees: the top one over the instances (`"top"`), or the tree
+/// of structure `n` (`{"structure": n}`; 0 holds the scene's own primitives, the meshes
+/// follow in order).
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case", deny_unknown_fields)]
+pub enum TreeRef {
+    Top,
+    Structure(u32),
+}
+
+impl Default for TreeRef {
+    fn default() -> Self {
+        TreeRef::Structure(0)
+    }
 }
 
 fn up_y() -> [f32; 3] {
@@ -70,7 +90,10 @@ pub enum Change {
         y: u32,
     },
     Save(crate::save::SaveFormat),
-    Node(Option<usize>),
+    Node {
+        tree: TreeRef,
+        index: Option<usize>,
+    },
 }
 
 impl Command {
@@ -151,7 +174,10 @@ impl Command {
                 Ok(Change::Pick { x, y })
             }
             Command::Save { format } => Ok(Change::Save(crate::save::SaveFormat::parse(&format)?)),
-            Command::Node { index } => Ok(Change::Node(index)),
+            Command::Node { tree, index } => Ok(Change::Node {
+                tree: tree.unwrap_or_default(),
+                index,
+            }),
         }
     }
 }
@@ -235,6 +261,11 @@ pub struct TreeReport {
     pub leaves: usize,
     /// Bytes of every structure: the primitives' tree, each mesh's and the top one.
     pub memory_bytes: usize,
+    /// Structures with a tree of their own (the scene's primitives', then each mesh's),
+    /// and whether a top tree over the instances is there: the trees the tree's view
+    /// offers.
+    pub structures: usize,
+    pub top_tree: bool,
 }
 
 /// A box as the page takes it: min and max corners.
@@ -316,6 +347,7 @@ pub enum ServerMessage {
 /// A node of the tree and its children, each with what it costs.
 #[derive(Clone, Debug, Serialize, PartialEq)]
 pub struct NodeReport {
+    pub tree: TreeRef,
     /// `None`: the root.
     pub index: Option<usize>,
     pub bounds: [[f32; 3]; 2],
@@ -337,6 +369,9 @@ pub struct NodeChild {
     /// primitives tested, weighted by the chance that a ray through the root's box
     /// enters each box) over the whole tree's.
     pub sah_share: f32,
+    /// A leaf of the top tree: the structures its instances place (each a tree to
+    /// descend into); empty otherwise.
+    pub structures: Vec<u32>,
 }
 
 /// The settings as the page shows them: the render options the viewer changes (the

@@ -142,6 +142,8 @@ fn tree_report(scene: &Scene, accel: &Accel, settings: &TreeSettings) -> TreeRep
         nodes: stats.nodes,
         leaves: stats.leaves,
         memory_bytes: trees.iter().map(|t| t.stats(&costs).memory_bytes).sum(),
+        structures: accel.world().blases().len(),
+        top_tree: accel.world().tree().is_some(),
     }
 }
 

@@ -9,7 +9,7 @@ use crate::protocol::{
 use crate::save::save;
 use crate::session::Session;
 use crate::settings::{current_options, Mode};
-use crate::tree_view::node_report;
+use crate::tree_view::world_node_report;
 use crate::walk::{primary_ray, walk};
 use axum::extract::ws::{Message, WebSocket, WebSocketUpgrade};
 use axum::extract::{Query, State};
@@ -250,15 +250,17 @@ async fn command(app: &App, text: &str) -> Option<ServerMessage> {
                 },
             })
         }
-        Ok(Change::Node(index)) => {
+        Ok(Change::Node { tree, index }) => {
             let session = session.clone();
             let costs = current.tree.params().sah;
             let report = tokio::task::spawn_blocking(move || {
-                let accel = session.accel.lock().unwrap_or_else(|e| e.into_inner()).clone();
-                let tree = accel.as_ref().and_then(|a| a.tree()).ok_or(
-                    "the tree is not built yet, or the scene has no primitives of its own (only mesh instances)",
-                )?;
-                node_report(tree.view(), &costs, index)
+                let accel = session
+                    .accel
+                    .lock()
+                    .unwrap_or_else(|e| e.into_inner())
+                    .clone();
+                let accel = accel.ok_or("the tree is not built yet; ask again in a moment")?;
+                world_node_report(accel.world(), tree, &costs, index)
             })
             .await;
             Some(match report {

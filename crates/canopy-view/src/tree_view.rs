@@ -1,17 +1,54 @@
-//! The tree's view: a node of the tree over the scene's own primitives and its children,
-//! each with its subtree's size and share of the tree's SAH cost, so that a user can
-//! descend to where a builder spends its cost.
+//! The tree's view: a node of one of the structure's trees (the top one over the
+//! instances, or a structure's own) and its children, each with its subtree's size and
+//! share of the tree's SAH cost, so that a user can descend to where a builder spends its
+//! cost, and from a leaf of the top tree into the trees of the structures it places.
 
-use crate::protocol::{corners, NodeChild, NodeReport};
+use crate::protocol::{corners, NodeChild, NodeReport, TreeRef};
 use canopy_bvh::view::{sah_contribution, Child, ChildKind, TreeView};
-use canopy_bvh::SahCosts;
+use canopy_bvh::{Instance, SahCosts, Tlas};
+use canopy_render::accel::SceneBlas;
+
+/// Node `index` of tree `tree` of `world` (see [`node_report`]).
+pub fn world_node_report(
+    world: &Tlas<SceneBlas>,
+    tree: TreeRef,
+    costs: &SahCosts,
+    index: Option<usize>,
+) -> Result<NodeReport, String> {
+    let (view, instances) = match tree {
+        TreeRef::Top => {
+            let top = world
+                .tree()
+                .ok_or("the scene has no top tree (one instance)")?;
+            (top.view(), Some(world.instances()))
+        }
+        TreeRef::Structure(n) => {
+            let count = world.blases().len();
+            let blas = world.blases().get(n as usize).ok_or_else(|| {
+                format!(
+                    "no structure {n}: the scene has {count} (0 to {})",
+                    count - 1
+                )
+            })?;
+            let own = blas
+                .tree()
+                .ok_or_else(|| format!("structure {n} has no tree"))?;
+            (own.view(), None)
+        }
+    };
+    let mut report = node_report(view, costs, index, instances)?;
+    report.tree = tree;
+    Ok(report)
+}
 
 /// Node `index` (an inner node's, as a report's child gives it; `None`: the root) and its
-/// children, or why there is none such.
+/// children, or why there is none such. `instances`: the tree is the top one, whose
+/// leaves hold these instances.
 pub fn node_report(
     view: &dyn TreeView,
     costs: &SahCosts,
     index: Option<usize>,
+    instances: Option<&[Instance]>,
 ) -> Result<NodeReport, String> {
     let root = view.root().ok_or("the tree is empty")?;
     let node = match index {
@@ -28,7 +65,21 @@ pub fn node_report(
         ChildKind::Inner(i) => view.children(i, &mut children),
         ChildKind::Leaf { .. } => {}
     }
+    // The structures a leaf of the top tree places, each once.
+    let structures = |c: &Child| -> Vec<u32> {
+        let (Some(instances), ChildKind::Leaf { first, count }) = (instances, c.kind) else {
+            return Vec::new();
+        };
+        let mut placed: Vec<u32> = view.prim_indices()[first..first + count]
+            .iter()
+            .map(|&k| instances[k as usize].blas)
+            .collect();
+        placed.sort_unstable();
+        placed.dedup();
+        placed
+    };
     Ok(NodeReport {
+        tree: TreeRef::default(),
         index,
         bounds: corners(&node.bounds),
         children: children
@@ -45,6 +96,7 @@ pub fn node_report(
                     nodes: s.nodes,
                     leaves: s.leaves,
                     sah_share: (s.cost / total) as f32,
+                    structures: structures(&c),
                 }
             })
             .collect(),
@@ -119,7 +171,7 @@ mod tests {
         for width in BvhWidth::ALL {
             let tree = tree(width);
             let costs = SahCosts::default();
-            let root = node_report(tree.view(), &costs, None).unwrap();
+            let root = node_report(tree.view(), &costs, None, None).unwrap();
             let prims: usize = root.children.iter().map(|c| c.primitives).sum();
             assert_eq!(prims, 200);
             // Every inner node and leaf once, the root besides.
@@ -141,7 +193,7 @@ mod tests {
             );
             // Each child descends, to its own children.
             let inner = root.children.iter().find_map(|c| c.index).unwrap();
-            let below = node_report(tree.view(), &costs, Some(inner)).unwrap();
+            let below = node_report(tree.view(), &costs, Some(inner), None).unwrap();
             assert!(!below.children.is_empty());
         }
     }
@@ -151,7 +203,7 @@ mod tests {
         let tree = tree(BvhWidth::Eight);
         let costs = SahCosts::default();
         for index in [usize::MAX, 1 << 40, tree.stats(&costs).nodes + 5] {
-            assert!(node_report(tree.view(), &costs, Some(index)).is_err());
+            assert!(node_report(tree.view(), &costs, Some(index), None).is_err());
         }
     }
 }

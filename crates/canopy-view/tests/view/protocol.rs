@@ -401,6 +401,72 @@ fn a_pick_walks_into_mesh_instances() {
     });
 }
 
+/// The tree's view offers the top tree over the instances; its leaves lead into the
+/// trees of the structures they place, a mesh's tree holding all of the mesh.
+#[test]
+fn the_tree_view_descends_from_the_top_tree_into_a_mesh() {
+    let mut scene = canopy_render::load_scene("teapots").unwrap();
+    (scene.settings.width, scene.settings.height) = (32, 24);
+    let triangles = scene.meshes[0].mesh.indices().len();
+    let options = ViewOptions {
+        render: two_threads(),
+        ..ViewOptions::default()
+    };
+    let server = ViewServer::start(scene, options).unwrap();
+    runtime().block_on(async {
+        let mut page = Client::connect(&server).await;
+        let tree = page.next_of("tree").await;
+        assert_eq!(
+            (tree["structures"].clone(), tree["top_tree"].clone()),
+            (json!(2), json!(true))
+        );
+        page.send(json!({"type": "node", "tree": "top", "index": null}))
+            .await;
+        let top = page.next_of("node").await;
+        assert_eq!(top["tree"], "top");
+        let children = top["children"].as_array().unwrap();
+        // 400 teapots and the ground's own structure: every instance below the root once.
+        let instances: u64 = children
+            .iter()
+            .map(|c| c["primitives"].as_u64().unwrap())
+            .sum();
+        assert_eq!(instances, 401);
+        // Descend to a leaf of the top tree: it names the structures it places.
+        let mut node = top.clone();
+        let placed = loop {
+            let children = node["children"].as_array().unwrap().clone();
+            if let Some(leaf) = children.iter().find(|c| c["index"].is_null()) {
+                break leaf["structures"].clone();
+            }
+            page.send(json!({"type": "node", "tree": "top", "index": children[0]["index"]}))
+                .await;
+            node = page.next_of("node").await;
+        };
+        assert!(placed.as_array().is_some_and(|s| !s.is_empty()), "{placed}");
+        page.send(json!({"type": "node", "tree": {"structure": 1}, "index": null}))
+            .await;
+        let mesh = page.next_of("node").await;
+        assert_eq!(mesh["tree"], json!({"structure": 1}));
+        let held: u64 = mesh["children"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|c| c["primitives"].as_u64().unwrap())
+            .sum();
+        assert_eq!(held, triangles as u64);
+        page.send(json!({"type": "node", "tree": {"structure": 7}, "index": null}))
+            .await;
+        let error = page.next_of("error").await;
+        assert!(
+            error["message"]
+                .as_str()
+                .unwrap()
+                .contains("no structure 7"),
+            "{error}"
+        );
+    });
+}
+
 #[test]
 fn hostile_messages_get_an_error_and_change_nothing() {
     let server = server(32, 24, 1000);
