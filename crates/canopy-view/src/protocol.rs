@@ -399,6 +399,9 @@ pub struct FrameInfo {
     /// Samples per pixel in the image, and the target.
     pub spp: u32,
     pub target_spp: u32,
+    /// The samples this accumulation continued from, kept over a change that leaves
+    /// them valid (exposure, a higher target, another tree); 0 when it started afresh.
+    pub continued_from: u32,
     /// Since accumulation restarted.
     pub seconds: f64,
     pub mrays_per_second: f64,

@@ -2,8 +2,8 @@
 //! while some page is open — a quick preview at a quarter of the size first, then the
 //! full image pass by pass, each pass published as a frame — until the target samples
 //! are in or the view changes. A change that leaves the samples valid (exposure, a
-//! higher target, the boxes' levels, another tree: every tree gives the same hits)
-//! continues from them.
+//! higher target, the boxes' levels, another tree of the same triangle test: every such
+//! tree gives the same hits) continues from them.
 
 use crate::frame::{encode, resident_bytes, Overlay};
 use crate::protocol::{FrameInfo, ServerMessage, TreeReport};
@@ -30,6 +30,7 @@ struct Kept {
 /// error notice) and not tried again until something changes.
 pub(crate) fn run(session: &Session) {
     let mut built_generation = None;
+    let mut built_test = None;
     let mut finished_generation = None;
     let mut kept: Option<Kept> = None;
     loop {
@@ -45,11 +46,18 @@ pub(crate) fn run(session: &Session) {
                 // The old scene's samples.
                 kept = None;
             }
+            if built_test.is_some_and(|test| test != control.tree.triangle_test) {
+                // Another triangle test may hit rays through edges elsewhere: samples
+                // of the two would mix two images.
+                kept = None;
+            }
             let report = build(session, &control.tree);
             session.publish_tree(report);
             built_generation = Some(control.tree_generation);
-            // The image does not depend on the tree, but its frames name the tree's
-            // speed: render the view again so the page shows the new one's.
+            built_test = Some(control.tree.triangle_test);
+            // The image does not depend on the tree (of one triangle test), but its
+            // frames name the tree's speed: render the view again so the page shows the
+            // new one's.
             finished_generation = None;
         }
         let accel = session
@@ -178,6 +186,7 @@ fn heatmap(session: &Session, control: &Control, accel: &Accel) {
         height: map.film.height,
         spp: 1,
         target_spp: 1,
+        continued_from: 0,
         seconds: start.elapsed().as_secs_f64(),
         mrays_per_second: 0.0,
         memory_bytes: resident_bytes(),
@@ -263,6 +272,7 @@ fn run_job(
         start,
         preview,
         rays_before: job.resume.as_ref().map_or(0, |a| a.rays),
+        samples_before,
         passes_started: Instant::now(),
     };
     let outcome = prepared
@@ -285,6 +295,8 @@ struct FrameObserver<'a> {
     start: Instant,
     preview: bool,
     rays_before: u64,
+    /// Samples the render continued from (0: it started afresh).
+    samples_before: u32,
     passes_started: Instant,
 }
 
@@ -317,6 +329,7 @@ impl Observer for FrameObserver<'_> {
             height: film.height,
             spp: accumulator.samples,
             target_spp: view.spp,
+            continued_from: self.samples_before,
             seconds: self.start.elapsed().as_secs_f64(),
             mrays_per_second: rays as f64 / self.passes_started.elapsed().as_secs_f64() / 1e6,
             memory_bytes: resident_bytes(),

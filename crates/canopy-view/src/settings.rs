@@ -1,6 +1,8 @@
-//! What the viewer renders: the view (camera, samples, estimator, what is shown) and the
-//! tree (builder, width, leaf size). A change of the view restarts accumulation; a change
-//! of the tree rebuilds it first.
+//! What the viewer renders: the view (camera, samples, estimator, sampler, what is shown)
+//! and the tree (builder, width, leaf size, triangle test), and how canopy's render
+//! options (`canopy_job::RenderOptions`, the settings of every front end) are put into
+//! them. A change of the view restarts accumulation; a change of the tree rebuilds it
+//! first.
 
 use canopy_bvh::{BuildParams, Builder, BvhWidth, TriangleTest};
 use canopy_job::{Device, RenderOptions};

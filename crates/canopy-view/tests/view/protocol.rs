@@ -337,6 +337,36 @@ fn the_viewer_starts_with_the_render_options_it_is_given() {
     }
 }
 
+/// Another tree of the same triangle test gives the same hits: the image keeps its
+/// samples. Another triangle test may not: accumulation starts again.
+#[test]
+fn another_tree_keeps_the_samples_and_another_triangle_test_restarts_them() {
+    let server = server(32, 24, 1000);
+    runtime().block_on(async {
+        let mut page = Client::connect(&server).await;
+        // What the first full-size frame after the change continued from (a page that
+        // reads slowly skips frames, but each says where its accumulation began).
+        let continued_from = async |page: &mut Client, settings: Value| {
+            let (before, _) = page.frame_until(|f| f["spp"].as_u64() >= Some(4)).await;
+            let generation = before["generation"].as_u64();
+            page.send(json!({"type": "settings", "render": settings}))
+                .await;
+            let (after, _) = page
+                .frame_until(|f| f["generation"].as_u64() > generation && f["preview"] == false)
+                .await;
+            let from = after["continued_from"].as_u64().unwrap();
+            (before["spp"].as_u64().unwrap(), from)
+        };
+        let (before, from) = continued_from(&mut page, json!({"bvh": "lbvh", "width": 4})).await;
+        assert!(
+            from >= before,
+            "another tree: {before} samples, continued from {from}"
+        );
+        let (before, from) = continued_from(&mut page, json!({"fast_triangles": true})).await;
+        assert_eq!(from, 0, "another triangle test after {before} samples");
+    });
+}
+
 #[test]
 fn a_pick_walks_the_tree_to_the_hit() {
     let server = server(48, 32, 1000);
