@@ -179,10 +179,7 @@ async fn command(app: &App, text: &str) -> Option<ServerMessage> {
             None
         }
         Ok(Change::Settings { view, tree }) => {
-            if tree != current.tree {
-                session.set_tree(tree);
-            }
-            session.set_view(view);
+            session.set_settings(view, tree);
             None
         }
         Ok(Change::Pick { x, y }) => {

@@ -108,11 +108,17 @@ impl Session {
         self.changed.notify_all();
     }
 
-    /// Asks for the tree to be built again.
-    pub fn set_tree(&self, tree: TreeSettings) {
+    /// Applies new settings: the view, and the tree, built again where it changed. One
+    /// change under one lock, so the render thread never sees the new tree with the old
+    /// view.
+    pub fn set_settings(&self, view: ViewSettings, tree: TreeSettings) {
         let mut c = self.lock();
-        c.tree = tree;
-        c.tree_generation += 1;
+        if c.tree != tree {
+            c.tree = tree;
+            c.tree_generation += 1;
+        }
+        c.view = view;
+        c.view_generation += 1;
         self.changed.notify_all();
     }
 

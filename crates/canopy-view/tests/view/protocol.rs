@@ -25,7 +25,12 @@ fn two_threads() -> RenderOptions {
 
 /// A small image of the first reference scene (spheres, a few lights).
 fn server(width: u32, height: u32, spp: u32) -> ViewServer {
-    let mut scene = canopy_render::load_scene("paper-1").unwrap();
+    server_of("paper-1", width, height, spp)
+}
+
+/// A small image of the built-in scene `name`, on two threads.
+fn server_of(name: &str, width: u32, height: u32, spp: u32) -> ViewServer {
+    let mut scene = canopy_render::load_scene(name).unwrap();
     scene.settings.width = width;
     scene.settings.height = height;
     scene.settings.spp = spp;
@@ -399,13 +404,7 @@ fn a_pick_walks_the_tree_to_the_hit() {
 /// and on into the trees of the instances it reaches.
 #[test]
 fn a_pick_walks_into_mesh_instances() {
-    let mut scene = canopy_render::load_scene("teapots").unwrap();
-    (scene.settings.width, scene.settings.height) = (48, 32);
-    let options = ViewOptions {
-        render: two_threads(),
-        ..ViewOptions::default()
-    };
-    let server = ViewServer::start(scene, options).unwrap();
+    let server = server_of("teapots", 48, 32, 1000);
     runtime().block_on(async {
         let mut page = Client::connect(&server).await;
         page.next_of("tree").await;
@@ -435,14 +434,9 @@ fn a_pick_walks_into_mesh_instances() {
 /// trees of the structures they place, a mesh's tree holding all of the mesh.
 #[test]
 fn the_tree_view_descends_from_the_top_tree_into_a_mesh() {
-    let mut scene = canopy_render::load_scene("teapots").unwrap();
-    (scene.settings.width, scene.settings.height) = (32, 24);
-    let triangles = scene.meshes[0].mesh.indices().len();
-    let options = ViewOptions {
-        render: two_threads(),
-        ..ViewOptions::default()
-    };
-    let server = ViewServer::start(scene, options).unwrap();
+    let teapot = &canopy_render::load_scene("teapots").unwrap().meshes[0].mesh;
+    let triangles = teapot.indices().len();
+    let server = server_of("teapots", 32, 24, 1000);
     runtime().block_on(async {
         let mut page = Client::connect(&server).await;
         let tree = page.next_of("tree").await;
