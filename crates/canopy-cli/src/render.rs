@@ -165,7 +165,7 @@ impl RenderArgs {
     }
 }
 
-fn parse_device(s: &str) -> Result<Device, String> {
+pub(crate) fn parse_device(s: &str) -> Result<Device, String> {
     s.parse()
 }
 

@@ -3,7 +3,7 @@
 
 use crate::limits;
 use canopy_bvh::{BuildParams, Builder};
-use canopy_job::RenderOptions;
+use canopy_job::{Device, RenderOptions};
 use canopy_render::{AccelKind, BvhWidth};
 use canopy_view::{Reload, ViewOptions, ViewServer};
 use clap::Args;
@@ -30,15 +30,21 @@ pub struct ViewArgs {
     /// Maximum ray segments per path, 1 to 1024 [default: from the scene].
     #[arg(long, value_parser = limits::depth())]
     depth: Option<u32>,
+    /// Where to render: `cpu` (all cores) or `gpu` (the first adapter wgpu finds; see
+    /// `canopy devices`). The GPU renders through binary trees; the heat map, the
+    /// albedo and normal views and the explorer's walks are traced on the CPU.
+    #[arg(long, default_value = "cpu", value_parser = crate::render::parse_device)]
+    device: Device,
     /// Worker threads, 1 to 1024 [default: all cores].
     #[arg(long, value_parser = limits::threads())]
     threads: Option<u32>,
     /// The BVH builder to start with (the page rebuilds with others).
     #[arg(long, default_value = "binned-sah")]
     bvh: Builder,
-    /// Children per node to start with: 2, 4 or 8.
-    #[arg(long, default_value = "8")]
-    width: BvhWidth,
+    /// Children per node to start with: 2, 4 or 8 [default: 8; 2 on the GPU, which
+    /// walks binary trees].
+    #[arg(long)]
+    width: Option<BvhWidth>,
     /// Most primitives in a leaf to start with (1 to 256).
     #[arg(long, default_value_t = BuildParams::default().max_leaf_size, value_parser = limits::leaf_size())]
     max_leaf_size: u32,
@@ -62,7 +68,8 @@ impl ViewArgs {
             spp: self.spp,
             max_depth: self.depth,
             bvh: Some(AccelKind::Bvh(self.bvh)),
-            width: Some(self.width),
+            width: self.width,
+            device: Some(self.device),
             max_leaf_size: Some(self.max_leaf_size),
             threads: self.threads.map(|n| n as usize),
             ..RenderOptions::default()

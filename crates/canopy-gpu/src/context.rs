@@ -32,6 +32,8 @@ pub enum GpuError {
     Readback(String),
     #[error("the GPU renderer does not take {0}")]
     Unsupported(&'static str),
+    #[error("the scene as uploaded to the GPU cannot be rendered {0}")]
+    View(String),
 }
 
 /// A GPU device and its queue.

@@ -9,9 +9,9 @@ use crate::textures::GpuTextures;
 use crate::{Gpu, GpuError};
 use bytemuck::{Pod, Zeroable};
 use canopy_bvh::Bvh2;
-use canopy_render::camera::Camera;
+use canopy_render::camera::{Camera, CameraSpec};
 use canopy_render::material::Material;
-use canopy_render::{Accel, Accumulator, Background, Integrator, Scene};
+use canopy_render::{Accel, Accumulator, Background, Integrator, RenderSettings, Scene};
 use glam::Vec3;
 use std::time::{Duration, Instant};
 
@@ -123,6 +123,38 @@ fn environment_tables(map: &canopy_render::EnvironmentMap) -> EnvironmentTables 
     }
 }
 
+/// `fixed` (what an upload fixed) seen through `camera` with `settings`' image size,
+/// seed, depth, estimator flag, roulette and sampler.
+fn viewed(fixed: &Frame, camera: &CameraSpec, settings: &RenderSettings) -> Frame {
+    let (width, height) = (settings.width, settings.height);
+    let camera = Camera::new(camera, width, height).basis();
+    let [lights, background_unsampled, ..] = fixed.options;
+    Frame {
+        origin: vec4(camera.origin, camera.lens_radius),
+        upper_left: vec4(camera.upper_left, 0.0),
+        horizontal: vec4(camera.horizontal, 0.0),
+        vertical: vec4(camera.vertical, 0.0),
+        u: vec4(camera.u, 0.0),
+        v: vec4(camera.v, 0.0),
+        size: [
+            width,
+            height,
+            canopy_render::rng::fold64(settings.seed),
+            settings.max_depth,
+        ],
+        options: [
+            lights,
+            background_unsampled,
+            (settings.integrator == Integrator::Path) as u32,
+            settings.russian_roulette as u32,
+        ],
+        region: [0, 0, width, height],
+        forward: vec4(camera.forward, camera.orthographic as u32 as f32),
+        sampling: [settings.sampler.sobol_dimensions(), 0, 0, 0],
+        ..*fixed
+    }
+}
+
 fn vec4(v: Vec3, w: f32) -> [f32; 4] {
     [v.x, v.y, v.z, w]
 }
@@ -142,14 +174,15 @@ pub struct Renderer<'g> {
     gpu: &'g Gpu,
     pipeline: wgpu::ComputePipeline,
     bind_group: wgpu::BindGroup,
+    /// The uploaded scene's frame: its camera and settings, and what the upload fixed.
     frame: Frame,
+    /// The estimator compiled into the pipeline.
+    integrator: Integrator,
     frame_buffer: wgpu::Buffer,
     accum: wgpu::Buffer,
     ray_count: wgpu::Buffer,
-    width: u32,
-    height: u32,
-    /// Pixels whose sums one dispatch holds (the whole image unless its sums exceed a
-    /// binding).
+    /// Pixels whose sums one dispatch holds (the whole uploaded image unless its sums
+    /// exceed a binding).
     band_pixels: u64,
 }
 
@@ -261,43 +294,30 @@ impl<'g> Renderer<'g> {
             &[0u8; 16],
             wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
         )?;
-        let camera = Camera::new(&scene.camera, width, height).basis();
-        let frame = Frame {
-            origin: vec4(camera.origin, camera.lens_radius),
-            upper_left: vec4(camera.upper_left, 0.0),
-            horizontal: vec4(camera.horizontal, 0.0),
-            vertical: vec4(camera.vertical, 0.0),
-            u: vec4(camera.u, 0.0),
-            v: vec4(camera.v, 0.0),
-            size: [
-                width,
-                height,
-                canopy_render::rng::fold64(scene.settings.seed),
-                scene.settings.max_depth,
-            ],
+        // What the upload fixes; the view's part (camera, size, seed, ...) is set below.
+        let fixed = Frame {
             samples: [0, 0, background_kind, 0],
             background: vec4(background, 0.0),
             options: [
                 light_table.len() as u32,
                 // Light sampling of the background: environment maps only, as on the CPU.
                 !scene.background.is_sampled() as u32,
-                (scene.settings.integrator == Integrator::Path) as u32,
-                scene.settings.russian_roulette as u32,
+                0,
+                0,
             ],
             env_x: vec4(env.to_world.x_axis, 0.0),
             env_y: vec4(env.to_world.y_axis, 0.0),
             env_z: vec4(env.to_world.z_axis, 0.0),
             env_size: [env.size[0].max(1), env.size[1].max(1), 0, 0],
-            region: [0, 0, width, height],
             top: [
                 flat.top.is_some() as u32,
                 flat.top.unwrap_or(0),
                 scene.has_see_through() as u32,
                 scene.is_textured() as u32,
             ],
-            forward: vec4(camera.forward, camera.orthographic as u32 as f32),
-            sampling: [scene.settings.sampler.sobol_dimensions(), 0, 0, 0],
+            ..Frame::zeroed()
         };
+        let frame = viewed(&fixed, &scene.camera, &scene.settings);
         let frame_buffer = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("frame"),
             size: std::mem::size_of::<Frame>() as u64,
@@ -364,13 +384,22 @@ impl<'g> Renderer<'g> {
             pipeline,
             bind_group,
             frame,
+            integrator: scene.settings.integrator,
             frame_buffer,
             accum,
             ray_count,
-            width,
-            height,
             band_pixels: band_rows * width as u64,
         })
+    }
+
+    /// The GPU it renders on.
+    pub fn gpu(&self) -> &'g Gpu {
+        self.gpu
+    }
+
+    /// The estimator this upload renders with (compiled into its pipeline).
+    pub fn integrator(&self) -> Integrator {
+        self.integrator
     }
 
     /// Renders with seed `seed` from now on, as a scene with that seed would (the scene
@@ -388,8 +417,48 @@ impl<'g> Renderer<'g> {
         accumulator: &mut Accumulator,
         count: u32,
     ) -> Result<DispatchStats, GpuError> {
+        self.dispatch(&self.frame, accumulator, count)
+    }
+
+    /// [`render_samples`](Self::render_samples) of the uploaded scene seen through
+    /// `camera`, with the image size, seed, depth, roulette and sampler of `settings`:
+    /// what a viewer renders as its camera moves, without uploading the scene again.
+    /// Refused for another integrator than the upload's (it is compiled into the
+    /// pipeline: upload again) and for an image wider than the uploaded one's sums
+    /// hold a row of.
+    pub fn render_view_samples(
+        &self,
+        camera: &CameraSpec,
+        settings: &RenderSettings,
+        accumulator: &mut Accumulator,
+        count: u32,
+    ) -> Result<DispatchStats, GpuError> {
+        if settings.integrator != self.integrator {
+            return Err(GpuError::View(format!(
+                "with the `{}` integrator: it was uploaded for `{}`",
+                settings.integrator.name(),
+                self.integrator.name()
+            )));
+        }
+        if settings.width as u64 > self.band_pixels {
+            return Err(GpuError::View(format!(
+                "{} pixels wide: its sums hold rows of at most {}",
+                settings.width, self.band_pixels
+            )));
+        }
+        self.dispatch(&viewed(&self.frame, camera, settings), accumulator, count)
+    }
+
+    /// Adds `count` samples of the image `frame` describes to `accumulator`, band by
+    /// band.
+    fn dispatch(
+        &self,
+        view: &Frame,
+        accumulator: &mut Accumulator,
+        count: u32,
+    ) -> Result<DispatchStats, GpuError> {
         let region = accumulator.region;
-        if let Err(e) = region.check_within(self.width, self.height) {
+        if let Err(e) = region.check_within(view.size[0], view.size[1]) {
             panic!("the accumulator does not fit the scene's image: {e}");
         }
         let start = Instant::now();
@@ -400,9 +469,9 @@ impl<'g> Renderer<'g> {
         for first_row in (0..region.height).step_by(band_rows as usize) {
             let rows = band_rows.min(region.height - first_row);
             let frame = Frame {
-                samples: [accumulator.samples, count, self.frame.samples[2], first_row],
+                samples: [accumulator.samples, count, view.samples[2], first_row],
                 region: [region.x, region.y, region.width, region.height],
-                ..self.frame
+                ..*view
             };
             // Each band is its own submission: the frame it reads is written before it.
             gpu.queue

@@ -15,10 +15,12 @@ pub(crate) enum Engine<'a> {
         schedule: Schedule,
     },
     Gpu {
-        renderer: Box<canopy_gpu::Renderer<'a>>,
-        /// Where the accumulator has AOV layers: the scene and the CPU's structure that
-        /// trace them.
-        aovs: Option<(&'a Scene, &'a Accel)>,
+        renderer: &'a canopy_gpu::Renderer<'a>,
+        /// The camera and settings rendered (the renderer may have been uploaded with
+        /// others: a viewer's earlier view).
+        scene: &'a Scene,
+        /// Where the accumulator has AOV layers: the CPU's structure that traces them.
+        aovs: Option<&'a Accel>,
     },
 }
 
@@ -47,13 +49,18 @@ impl Engine<'_> {
                 &|| observer.rows_done(1),
                 &|| !(abandonable && observer.abandon_pass()),
             )),
-            Engine::Gpu { renderer, aovs } => {
+            Engine::Gpu {
+                renderer,
+                scene,
+                aovs,
+            } => {
                 // The AOVs of the GPU's samples: the same camera rays, traced on the CPU.
                 let aov_rays = match aovs {
-                    Some((scene, accel)) => render_aov_samples(scene, accel, accumulator, 1),
+                    Some(accel) => render_aov_samples(scene, accel, accumulator, 1),
                     None => 0,
                 };
-                let done = renderer.render_samples(accumulator, 1)?;
+                let done =
+                    renderer.render_view_samples(&scene.camera, &scene.settings, accumulator, 1)?;
                 observer.rows_done(accumulator.region.height as u64);
                 Ok(Some(RenderStats {
                     rays: done.rays + aov_rays,

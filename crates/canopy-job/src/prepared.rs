@@ -29,7 +29,15 @@ pub struct Prepared<'j> {
     owners: Vec<u64>,
     pool: Option<rayon::ThreadPool>,
     accel: Arc<Accel>,
-    gpu: Option<canopy_gpu::Gpu>,
+    gpu: Option<GpuUse<'j>>,
+}
+
+/// The GPU a job renders on.
+enum GpuUse<'j> {
+    /// Opened for this job: the scene is uploaded when it runs.
+    Opened(Box<canopy_gpu::Gpu>),
+    /// The caller's, the scene uploaded and kept across jobs.
+    Kept(&'j canopy_gpu::Renderer<'j>),
 }
 
 /// What a run produced.
@@ -51,7 +59,7 @@ impl<'s> RenderJob<'s> {
     /// Checks the job, starts its threads, opens its device and builds its acceleration
     /// structure.
     pub fn prepare(&self) -> Result<Prepared<'_>, JobError> {
-        self.prepare_inner(None)
+        self.prepare_inner(None, None)
     }
 
     /// [`prepare`](Self::prepare), tracing through `accel` instead of building one: the
@@ -60,6 +68,41 @@ impl<'s> RenderJob<'s> {
     /// this scene's own primitives (the same shared array) and one instance per mesh
     /// instance, else the job is refused. On the GPU, it must be binary.
     pub fn prepare_with(&self, accel: Arc<Accel>) -> Result<Prepared<'_>, JobError> {
+        self.check_given(&accel)?;
+        self.prepare_inner(Some(accel), None)
+    }
+
+    /// [`prepare_with`](Self::prepare_with) on the GPU, rendering through `renderer`:
+    /// this scene's geometry, materials and lights uploaded with `accel`'s structures
+    /// (by [`canopy_gpu::Renderer::for_accel`]), kept by the caller across jobs whose
+    /// camera and settings differ (a viewer's, as its camera moves). Each pass renders
+    /// the job's scene's camera and settings on it. Refused for a job not on the GPU
+    /// and for another integrator than the upload's.
+    pub fn prepare_on<'j>(
+        &'j self,
+        accel: Arc<Accel>,
+        renderer: &'j canopy_gpu::Renderer<'j>,
+    ) -> Result<Prepared<'j>, JobError> {
+        if self.device != Device::Gpu {
+            return Err(JobError::Invalid(
+                "a GPU renderer was given to a job on the CPU".into(),
+            ));
+        }
+        let integrator = self.scene.settings.integrator;
+        if renderer.integrator() != integrator {
+            return Err(JobError::Invalid(format!(
+                "the GPU renderer given renders the `{}` integrator, not the `{}` asked for",
+                renderer.integrator().name(),
+                integrator.name()
+            )));
+        }
+        self.check_given(&accel)?;
+        self.prepare_inner(Some(accel), Some(renderer))
+    }
+
+    /// Whether `accel` may be traced for this job: built over its scene (and binary, on
+    /// the GPU).
+    fn check_given(&self, accel: &Accel) -> Result<(), JobError> {
         let scene = self.scene;
         let same_primitives = std::ptr::eq(accel.primitives(), scene.primitives.as_slice());
         if !same_primitives || accel.world().instances().len() != scene.instances.len() + 1 {
@@ -77,10 +120,14 @@ impl<'s> RenderJob<'s> {
                 "the GPU walks binary trees; the structure given is wider".into(),
             ));
         }
-        self.prepare_inner(Some(accel))
+        Ok(())
     }
 
-    fn prepare_inner(&self, accel: Option<Arc<Accel>>) -> Result<Prepared<'_>, JobError> {
+    fn prepare_inner<'j>(
+        &'j self,
+        accel: Option<Arc<Accel>>,
+        kept: Option<&'j canopy_gpu::Renderer<'j>>,
+    ) -> Result<Prepared<'j>, JobError> {
         let settings = self.scene.settings;
         self.scene.validate().map_err(JobError::Invalid)?;
         self.region()
@@ -145,7 +192,10 @@ impl<'s> RenderJob<'s> {
                     "the GPU traces through a BVH; choose a builder, not `none`".into(),
                 ))
             }
-            Device::Gpu => Some(canopy_gpu::Gpu::new()?),
+            Device::Gpu => Some(match kept {
+                Some(renderer) => GpuUse::Kept(renderer),
+                None => GpuUse::Opened(Box::new(canopy_gpu::Gpu::new()?)),
+            }),
         };
         // The GPU walks the binary tree (in its own layout, derived from it).
         let width = match gpu {
@@ -231,7 +281,8 @@ impl Prepared<'_> {
     /// `cpu`, or the GPU adapter in words.
     pub fn device_name(&self) -> String {
         match &self.gpu {
-            Some(gpu) => gpu.describe(),
+            Some(GpuUse::Opened(gpu)) => gpu.describe(),
+            Some(GpuUse::Kept(renderer)) => renderer.gpu().describe(),
             None => "cpu".into(),
         }
     }
@@ -256,17 +307,27 @@ impl Prepared<'_> {
     pub fn run(&self, observer: &mut dyn Observer) -> Result<Outcome, JobError> {
         let job = self.job;
         let scene = job.scene;
-        let engine = match &self.gpu {
+        let uploaded;
+        let renderer = match &self.gpu {
+            None => None,
+            // Mesh instances in two levels, as on the CPU (the structures are binary
+            // trees: built with width 2 above).
+            Some(GpuUse::Opened(gpu)) => {
+                uploaded = canopy_gpu::Renderer::for_accel(gpu, scene, &self.accel)?;
+                Some(&uploaded)
+            }
+            Some(GpuUse::Kept(renderer)) => Some(*renderer),
+        };
+        let engine = match renderer {
             None => Engine::Cpu {
                 scene,
                 accel: &self.accel,
                 schedule: job.schedule,
             },
-            // Mesh instances in two levels, as on the CPU (the structures are binary
-            // trees: built with width 2 above).
-            Some(gpu) => Engine::Gpu {
-                renderer: Box::new(canopy_gpu::Renderer::for_accel(gpu, scene, &self.accel)?),
-                aovs: (!job.aovs.is_empty()).then_some((scene, &self.accel)),
+            Some(renderer) => Engine::Gpu {
+                renderer,
+                scene,
+                aovs: (!job.aovs.is_empty()).then_some(&*self.accel),
             },
         };
         let mut accumulator = job

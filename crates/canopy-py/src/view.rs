@@ -3,7 +3,7 @@
 use crate::render::{scene_error, SceneArg};
 use canopy_render::load_scene_allowing;
 use canopy_view::{Reload, ViewOptions, ViewServer};
-use pyo3::exceptions::{PyOSError, PyValueError};
+use pyo3::exceptions::{PyOSError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use std::net::SocketAddr;
 use std::path::PathBuf;
@@ -98,6 +98,9 @@ pub fn view(
         .detach(|| ViewServer::start(scene, options))
         .map_err(|e| match e {
             canopy_view::ViewError::Bind { .. } => PyOSError::new_err(e.to_string()),
+            canopy_view::ViewError::Threads(_) | canopy_view::ViewError::Gpu(_) => {
+                PyRuntimeError::new_err(e.to_string())
+            }
             _ => PyValueError::new_err(e.to_string()),
         })?;
     Ok(PyViewer {

@@ -18,8 +18,7 @@ def test_every_front_end_takes_every_render_option():
     options = set(canopy.RENDER_OPTIONS)
     assert {"spp", "size", "max_depth", "bvh", "width", "max_leaf_size", "fast_triangles", "threads"} <= options
     assert options <= keywords(canopy.render)
-    # The viewer renders on the CPU.
-    assert options - {"device"} <= keywords(canopy.view)
+    assert options <= keywords(canopy.view)
     # A task's threads are threads_per_task.
     for driver in (distributed.render, distributed.render_frames):
         assert options - {"threads"} <= keywords(driver), driver.__name__

@@ -50,12 +50,25 @@ def test_a_scene_built_in_code_is_viewed_and_shown_inline():
     assert not viewer.running
 
 
+@pytest.mark.skipif(not canopy_rt.devices(), reason="no GPU adapter")
+def test_a_viewer_on_the_gpu_serves_and_prints_nothing(capfd):
+    with canopy_rt.view("cornell", device="gpu", size=(32, 24), spp=2, bvh="lbvh") as viewer:
+        status, page = get(viewer.url)
+        assert status == 200 and "canopy view" in page
+    assert not viewer.running
+    out, err = capfd.readouterr()
+    assert out == "" and err == "", "the library printed"
+
+
 @pytest.mark.parametrize(
     "keywords, named",
     [
         ({"bind": "not an address"}, "bind"),
         ({"bvh": "nope"}, "bvh"),
         ({"width": 3}, "width"),
+        ({"device": "gpu", "width": 4}, "width"),
+        ({"device": "gpu", "fast_triangles": True}, "fast_triangles"),
+        ({"device": "tpu"}, "device"),
         ({"max_leaf_size": 0}, "max_leaf_size"),
         ({"threads": 0}, "threads"),
         ({"output_dir": "/no/such/folder"}, "output_dir"),

@@ -34,7 +34,7 @@ pub use settings::{Mode, TreeSettings, ViewSettings};
 pub use watcher::Reload;
 
 use axum::serve::ListenerExt;
-use canopy_job::RenderOptions;
+use canopy_job::{Device, RenderOptions};
 use canopy_render::Scene;
 use session::Session;
 use std::net::{SocketAddr, TcpListener};
@@ -56,8 +56,9 @@ pub struct ViewOptions {
     pub bind: SocketAddr,
     /// The render options to start with, canopy's as `canopy render` takes them: the
     /// scene's settings (size, spp, ...) overridden, the tree (builder, width, leaf size,
-    /// triangle test), the schedule, and the worker threads (every core by default).
-    /// The viewer renders on the CPU.
+    /// triangle test), the device (the GPU renders through binary trees, testing
+    /// triangles watertight), the schedule, and the worker threads (every core by
+    /// default).
     pub render: RenderOptions,
     /// Where the page's "save" writes images.
     pub save_dir: PathBuf,
@@ -91,6 +92,8 @@ pub enum ViewError {
     Scene(String),
     #[error("{0}")]
     Options(String),
+    #[error("cannot render on the GPU: {0}")]
+    Gpu(#[from] canopy_gpu::GpuError),
 }
 
 /// A running viewer: its server and render thread. Dropping it shuts both down.
@@ -113,12 +116,14 @@ impl ViewServer {
             .render
             .apply_to_settings(&mut scene.settings)
             .map_err(ViewError::Options)?;
-        let (view, tree) = settings::starting_options(
-            &ViewSettings::of_scene(&scene),
-            &TreeSettings::default(),
-            &options.render,
-        )
-        .map_err(ViewError::Options)?;
+        let (view, tree, device) =
+            settings::starting_options(&ViewSettings::of_scene(&scene), &options.render)
+                .map_err(ViewError::Options)?;
+        // Opened now, so that a machine without one is told before anything listens.
+        let gpu = match device {
+            Device::Cpu => None,
+            Device::Gpu => Some(canopy_gpu::Gpu::new()?),
+        };
         let bind_error = |cause| ViewError::Bind {
             addr: options.bind,
             cause,
@@ -128,7 +133,8 @@ impl ViewServer {
         let addr = listener.local_addr().map_err(bind_error)?;
         let token: Arc<str> = new_token().into();
         let inputs = scene.inputs.clone();
-        let session = Arc::new(Session::new(scene, view, tree));
+        let device_name = gpu.as_ref().map_or("cpu".into(), |gpu| gpu.describe());
+        let session = Arc::new(Session::new(scene, view, tree, device, device_name));
 
         let pool = match options.render.threads {
             Some(n) => Some(
@@ -144,8 +150,8 @@ impl ViewServer {
             std::thread::Builder::new()
                 .name("canopy-view-render".into())
                 .spawn(move || match pool {
-                    Some(pool) => pool.install(|| renderer::run(&session)),
-                    None => renderer::run(&session),
+                    Some(pool) => pool.install(|| renderer::run(&session, gpu.as_ref())),
+                    None => renderer::run(&session, gpu.as_ref()),
                 })
                 .map_err(|e| ViewError::Threads(e.to_string()))?
         };

@@ -6,7 +6,7 @@
 //! [`ServerMessage::Error`] reply and changes nothing.
 
 use crate::settings::{with_options, Mode, TreeSettings, ViewSettings};
-use canopy_job::RenderOptions;
+use canopy_job::{Device, RenderOptions};
 use canopy_render::camera::CameraSpec;
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
@@ -108,14 +108,15 @@ impl Command {
         serde_json::from_str(text).map_err(|e| format!("not a command: {e}"))
     }
 
-    /// What the command changes in the `current` view and `tree`, or why it cannot be
-    /// done (`width` and `height` are the image's, for picks).
+    /// What the command changes in the `current` view and `tree` of a viewer on
+    /// `device`, or why it cannot be done (`width` and `height` are the image's, for
+    /// picks).
     pub fn apply(
         self,
         current: &ViewSettings,
         tree: &TreeSettings,
-        width: u32,
-        height: u32,
+        device: Device,
+        (width, height): (u32, u32),
     ) -> Result<Change, String> {
         match self {
             Command::Camera {
@@ -143,7 +144,7 @@ impl Command {
                 mode,
                 levels,
             } => {
-                let (mut next, tree) = with_options(current, tree, &render)?;
+                let (mut next, tree) = with_options(current, tree, &render, device)?;
                 if let Some(exposure) = exposure {
                     if !(-20.0..=20.0).contains(&exposure) {
                         return Err(format!(
@@ -303,23 +304,33 @@ pub struct PickHit {
     pub material: Option<String>,
 }
 
+/// The first message on a socket: the scene and everything the controls offer.
+#[derive(Clone, Debug, Serialize)]
+pub struct Hello {
+    pub scene: String,
+    pub width: u32,
+    pub height: u32,
+    pub camera: CameraState,
+    pub settings: ViewSettingsState,
+    /// Where it renders: `cpu` or `gpu`, and the device in words.
+    pub device: String,
+    pub device_name: String,
+    pub builders: Vec<BuilderInfo>,
+    /// The tree widths the device renders through (the GPU's: 2), and whether it
+    /// offers the fast triangle test (the CPU).
+    pub widths: Vec<u32>,
+    pub fast_triangles: bool,
+    pub modes: Vec<Mode>,
+    pub integrators: Vec<String>,
+    pub samplers: Vec<String>,
+}
+
 /// What the server tells the page.
 #[derive(Clone, Debug, Serialize)]
 #[serde(tag = "type", rename_all = "snake_case")]
 pub enum ServerMessage {
     /// First message on a socket: the scene and everything the controls offer.
-    Hello {
-        scene: String,
-        width: u32,
-        height: u32,
-        camera: CameraState,
-        settings: ViewSettingsState,
-        builders: Vec<BuilderInfo>,
-        widths: [u32; 3],
-        modes: Vec<Mode>,
-        integrators: Vec<String>,
-        samplers: Vec<String>,
-    },
+    Hello(Box<Hello>),
     /// The tree after a build.
     Tree(TreeReport),
     /// An image follows as the next (binary) message.

@@ -9,7 +9,8 @@ use crate::frame::{encode, resident_bytes, Overlay};
 use crate::protocol::{FrameInfo, ServerMessage, TreeReport};
 use crate::session::{Control, Frame, Session, Shown};
 use crate::settings::{Mode, TreeSettings, ViewSettings};
-use canopy_job::{Observer, RenderJob, Structure};
+use canopy_gpu::{Gpu, Renderer as GpuRenderer};
+use canopy_job::{Device, Observer, RenderJob, Structure};
 use canopy_render::film::srgb_to_linear;
 use canopy_render::visualize::render_heatmap;
 use canopy_render::{Accel, AccelKind, Accumulator, Film, Scene};
@@ -26,9 +27,41 @@ struct Kept {
     accumulator: Accumulator,
 }
 
-/// Runs until the session shuts down. A job that cannot run is told to the pages (as an
-/// error notice) and not tried again until something changes.
-pub(crate) fn run(session: &Session) {
+/// The GPU a viewer renders on, and the scene uploaded to it with the tree built last.
+struct GpuStage<'g> {
+    gpu: &'g Gpu,
+    uploaded: Option<GpuRenderer<'g>>,
+}
+
+impl<'g> GpuStage<'g> {
+    /// The upload of `scene` (at its full size) and `accel`: the one kept, unless its
+    /// integrator is another.
+    fn renderer(&mut self, scene: &Scene, accel: &Accel) -> Result<&GpuRenderer<'g>, String> {
+        let integrator = scene.settings.integrator;
+        if self
+            .uploaded
+            .as_ref()
+            .is_some_and(|r| r.integrator() != integrator)
+        {
+            self.uploaded = None;
+        }
+        if self.uploaded.is_none() {
+            let renderer = GpuRenderer::for_accel(self.gpu, scene, accel)
+                .map_err(|e| format!("cannot render the view on the GPU: {e}"))?;
+            self.uploaded = Some(renderer);
+        }
+        Ok(self.uploaded.as_ref().expect("uploaded above"))
+    }
+}
+
+/// Runs until the session shuts down, rendering on `gpu` where given. A job that cannot
+/// run is told to the pages (as an error notice) and not tried again until something
+/// changes.
+pub(crate) fn run(session: &Session, gpu: Option<&Gpu>) {
+    let mut stage = gpu.map(|gpu| GpuStage {
+        gpu,
+        uploaded: None,
+    });
     let mut built_generation = None;
     let mut built_test = None;
     let mut finished_generation = None;
@@ -53,6 +86,10 @@ pub(crate) fn run(session: &Session) {
             }
             let report = build(session, &control.tree);
             session.publish_tree(report);
+            if let Some(stage) = &mut stage {
+                // Uploaded with the old tree (and scene).
+                stage.uploaded = None;
+            }
             built_generation = Some(control.tree_generation);
             built_test = Some(control.tree.triangle_test);
             // The image does not depend on the tree (of one triangle test), but its
@@ -78,7 +115,8 @@ pub(crate) fn run(session: &Session) {
                     .filter(|k| k.view.keeps_samples(&control.view))
                     .map(|k| k.accumulator)
                     .filter(|a| a.samples <= control.view.spp);
-                let (accumulator, complete) = render(session, &control, &accel, resume);
+                let (accumulator, complete) =
+                    render(session, &control, &accel, stage.as_mut(), resume);
                 kept = accumulator.map(|accumulator| Kept {
                     view: control.view.clone(),
                     accumulator,
@@ -207,9 +245,18 @@ fn render(
     session: &Session,
     control: &Control,
     accel: &Arc<Accel>,
+    stage: Option<&mut GpuStage<'_>>,
     resume: Option<Accumulator>,
 ) -> (Option<Accumulator>, bool) {
     let start = Instant::now();
+    // Uploaded with the scene at its full size: the sums' buffer holds the full image.
+    let gpu = match stage.map(|s| s.renderer(&read(session), accel)).transpose() {
+        Ok(gpu) => gpu,
+        Err(message) => {
+            session.notify(ServerMessage::Error { message });
+            return (None, true);
+        }
+    };
     if resume.is_none() {
         let size = (
             (session.width / PREVIEW_DIVISOR).max(1),
@@ -223,14 +270,14 @@ fn render(
             },
             Some(size),
         );
-        let preview = run_job(session, control, accel, None, start, true);
+        let preview = run_job(session, control, accel, gpu, None, start, true);
         apply_view(session, &control.view, None);
         if let Err(message) = preview {
             session.notify(ServerMessage::Error { message });
             return (None, true);
         }
     }
-    match run_job(session, control, accel, resume, start, false) {
+    match run_job(session, control, accel, gpu, resume, start, false) {
         Ok(outcome) => (Some(outcome.accumulator), outcome.complete),
         Err(message) => {
             session.notify(ServerMessage::Error { message });
@@ -239,12 +286,13 @@ fn render(
     }
 }
 
-/// One job over the scene as it is set now, publishing a frame after each pass; why it
-/// could not run, if it could not.
+/// One job over the scene as it is set now (on `gpu`'s upload where given), publishing a
+/// frame after each pass; why it could not run, if it could not.
 fn run_job(
     session: &Session,
     control: &Control,
     accel: &Arc<Accel>,
+    gpu: Option<&GpuRenderer<'_>>,
     resume: Option<Accumulator>,
     start: Instant,
     preview: bool,
@@ -262,9 +310,14 @@ fn run_job(
     job.resume = resume;
     job.aovs = control.view.mode.aovs();
     let samples_before = job.resume.as_ref().map_or(0, |a| a.samples);
-    let prepared = job
-        .prepare_with(accel.clone())
-        .map_err(|e| format!("cannot render the view: {e}"))?;
+    let prepared = match gpu {
+        None => job.prepare_with(accel.clone()),
+        Some(renderer) => {
+            job.device = Device::Gpu;
+            job.prepare_on(accel.clone(), renderer)
+        }
+    }
+    .map_err(|e| format!("cannot render the view: {e}"))?;
     let mut observer = FrameObserver {
         session,
         control,

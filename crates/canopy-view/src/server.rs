@@ -3,7 +3,7 @@
 //! answers the page's commands.
 
 use crate::protocol::{
-    BuilderInfo, CameraState, Change, Command, ServerMessage, ViewSettingsState,
+    BuilderInfo, CameraState, Change, Command, Hello, ServerMessage, ViewSettingsState,
     MAX_SOCKET_MESSAGE_BYTES,
 };
 use crate::save::save;
@@ -18,6 +18,7 @@ use axum::response::{IntoResponse, Response};
 use axum::routing::get;
 use axum::Router;
 use canopy_bvh::Builder;
+use canopy_job::Device;
 use canopy_render::{Integrator, Sampler};
 use serde::Deserialize;
 use std::path::PathBuf;
@@ -170,8 +171,14 @@ async fn talk(ws: &mut WebSocket, app: &App) -> Result<(), Closed> {
 async fn command(app: &App, text: &str) -> Option<ServerMessage> {
     let session = &app.session;
     let current = session.control();
-    let change = Command::parse(text)
-        .and_then(|c| c.apply(&current.view, &current.tree, session.width, session.height));
+    let change = Command::parse(text).and_then(|c| {
+        c.apply(
+            &current.view,
+            &current.tree,
+            session.device,
+            (session.width, session.height),
+        )
+    });
     match change {
         Err(message) => Some(ServerMessage::Error { message }),
         Ok(Change::View(view)) => {
@@ -278,7 +285,7 @@ fn not_built() -> ServerMessage {
 fn hello(session: &Session) -> ServerMessage {
     let c = session.control();
     let v = &c.view;
-    ServerMessage::Hello {
+    ServerMessage::Hello(Box::new(Hello {
         scene: session.name.clone(),
         width: session.width,
         height: session.height,
@@ -296,9 +303,15 @@ fn hello(session: &Session) -> ServerMessage {
                 description: b.description(),
             })
             .collect(),
-        widths: [2, 4, 8],
+        device: session.device.name().into(),
+        device_name: session.device_name.clone(),
+        widths: match session.device {
+            Device::Cpu => vec![2, 4, 8],
+            Device::Gpu => vec![2],
+        },
+        fast_triangles: session.device == Device::Cpu,
         modes: Mode::ALL.to_vec(),
         integrators: Integrator::ALL.iter().map(|i| i.name().into()).collect(),
         samplers: Sampler::ALL.iter().map(|s| s.name().into()).collect(),
-    }
+    }))
 }

@@ -5,6 +5,7 @@
 
 use crate::protocol::{FrameInfo, ServerMessage, TreeReport};
 use crate::settings::{TreeSettings, ViewSettings};
+use canopy_job::Device;
 use canopy_render::{Accel, Film, Scene};
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard, RwLock};
@@ -45,6 +46,9 @@ pub(crate) struct Session {
     pub name: String,
     pub width: u32,
     pub height: u32,
+    /// Where it renders, fixed; and that device in words (the GPU adapter's).
+    pub device: Device,
+    pub device_name: String,
     /// The structure rendered through (`None` until the first build).
     pub accel: Mutex<Option<Arc<Accel>>>,
     /// A scene loaded again after its files changed, for the render thread to take up.
@@ -65,11 +69,19 @@ pub(crate) struct Session {
 }
 
 impl Session {
-    pub fn new(scene: Scene, view: ViewSettings, tree: TreeSettings) -> Self {
+    pub fn new(
+        scene: Scene,
+        view: ViewSettings,
+        tree: TreeSettings,
+        device: Device,
+        device_name: String,
+    ) -> Self {
         Self {
             name: scene.name.clone(),
             width: scene.settings.width,
             height: scene.settings.height,
+            device,
+            device_name,
             scene: RwLock::new(scene),
             accel: Mutex::new(None),
             pending_scene: Mutex::new(None),

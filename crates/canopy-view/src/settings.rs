@@ -122,6 +122,34 @@ impl Default for TreeSettings {
 }
 
 impl TreeSettings {
+    /// The tree a viewer on `device` starts with: the default, binary on the GPU
+    /// (which walks binary trees).
+    pub fn on(device: Device) -> Self {
+        let default = Self::default();
+        match device {
+            Device::Cpu => default,
+            Device::Gpu => Self {
+                width: BvhWidth::Two,
+                ..default
+            },
+        }
+    }
+
+    /// Why `device` cannot render through this tree, if it cannot: the GPU walks
+    /// binary trees and tests triangles watertight.
+    pub fn check_for(&self, device: Device) -> Result<(), String> {
+        match device {
+            Device::Gpu if self.width != BvhWidth::Two => Err(format!(
+                "`width` {} is for the CPU: the GPU walks binary trees (width 2)",
+                self.width.children()
+            )),
+            Device::Gpu if self.triangle_test == TriangleTest::Fast => {
+                Err("`fast_triangles` is for the CPU: the GPU's triangle test is watertight".into())
+            }
+            _ => Ok(()),
+        }
+    }
+
     pub fn params(&self) -> BuildParams {
         BuildParams {
             max_leaf_size: self.max_leaf_size,
@@ -134,12 +162,14 @@ impl TreeSettings {
 const FIXED_OPTIONS: [&str; 3] = ["size", "device", "threads"];
 
 /// The view and tree with `options` put in, or why they cannot be: an option out of
-/// range, one the viewer cannot change while it runs (`size`, `device`, `threads`), or
-/// no tree (`bvh = "none"`: the viewer walks a tree).
+/// range, one the viewer cannot change while it runs (`size`, `device`, `threads`), a
+/// tree `device` cannot render through, or no tree (`bvh = "none"`: the viewer walks a
+/// tree).
 pub fn with_options(
     view: &ViewSettings,
     tree: &TreeSettings,
     options: &RenderOptions,
+    device: Device,
 ) -> Result<(ViewSettings, TreeSettings), String> {
     if let Some(name) = options
         .given()
@@ -150,20 +180,28 @@ pub fn with_options(
             "`{name}` is set when the viewer starts and cannot change while it runs"
         ));
     }
-    starting_options(view, tree, options)
+    put_in(view, tree, options, device)
 }
 
-/// As [`with_options`], for the options a viewer starts with: any, where the size and
-/// threads are the caller's to apply and the device is the CPU.
+/// The view, tree and device a viewer starts with: `view` (the scene's) with
+/// `options` put in, as [`with_options`] does, where the size and threads are the
+/// caller's to apply.
 pub fn starting_options(
+    view: &ViewSettings,
+    options: &RenderOptions,
+) -> Result<(ViewSettings, TreeSettings, Device), String> {
+    let device = options.device.unwrap_or_default();
+    let (view, tree) = put_in(view, &TreeSettings::on(device), options, device)?;
+    Ok((view, tree, device))
+}
+
+fn put_in(
     view: &ViewSettings,
     tree: &TreeSettings,
     options: &RenderOptions,
+    device: Device,
 ) -> Result<(ViewSettings, TreeSettings), String> {
     options.check()?;
-    if options.device == Some(Device::Gpu) {
-        return Err("the viewer renders on the CPU: drop device=\"gpu\"".into());
-    }
     let mut settings = canopy_render::RenderSettings {
         spp: view.spp,
         max_depth: view.max_depth,
@@ -205,6 +243,7 @@ pub fn starting_options(
             Some(false) => TriangleTest::Watertight,
         },
     };
+    next_tree.check_for(device)?;
     Ok((next_view, next_tree))
 }
 
@@ -245,7 +284,7 @@ mod tests {
                 _ => format!(r#"{{"{name}": 1}}"#),
             })
             .unwrap();
-            let e = with_options(&view, &tree, &options).unwrap_err();
+            let e = with_options(&view, &tree, &options, Device::Cpu).unwrap_err();
             assert!(e.contains(name), "{e}");
         }
     }
@@ -255,7 +294,7 @@ mod tests {
         let (view, tree) = start();
         let change = |json: &str| {
             let options = RenderOptions::from_json(json).unwrap();
-            with_options(&view, &tree, &options).unwrap()
+            with_options(&view, &tree, &options, Device::Cpu).unwrap()
         };
         for restarts in [
             r#"{"seed": 5}"#,
@@ -278,8 +317,44 @@ mod tests {
         // What the page is shown reads back as the same view and tree.
         let shown = current_options(&next, &next_tree);
         assert_eq!(
-            with_options(&view, &tree, &shown).unwrap(),
+            with_options(&view, &tree, &shown, Device::Cpu).unwrap(),
             (next, next_tree)
         );
+    }
+
+    #[test]
+    fn a_viewer_on_the_gpu_walks_binary_watertight_trees() {
+        let (view, _) = start();
+        let (_, tree, device) = starting_options(
+            &view,
+            &RenderOptions::from_json(r#"{"device": "gpu", "bvh": "lbvh"}"#).unwrap(),
+        )
+        .unwrap();
+        assert_eq!(device, Device::Gpu);
+        assert_eq!((tree.builder, tree.width), (Builder::Lbvh, BvhWidth::Two));
+        for (json, named) in [
+            (r#"{"device": "gpu", "width": 8}"#, "width"),
+            (
+                r#"{"device": "gpu", "fast_triangles": true}"#,
+                "fast_triangles",
+            ),
+        ] {
+            let options = RenderOptions::from_json(json).unwrap();
+            let e = starting_options(&view, &options).unwrap_err();
+            assert!(e.contains(named), "{json}: {e}");
+        }
+        // And while it runs: another builder or leaf size is built, a wider tree or
+        // the fast test refused by name.
+        let change = |json: &str| {
+            let options = RenderOptions::from_json(json).unwrap();
+            with_options(&view, &tree, &options, Device::Gpu)
+        };
+        let (_, next) = change(r#"{"bvh": "ploc", "max_leaf_size": 2}"#).unwrap();
+        assert_eq!((next.builder, next.max_leaf_size), (Builder::Ploc, 2));
+        assert!(change(r#"{"width": 4}"#).unwrap_err().contains("width"));
+        assert!(change(r#"{"fast_triangles": true}"#)
+            .unwrap_err()
+            .contains("fast_triangles"));
+        assert!(change(r#"{"width": 2, "fast_triangles": false}"#).is_ok());
     }
 }

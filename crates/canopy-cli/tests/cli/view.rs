@@ -78,3 +78,17 @@ fn view_refuses_an_address_it_cannot_listen_on_and_a_missing_output_folder() {
     );
     std::fs::remove_dir_all(dir).unwrap();
 }
+
+#[test]
+fn view_on_the_gpu_refuses_a_tree_the_gpu_cannot_walk_before_opening_it() {
+    let dir = scratch("view-gpu-width");
+    let args = ["view", "cornell", "--device", "gpu", "--width", "8"];
+    let out = canopy_within(&args, &dir, Duration::from_secs(120));
+    assert_eq!(out.status.code(), Some(1));
+    assert!(
+        stderr(&out).contains("`width` 8 is for the CPU"),
+        "{}",
+        stderr(&out)
+    );
+    std::fs::remove_dir_all(dir).unwrap();
+}

@@ -859,3 +859,66 @@ fn an_orthographic_camera_sees_alike_on_cpu_and_gpu() {
     scene.camera.check().unwrap();
     assert_devices_agree("orthographic", &gpu, &scene, 6);
 }
+
+#[test]
+fn a_view_of_an_upload_renders_what_an_upload_of_that_view_does() {
+    let Some(gpu) = gpu() else { return };
+    let mut scene = scene_from("view", SPHERES);
+    scene.settings.integrator = Integrator::Path;
+    let boxes: Vec<_> = scene.primitives.iter().map(|p| p.shape.bounds()).collect();
+    let bvh = canopy_bvh::build(Builder::BinnedSah, &boxes, &BuildParams::default());
+    let uploaded = Renderer::new(&gpu, &scene, &bvh).unwrap();
+    // A viewer's moved camera, at a preview's smaller size, with other settings.
+    let mut moved = scene.clone();
+    moved.camera.look_from = glam::Vec3::new(2.0, 2.5, 5.0);
+    moved.camera.vfov = 30.0;
+    let s = &mut moved.settings;
+    (s.width, s.height) = (16, 12);
+    (s.seed, s.max_depth, s.russian_roulette) = (9, 3, !s.russian_roulette);
+    s.sampler = Sampler::Independent;
+    let mut viewed = Accumulator::new(16, 12);
+    uploaded
+        .render_view_samples(&moved.camera, &moved.settings, &mut viewed, 2)
+        .unwrap();
+    let mut fresh = Accumulator::new(16, 12);
+    Renderer::new(&gpu, &moved, &bvh)
+        .unwrap()
+        .render_samples(&mut fresh, 2)
+        .unwrap();
+    assert_eq!(viewed.sums, fresh.sums);
+    assert_eq!((viewed.samples, viewed.rays), (fresh.samples, fresh.rays));
+    // The uploaded view itself is unchanged.
+    let mut own = Accumulator::new(32, 32);
+    let mut again = Accumulator::new(32, 32);
+    uploaded.render_samples(&mut own, 1).unwrap();
+    uploaded
+        .render_view_samples(&scene.camera, &scene.settings, &mut again, 1)
+        .unwrap();
+    assert_eq!(own.sums, again.sums);
+
+    // The estimator is compiled into the pipeline: another one is refused by name.
+    let mut bsdf = moved.settings;
+    bsdf.integrator = Integrator::Bsdf;
+    let Err(e) = uploaded.render_view_samples(&moved.camera, &bsdf, &mut viewed, 1) else {
+        panic!("another integrator rendered");
+    };
+    assert!(e.to_string().contains("bsdf"), "{e}");
+}
+
+#[test]
+fn a_view_wider_than_the_uploads_sums_hold_is_refused() {
+    let Some(gpu) = gpu() else { return };
+    let mut scene = scene_from("narrow", SPHERES);
+    (scene.settings.width, scene.settings.height) = (4, 2);
+    let boxes: Vec<_> = scene.primitives.iter().map(|p| p.shape.bounds()).collect();
+    let bvh = canopy_bvh::build(Builder::BinnedSah, &boxes, &BuildParams::default());
+    let uploaded = Renderer::new(&gpu, &scene, &bvh).unwrap();
+    let mut wide = scene.settings;
+    (wide.width, wide.height) = (64, 1);
+    let mut acc = Accumulator::new(64, 1);
+    let Err(e) = uploaded.render_view_samples(&scene.camera, &wide, &mut acc, 1) else {
+        panic!("a row wider than the sums rendered");
+    };
+    assert!(e.to_string().contains("64 pixels wide"), "{e}");
+    assert_eq!(acc.samples, 0);
+}

@@ -576,3 +576,51 @@ fn a_job_traces_through_a_structure_given_only_if_it_is_over_its_scene() {
     gpu.device = Device::Gpu;
     assert!(matches!(gpu.prepare_with(accel), Err(JobError::Invalid(m)) if m.contains("binary")));
 }
+
+#[test]
+fn a_kept_gpu_upload_renders_each_jobs_view_as_a_fresh_upload_does() {
+    let mut scene = small("teapots", 24, 16, 2);
+    let binary = canopy_render::Accel::for_scene(
+        &scene,
+        AccelKind::default(),
+        canopy_render::BvhWidth::Two,
+        &Default::default(),
+        None,
+    );
+    let accel = std::sync::Arc::new(binary);
+    let gpu = match canopy_gpu::Gpu::new() {
+        Ok(gpu) => gpu,
+        Err(e @ canopy_gpu::GpuError::NoAdapter(_)) => {
+            eprintln!("SKIPPED: no GPU adapter: {e}");
+            return;
+        }
+        Err(e) => panic!("{e}"),
+    };
+    let kept = canopy_gpu::Renderer::for_accel(&gpu, &scene, &accel).unwrap();
+    // A viewer's next views: the camera moved, then a preview at a quarter of the size.
+    scene.camera.look_from += glam::Vec3::new(1.5, 0.5, 0.0);
+    for (width, height) in [(24, 16), (6, 4)] {
+        (scene.settings.width, scene.settings.height) = (width, height);
+        let mut job = RenderJob::new(&scene, "teapots");
+        job.device = Device::Gpu;
+        let on_kept = job.prepare_on(accel.clone(), &kept).unwrap();
+        assert_ne!(on_kept.device_name(), "cpu");
+        let on_kept = on_kept.run(&mut ()).unwrap().accumulator;
+        let uploaded = job.prepare_with(accel.clone()).unwrap();
+        let uploaded = uploaded.run(&mut ()).unwrap().accumulator;
+        assert_eq!(on_kept.sums, uploaded.sums, "{width}x{height}");
+        assert_eq!(on_kept.samples, 2);
+    }
+    // Not on the GPU, or with another estimator than the upload's: refused by name.
+    let cpu = RenderJob::new(&scene, "teapots");
+    assert!(
+        matches!(cpu.prepare_on(accel.clone(), &kept), Err(JobError::Invalid(m)) if m.contains("CPU"))
+    );
+    let mut bsdf = scene.clone();
+    bsdf.settings.integrator = canopy_render::Integrator::Bsdf;
+    let mut other = RenderJob::new(&bsdf, "teapots");
+    other.device = Device::Gpu;
+    assert!(
+        matches!(other.prepare_on(accel, &kept), Err(JobError::Invalid(m)) if m.contains("bsdf"))
+    );
+}

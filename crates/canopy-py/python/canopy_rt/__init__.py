@@ -564,10 +564,11 @@ def view(
     russian_roulette: Optional[bool] = None,
     sampler: Optional[str] = None,
     bvh: str = "binned-sah",
-    width: int = 8,
+    width: Optional[int] = None,
     max_leaf_size: int = 4,
     fast_triangles: bool = False,
     schedule: str = "wavefront",
+    device: str = "cpu",
     threads: Optional[int] = None,
     output_dir=".",
     allow_paths: Sequence = (),
@@ -584,9 +585,11 @@ def view(
     served on ``bind`` (this machine only, a free port, by default) behind a random token
     that ``url`` carries. A scene read from files is loaded again when they change
     (``reload=False``: not). ``size`` is (width, height); the render options start as
-    :func:`render` takes them (the viewer renders on the CPU) and the page changes them,
-    all but ``size`` and ``threads``. The call returns at once: the viewer runs on
-    threads of its own until stopped."""
+    :func:`render` takes them and the page changes them, all but ``size``, ``device``
+    and ``threads``. ``device="gpu"`` renders on the first GPU adapter found (see
+    :func:`devices`) through binary trees (``width`` 2, the default there) with the
+    watertight triangle test; elsewhere ``width`` is 8 unless given. The call returns
+    at once: the viewer runs on threads of its own until stopped."""
     options = _render_options(locals())
     native = _canopy.view(
         scene._native.native if isinstance(scene, Scene) else str(scene),

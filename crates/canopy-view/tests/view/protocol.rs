@@ -329,7 +329,8 @@ fn the_viewer_starts_with_the_render_options_it_is_given() {
     });
     drop(server);
     for refused in [
-        r#"{"device": "gpu"}"#,
+        // The GPU walks binary trees.
+        r#"{"device": "gpu", "width": 4}"#,
         r#"{"bvh": "none"}"#,
         r#"{"spp": 0}"#,
         r#"{"max_leaf_size": 1000}"#,
@@ -845,4 +846,85 @@ fn the_albedo_and_normal_layers_are_shown() {
         let p = row[32];
         assert!(p[1] > 230 && (p[0] as i32 - 128).abs() < 40, "{p:?}");
     });
+}
+
+#[test]
+fn on_the_gpu_the_view_renders_as_a_gpu_job_does() {
+    let dir = temp_dir("gpu");
+    let mut scene = canopy_render::load_scene("paper-1").unwrap();
+    let s = &mut scene.settings;
+    (s.width, s.height, s.spp, s.max_depth) = (40, 30, 3, 4);
+    let options = ViewOptions {
+        render: RenderOptions {
+            device: Some(canopy_job::Device::Gpu),
+            ..two_threads()
+        },
+        save_dir: dir.clone(),
+        ..ViewOptions::default()
+    };
+    let server = match ViewServer::start(scene.clone(), options) {
+        Ok(server) => server,
+        Err(canopy_view::ViewError::Gpu(e @ canopy_gpu::GpuError::NoAdapter(_))) => {
+            eprintln!("SKIPPED: no GPU adapter: {e}");
+            return;
+        }
+        Err(e) => panic!("{e}"),
+    };
+    let saved = runtime().block_on(async {
+        let mut page = Client::connect(&server).await;
+        assert_eq!(page.hello["device"], "gpu");
+        assert_eq!(page.hello["widths"], json!([2]));
+        assert_eq!(page.hello["fast_triangles"], false);
+        assert_eq!(page.next_of("tree").await["width"], 2);
+        let (done, _) = page
+            .frame_until(|f| f["spp"] == 3 && f["preview"] == false)
+            .await;
+        page.send(json!({"type": "save", "format": "exr"})).await;
+        let saved = page.next_of("saved").await["path"]
+            .as_str()
+            .unwrap()
+            .to_string();
+        // A wider tree or the CPU's fast triangle test: refused by name.
+        for (render, named) in [
+            (json!({"width": 4}), "width"),
+            (json!({"fast_triangles": true}), "fast_triangles"),
+        ] {
+            page.send(json!({"type": "settings", "render": render}))
+                .await;
+            let error = page.next_of("error").await;
+            assert!(error["message"].as_str().unwrap().contains(named), "{error}");
+        }
+        // Another builder is built and rendered through; a camera move renders the new
+        // view to its target.
+        page.send(json!({"type": "settings", "render": {"bvh": "lbvh"}}))
+            .await;
+        assert_eq!(page.next_of("tree").await["builder"], "lbvh");
+        page.send(json!({"type": "camera", "look_from": [10.0, 3.0, 4.0], "look_at": [0.0, 0.0, 0.0], "vfov": 25.0}))
+            .await;
+        let generation = done["generation"].as_u64().unwrap();
+        let (moved, image) = page
+            .frame_until(|f| f["generation"].as_u64().unwrap() > generation + 1 && f["spp"] == 3)
+            .await;
+        assert_eq!(moved["preview"], false);
+        assert!(moved["mrays_per_second"].as_f64().unwrap() > 0.0);
+        assert!(image.pixels().any(|p| p.0 != [0, 0, 0]), "black");
+        saved
+    });
+    drop(server);
+    // The image the page saved is a GPU render's of that view, bit for bit: the same
+    // passes, through an upload kept across views.
+    let mut job = canopy_job::RenderJob::new(&scene, "paper-1");
+    job.device = canopy_job::Device::Gpu;
+    let film = job
+        .prepare()
+        .unwrap()
+        .run(&mut ())
+        .unwrap()
+        .accumulator
+        .film();
+    let (width, height, pixels) = canopy_render::output::read_image(saved.as_ref()).unwrap();
+    assert_eq!((width, height), (40, 30));
+    let expected: Vec<f32> = film.pixels.iter().flat_map(|p| p.to_array()).collect();
+    assert_eq!(pixels, expected);
+    std::fs::remove_dir_all(dir).unwrap();
 }
