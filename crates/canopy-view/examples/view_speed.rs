@@ -4,9 +4,10 @@
 //! 16 ms (a drag), and the time to converge to 64 spp once it stops.
 //!
 //! `cargo run --release -p canopy-view --example view_speed -- [--size WxH] [--threads N]
-//! [SCENE...]` (default: paper-1, cornell and the glTF milk truck at 640x480). Times
+//! [--device cpu|gpu] [SCENE...]` (default: paper-1, cornell and the glTF milk truck at 640x480). Times
 //! include encoding and sending frames, as a user waits for them.
 
+use canopy_job::Device;
 use canopy_view::{ViewOptions, ViewServer};
 use futures_util::{SinkExt, StreamExt};
 use serde_json::{json, Value};
@@ -64,7 +65,7 @@ fn camera_command(hello: &Value, angle: f32) -> Value {
     })
 }
 
-async fn measure(name: &str, size: (u32, u32), threads: Option<usize>) {
+async fn measure(name: &str, size: (u32, u32), threads: Option<usize>, device: Device) {
     let mut scene = canopy_render::load_scene_allowing(name, &[]).unwrap();
     (scene.settings.width, scene.settings.height) = size;
     scene.settings.spp = 64;
@@ -74,6 +75,7 @@ async fn measure(name: &str, size: (u32, u32), threads: Option<usize>) {
         ViewOptions {
             render: canopy_job::RenderOptions {
                 threads,
+                device: Some(device),
                 ..Default::default()
             },
             ..ViewOptions::default()
@@ -151,6 +153,9 @@ async fn measure(name: &str, size: (u32, u32), threads: Option<usize>) {
     })
     .await;
     let to_converge = stopped.elapsed();
+    if device == Device::Gpu {
+        println!("on {}", hello["device_name"]);
+    }
     println!(
         "{name:<32} first frame {:>7.1} ms | after a move: preview {:>6.1} ms, full size {:>6.1} ms | dragging {:>5.1} frames/s | 64 spp in {:>6.2} s",
         to_first.as_secs_f64() * 1e3,
@@ -166,6 +171,7 @@ fn main() {
     let mut args = std::env::args().skip(1);
     let mut size = (640, 480);
     let mut threads = None;
+    let mut device = Device::Cpu;
     let mut scenes = Vec::new();
     while let Some(arg) = args.next() {
         match arg.as_str() {
@@ -175,6 +181,7 @@ fn main() {
                 size = (w.parse().unwrap(), h.parse().unwrap());
             }
             "--threads" => threads = Some(args.next().unwrap().parse().unwrap()),
+            "--device" => device = args.next().expect("--device cpu|gpu").parse().unwrap(),
             _ => scenes.push(arg),
         }
     }
@@ -195,7 +202,7 @@ fn main() {
         .build()
         .unwrap();
     for scene in &scenes {
-        runtime.block_on(measure(scene, size, threads));
+        runtime.block_on(measure(scene, size, threads, device));
     }
 }
 
