@@ -74,15 +74,7 @@ fn options(
     threads: Option<usize>,
     triangles: &str,
 ) -> PyResult<Options> {
-    let triangle_test = match triangles {
-        "watertight" => TriangleTest::Watertight,
-        "fast" => TriangleTest::Fast,
-        other => {
-            return Err(PyValueError::new_err(format!(
-                "triangles must be 'watertight' or 'fast', not {other:?}"
-            )))
-        }
-    };
+    let triangle_test = triangle_test(triangles)?;
     let kind: AccelKind = builder
         .parse()
         .map_err(|e: canopy_bvh::UnknownBuilder| PyValueError::new_err(e.to_string()))?;
@@ -511,11 +503,7 @@ impl Bvh {
         d.set_item("builder", self.name())?;
         d.set_item("primitives", accel.primitives().len())?;
         d.set_item("build_ms", self.build_ms)?;
-        let triangles = match accel.triangle_test() {
-            TriangleTest::Watertight => "watertight",
-            TriangleTest::Fast => "fast",
-        };
-        d.set_item("triangles", triangles)?;
+        d.set_item("triangles", triangle_test_name(accel.triangle_test()))?;
         let Some(tree) = accel.tree() else {
             return Ok(d);
         };
@@ -725,4 +713,23 @@ impl Bvh {
 fn triangle(vertices: &[[f32; 3]], [a, b, c]: [u32; 3]) -> Triangle {
     let vertex = |i: u32| Vec3::from(vertices[i as usize]);
     Triangle::new(vertex(a), vertex(b), vertex(c))
+}
+
+/// The triangle test a `triangles=` keyword names.
+pub(crate) fn triangle_test(triangles: &str) -> PyResult<TriangleTest> {
+    match triangles {
+        "watertight" => Ok(TriangleTest::Watertight),
+        "fast" => Ok(TriangleTest::Fast),
+        other => Err(PyValueError::new_err(format!(
+            "triangles must be 'watertight' or 'fast', not {other:?}"
+        ))),
+    }
+}
+
+/// The `triangles=` name of a triangle test.
+pub(crate) fn triangle_test_name(test: TriangleTest) -> &'static str {
+    match test {
+        TriangleTest::Watertight => "watertight",
+        TriangleTest::Fast => "fast",
+    }
 }

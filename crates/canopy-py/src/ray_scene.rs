@@ -209,8 +209,9 @@ fn geometric_normal(tlas: &Tlas<MeshBlas>, hit: &Hit) -> Vec3 {
 #[pymethods]
 impl RayScene {
     #[new]
-    #[pyo3(signature = (builder="binned-sah", width=8))]
-    fn new(builder: &str, width: u32) -> PyResult<Self> {
+    #[pyo3(signature = (builder="binned-sah", width=8, triangles="watertight"))]
+    fn new(builder: &str, width: u32, triangles: &str) -> PyResult<Self> {
+        let triangle_test = crate::bvh::triangle_test(triangles)?;
         let kind: canopy_render::AccelKind = builder
             .parse()
             .map_err(|e: canopy_bvh::UnknownBuilder| PyValueError::new_err(e.to_string()))?;
@@ -222,6 +223,7 @@ impl RayScene {
         };
         let mut params = BlasParams::new(builder, width);
         params.build = canopy_bvh::packed_params(&params.build);
+        params.triangle_test = triangle_test;
         Ok(Self {
             meshes: Vec::new(),
             instances: Vec::new(),
@@ -348,6 +350,12 @@ impl RayScene {
         })?;
         // Checked above: the count matches and the positions are finite.
         edited.map_err(|e| PyValueError::new_err(format!("set_vertices: {e}")))
+    }
+
+    /// How ray queries test triangles: "watertight" or "fast".
+    #[getter]
+    fn triangles(&self) -> &'static str {
+        crate::bvh::triangle_test_name(self.params.triangle_test)
     }
 
     /// Everything the scene was made from, for pickling: (builder, width, each

@@ -1,6 +1,8 @@
 """canopy.RayScene: several meshes placed by instances, against brute force over every
 instance's triangles in world space (float64), with masks, moves and bad input."""
 
+import pickle
+
 import numpy as np
 import pytest
 
@@ -148,3 +150,52 @@ def test_an_empty_scene_misses_and_bad_input_is_refused():
             call()
         assert words in str(e.value), str(e.value)
     assert scene.instance_count == 0 and scene.geometry_count == 1
+
+
+@pytest.mark.parametrize("builder, width", [("binned-sah", 8), ("lbvh", 4), ("sweep-sah", 2)])
+def test_the_fast_triangle_test_answers_as_brute_force_in_that_mode_and_pickles(builder, width):
+    # One untransformed instance and rays aimed exactly at edge midpoints, where the two
+    # modes can differ: each mode's tree answers as brute force in the same mode.
+    vertices, faces = random_soup(300, 3)
+    rng = np.random.default_rng(5)
+    triangles = vertices[faces]
+    targets = 0.5 * (triangles[:, 0] + triangles[:, 1])
+    origins = (rng.random((len(targets), 3), dtype=np.float32) * 8 - 4).astype(np.float32)
+    directions = targets - origins
+    hits = {}
+    for mode in ("watertight", "fast"):
+        scene = canopy.RayScene(builder=builder, width=width, triangles=mode)
+        reference = canopy.RayScene(builder="none", triangles=mode)
+        for s in (scene, reference):
+            s.add_mesh(vertices, faces)
+        assert scene.triangles == mode
+        got, expected = scene.intersect(origins, directions), reference.intersect(origins, directions)
+        np.testing.assert_array_equal(got.prim, expected.prim)
+        np.testing.assert_array_equal(got.t, expected.t)
+        np.testing.assert_array_equal(scene.occluded(origins, directions), expected.prim >= 0)
+        copy = pickle.loads(pickle.dumps(scene))
+        assert copy.triangles == mode
+        np.testing.assert_array_equal(copy.intersect(origins, directions).prim, got.prim)
+        hits[mode] = got.prim >= 0
+    # The fast test stops every ray the watertight one stops.
+    assert np.all(hits["fast"][hits["watertight"]])
+    with pytest.raises(ValueError, match="'watertight' or 'fast'"):
+        canopy.RayScene(triangles="robust")
+
+
+def test_the_triangle_modes_differ_where_a_ray_grazes_an_edge():
+    # Each ray looks only at a short segment around an edge midpoint of the triangle it
+    # aims at: the fast test stops a few more of them, never fewer (so `triangles=` is
+    # the mode the queries use).
+    vertices, faces = random_soup(20000, 3)
+    rng = np.random.default_rng(5)
+    triangles = vertices[faces]
+    targets = 0.5 * (triangles[:, 0] + triangles[:, 1])
+    origins = (rng.random((len(targets), 3), dtype=np.float32) * 8 - 4).astype(np.float32)
+    stopped = {}
+    for mode in ("watertight", "fast"):
+        scene = canopy.RayScene(triangles=mode)
+        scene.add_mesh(vertices, faces)
+        stopped[mode] = scene.occluded(origins, targets - origins, 0.999, 1.001)
+    assert not np.any(stopped["watertight"] & ~stopped["fast"])
+    assert np.sum(stopped["fast"] & ~stopped["watertight"]) > 0

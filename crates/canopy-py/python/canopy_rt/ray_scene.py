@@ -100,26 +100,35 @@ def _mask(mask) -> int:
 class RayScene:
     """Triangle meshes, each stored and built once, placed by any number of instances
     (any invertible affine transform: rotations, mirrors, non-uniform scale), each with
-    a 32-bit mask that rays select by. ``builder`` and ``width`` choose the BVHs as for
-    :class:`canopy.Bvh`. The top-level tree is rebuilt at the first query after
+    a 32-bit mask that rays select by. ``builder`` and ``width`` choose the BVHs, and
+    ``triangles`` how ray queries test triangles, as for :class:`canopy.Bvh`:
+    ``"watertight"`` (the default) or ``"fast"`` (Embree's default test; crossing counts
+    and lists always use exact signs). The top-level tree is rebuilt at the first query after
     instances change (milliseconds for thousands).
 
     Rays are ``origins`` and ``directions`` (n, 3), or one (n, 6) array of origin and
     direction rows (Open3D's). A scene pickles (for ``multiprocessing``, Ray's object
     store): the pickle holds its meshes and instances, and the trees are built again."""
 
-    def __init__(self, *, builder: str = "binned-sah", width: int = 8):
+    def __init__(self, *, builder: str = "binned-sah", width: int = 8, triangles: str = "watertight"):
         if not isinstance(builder, str):
             raise TypeError(f"builder must be a name (see canopy_rt.builders()), not {builder!r}")
-        self._native = _canopy.RayScene(builder, int(width))
+        self._native = _canopy.RayScene(builder, int(width), str(triangles))
+
+    @property
+    def triangles(self) -> str:
+        """How ray queries test triangles: ``"watertight"`` or ``"fast"``."""
+        return self._native.triangles
 
     def __getstate__(self) -> dict:
         # The meshes and instances; unpickling builds the trees again (see Bvh).
         builder, width, geometries, instances = self._native.state()
-        return {"builder": builder, "width": width, "geometries": geometries, "instances": instances}
+        return {"builder": builder, "width": width, "triangles": self.triangles,
+                "geometries": geometries, "instances": instances}
 
     def __setstate__(self, state: dict) -> None:
-        self.__init__(builder=state["builder"], width=state["width"])
+        self.__init__(builder=state["builder"], width=state["width"],
+                      triangles=state.get("triangles", "watertight"))
         for vertices, faces in state["geometries"]:
             self.add_geometry(vertices, faces)
         for geometry, transform, mask in state["instances"]:
