@@ -28,6 +28,17 @@ def random_soup(n: int, seed: int):
     return vertices, np.arange(3 * n).reshape(n, 3)
 
 
+def edge_midpoint_rays(vertices, faces, seed: int):
+    """A ray from a random point around the unit cube to the midpoint of each triangle's
+    first edge, as (origins, directions) with the midpoint at t = 1: where the watertight
+    and fast triangle tests can differ."""
+    rng = np.random.default_rng(seed)
+    triangles = vertices[faces]
+    targets = 0.5 * (triangles[:, 0] + triangles[:, 1])
+    origins = (rng.random((len(targets), 3), dtype=np.float32) * 8 - 4).astype(np.float32)
+    return origins, targets - origins
+
+
 def random_rays(n: int, seed: int):
     """Rays from around the unit cube towards random points inside it."""
     rng = np.random.default_rng(seed)

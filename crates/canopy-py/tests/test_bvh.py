@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import canopy_rt as canopy
-from conftest import MESHES, random_rays, random_soup
+from conftest import MESHES, edge_midpoint_rays, random_rays, random_soup
 
 
 def moller_trumbore(vertices, faces, origins, directions):
@@ -68,11 +68,7 @@ def test_every_builder_and_width_gives_the_brute_force_answer(builder, width):
 def test_the_fast_triangle_test_agrees_with_itself_and_hits_wherever_the_watertight_one_does(builder, width):
     # Rays aimed exactly at edge midpoints, where the two modes can differ.
     vertices, faces = random_soup(300, 3)
-    rng = np.random.default_rng(4)
-    triangles = vertices[faces]
-    targets = 0.5 * (triangles[:, 0] + triangles[:, 1])
-    origins = (rng.random((len(targets), 3), dtype=np.float32) * 8 - 4).astype(np.float32)
-    directions = targets - origins
+    origins, directions = edge_midpoint_rays(vertices, faces, 4)
     reference = canopy.Bvh(vertices, faces, builder="none", triangles="fast")
     fast = canopy.Bvh(vertices, faces, builder=builder, width=width, triangles="fast")
     watertight = canopy.Bvh(vertices, faces, builder=builder, width=width)

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import canopy_rt as canopy
-from conftest import random_rays, random_soup
+from conftest import edge_midpoint_rays, random_rays, random_soup
 
 
 def random_transform(rng, mirror: bool) -> np.ndarray:
@@ -157,11 +157,7 @@ def test_the_fast_triangle_test_answers_as_brute_force_in_that_mode_and_pickles(
     # One untransformed instance and rays aimed exactly at edge midpoints, where the two
     # modes can differ: each mode's tree answers as brute force in the same mode.
     vertices, faces = random_soup(300, 3)
-    rng = np.random.default_rng(5)
-    triangles = vertices[faces]
-    targets = 0.5 * (triangles[:, 0] + triangles[:, 1])
-    origins = (rng.random((len(targets), 3), dtype=np.float32) * 8 - 4).astype(np.float32)
-    directions = targets - origins
+    origins, directions = edge_midpoint_rays(vertices, faces, 5)
     hits = {}
     for mode in ("watertight", "fast"):
         scene = canopy.RayScene(builder=builder, width=width, triangles=mode)
@@ -188,14 +184,11 @@ def test_the_triangle_modes_differ_where_a_ray_grazes_an_edge():
     # aims at: the fast test stops a few more of them, never fewer (so `triangles=` is
     # the mode the queries use).
     vertices, faces = random_soup(20000, 3)
-    rng = np.random.default_rng(5)
-    triangles = vertices[faces]
-    targets = 0.5 * (triangles[:, 0] + triangles[:, 1])
-    origins = (rng.random((len(targets), 3), dtype=np.float32) * 8 - 4).astype(np.float32)
+    origins, directions = edge_midpoint_rays(vertices, faces, 5)
     stopped = {}
     for mode in ("watertight", "fast"):
         scene = canopy.RayScene(triangles=mode)
         scene.add_mesh(vertices, faces)
-        stopped[mode] = scene.occluded(origins, targets - origins, 0.999, 1.001)
+        stopped[mode] = scene.occluded(origins, directions, 0.999, 1.001)
     assert not np.any(stopped["watertight"] & ~stopped["fast"])
     assert np.sum(stopped["fast"] & ~stopped["watertight"]) > 0
