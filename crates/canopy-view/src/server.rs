@@ -8,7 +8,7 @@ use crate::protocol::{
 };
 use crate::save::save;
 use crate::session::Session;
-use crate::settings::{current_options, Mode};
+use crate::settings::{current_options, Mode, TreeSettings};
 use crate::tree_view::world_node_report;
 use crate::walk::{primary_ray, walk};
 use axum::extract::ws::{Message, WebSocket, WebSocketUpgrade};
@@ -18,7 +18,6 @@ use axum::response::{IntoResponse, Response};
 use axum::routing::get;
 use axum::Router;
 use canopy_bvh::Builder;
-use canopy_job::Device;
 use canopy_render::{Integrator, Sampler};
 use serde::Deserialize;
 use std::path::PathBuf;
@@ -285,6 +284,7 @@ fn not_built() -> ServerMessage {
 fn hello(session: &Session) -> ServerMessage {
     let c = session.control();
     let v = &c.view;
+    let (widths, fast_triangles) = TreeSettings::offered_on(session.device);
     ServerMessage::Hello(Box::new(Hello {
         scene: session.name.clone(),
         width: session.width,
@@ -305,11 +305,8 @@ fn hello(session: &Session) -> ServerMessage {
             .collect(),
         device: session.device.name().into(),
         device_name: session.device_name.clone(),
-        widths: match session.device {
-            Device::Cpu => vec![2, 4, 8],
-            Device::Gpu => vec![2],
-        },
-        fast_triangles: session.device == Device::Cpu,
+        widths,
+        fast_triangles,
         modes: Mode::ALL.to_vec(),
         integrators: Integrator::ALL.iter().map(|i| i.name().into()).collect(),
         samplers: Sampler::ALL.iter().map(|s| s.name().into()).collect(),

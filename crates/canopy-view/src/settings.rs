@@ -150,6 +150,22 @@ impl TreeSettings {
         }
     }
 
+    /// The tree widths `device` renders through, and whether it offers the fast
+    /// triangle test: what [`check_for`](Self::check_for) lets through, for the page.
+    pub fn offered_on(device: Device) -> (Vec<u32>, bool) {
+        let base = Self::on(device);
+        let widths = BvhWidth::ALL
+            .into_iter()
+            .filter(|&width| Self { width, ..base }.check_for(device).is_ok())
+            .map(BvhWidth::children)
+            .collect();
+        let fast = Self {
+            triangle_test: TriangleTest::Fast,
+            ..base
+        };
+        (widths, fast.check_for(device).is_ok())
+    }
+
     pub fn params(&self) -> BuildParams {
         BuildParams {
             max_leaf_size: self.max_leaf_size,
