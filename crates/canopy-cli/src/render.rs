@@ -8,6 +8,7 @@ use crate::scene_facts::SceneFacts;
 use crate::signals;
 use crate::Interrupted;
 use anyhow::bail;
+use canopy_bvh::TriangleTest;
 use canopy_job::{
     CheckpointPolicy, Device, Observer, RenderJob, RenderOptions, Schedule, Structure,
 };
@@ -111,7 +112,7 @@ pub struct RenderArgs {
     #[arg(long, default_value = "60s", value_parser = limits::duration, requires = "checkpoint")]
     every: Duration,
     /// Continue the render saved in a checkpoint (scene and settings come from it).
-    #[arg(long, value_name = "FILE", conflicts_with_all = ["scene", "size", "spp", "depth", "seed", "integrator", "no_roulette", "sampler", "heatmap"])]
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["scene", "size", "spp", "depth", "seed", "integrator", "no_roulette", "sampler", "fast_triangles", "heatmap"])]
     resume: Option<PathBuf>,
     /// Also write these AOVs as layers of the (.exr) image: a comma-separated list of
     /// albedo, normal (what a denoiser takes: the first surface past mirrors and glass),
@@ -191,6 +192,9 @@ struct Summary {
     /// `none`, or the builder's name.
     bvh: String,
     bvh_width: u32,
+    /// The triangle test: `watertight`, or `fast` (`--fast-triangles`, or the checkpoint
+    /// resumed was rendered so).
+    triangles: &'static str,
     build_ms: f64,
     /// `cpu`, or the GPU adapter rendered on.
     device: String,
@@ -244,6 +248,8 @@ struct Job {
     /// The checkpoint this render continues, if any, and the render that wrote it.
     resumed_from: Option<PathBuf>,
     resume_owner: Option<u64>,
+    /// The triangle test of the render continued (it goes on in the same mode).
+    resumed_triangle_test: Option<TriangleTest>,
 }
 
 fn load_job(args: &RenderArgs) -> anyhow::Result<Job> {
@@ -255,6 +261,7 @@ fn load_job(args: &RenderArgs) -> anyhow::Result<Job> {
             accumulator: Some(resumed.accumulator),
             resumed_from: Some(resumed.path),
             resume_owner: Some(resumed.owner),
+            resumed_triangle_test: Some(resumed.triangle_test),
         });
     }
     let arg = args
@@ -271,6 +278,7 @@ fn load_job(args: &RenderArgs) -> anyhow::Result<Job> {
         accumulator: None,
         resumed_from: None,
         resume_owner: None,
+        resumed_triangle_test: None,
     })
 }
 
@@ -392,6 +400,9 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     if args.device == Device::Gpu && args.fast_triangles {
         bail!("--fast-triangles chooses the CPU's triangle test (the GPU's is watertight); drop --device gpu");
     }
+    if args.device == Device::Gpu && job.resumed_triangle_test == Some(TriangleTest::Fast) {
+        bail!("the render to resume tests triangles in the fast mode, which the GPU does not have (its test is watertight); resume it without --device gpu");
+    }
     if args.device == Device::Gpu && args.bvh == AccelKind::None {
         bail!("--device gpu traces through a BVH; choose a builder with --bvh");
     }
@@ -417,6 +428,9 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     args.options()
         .apply_to_job(&mut render_job)
         .map_err(|e| anyhow::anyhow!("{e}"))?;
+    if let Some(test) = job.resumed_triangle_test {
+        render_job.structure.triangle_test = test;
+    }
     let prepared = render_job.prepare()?;
     let accel = prepared.accel();
     if args.show_bvh && accel.tree().is_none() {
@@ -427,6 +441,10 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         facts: SceneFacts::of(&job.source, scene),
         bvh: args.bvh.to_string(),
         bvh_width: prepared.width().children(),
+        triangles: match prepared.triangle_test() {
+            TriangleTest::Watertight => "watertight",
+            TriangleTest::Fast => "fast",
+        },
         build_ms: prepared.build_time().as_secs_f64() * 1e3,
         device: prepared.device_name(),
         threads: prepared.threads(),

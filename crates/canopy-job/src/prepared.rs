@@ -4,6 +4,7 @@
 use crate::engine::Engine;
 use crate::observer::Observer;
 use crate::{Device, JobError, RenderJob};
+use canopy_bvh::TriangleTest;
 use canopy_render::checkpoint::{Checkpoint, CheckpointError};
 use canopy_render::{Accel, AccelKind, Accumulator, BvhWidth, RenderStats};
 use std::path::PathBuf;
@@ -185,6 +186,11 @@ impl<'s> RenderJob<'s> {
             ),
         };
         let structure = &self.structure;
+        if self.device == Device::Gpu && structure.triangle_test == TriangleTest::Fast {
+            return Err(JobError::Invalid(
+                "the GPU tests triangles watertight only, and this render's test is the fast one (a resumed render keeps its checkpoint's): render it on the CPU".into(),
+            ));
+        }
         let gpu = match self.device {
             Device::Cpu => None,
             Device::Gpu if structure.kind == AccelKind::None => {
@@ -257,8 +263,18 @@ impl Prepared<'_> {
     ) -> Result<(), CheckpointError> {
         let job = self.job;
         Checkpoint::new(&job.source, job.scene, accumulator.clone())
+            .with_triangle_test(self.triangle_test())
             .owned_by(self.owners[0])
             .save_owned(path, &self.owners)
+    }
+
+    /// How this render tests triangles: the structure's mode on the CPU; the GPU's test
+    /// is always watertight.
+    pub fn triangle_test(&self) -> TriangleTest {
+        match self.gpu {
+            Some(_) => TriangleTest::Watertight,
+            None => self.accel.triangle_test(),
+        }
     }
 
     /// The structure over the job's scene (the one the CPU traces).

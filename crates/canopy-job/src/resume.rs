@@ -1,6 +1,7 @@
 //! A saved render, loaded to be continued.
 
 use crate::{JobError, RenderJob};
+use canopy_bvh::TriangleTest;
 use canopy_render::checkpoint::Checkpoint;
 use canopy_render::{Accumulator, Scene};
 use std::path::{Path, PathBuf};
@@ -16,6 +17,8 @@ pub struct Resumed {
     pub path: PathBuf,
     /// The render that wrote it (see [`RenderJob::resume_owner`]).
     pub owner: u64,
+    /// How the render tested triangles: it goes on in the same mode.
+    pub triangle_test: TriangleTest,
 }
 
 impl Resumed {
@@ -58,6 +61,7 @@ impl Resumed {
             accumulator: checkpoint.accumulator,
             path: path.to_owned(),
             owner: checkpoint.owner,
+            triangle_test: checkpoint.triangle_test,
         })
     }
 
@@ -69,6 +73,7 @@ impl Resumed {
         job.aovs = self.accumulator.aovs.set;
         job.resume = Some(self.accumulator.clone());
         job.resume_owner = Some(self.owner);
+        job.structure.triangle_test = self.triangle_test;
         job.checkpoint.periodic = Some(self.path.clone());
         job.checkpoint.on_interrupt = Some(self.path.clone());
         job

@@ -196,6 +196,7 @@ pub fn render<'py>(
     }
     let mut overrides = options.given_scene_settings();
     for (given, name) in [
+        (options.fast_triangles.is_some(), "fast_triangles"),
         (region.is_some(), "region"),
         (camera.is_some(), "camera"),
         (instances.is_some(), "instances"),
@@ -248,13 +249,21 @@ pub fn render<'py>(
             let r = py
                 .detach(|| Resumed::load(path, &allow_paths))
                 .map_err(job_error)?;
-            (r.scene, r.source, Some((r.accumulator, r.owner)))
+            (
+                r.scene,
+                r.source,
+                Some((r.accumulator, r.owner, r.triangle_test)),
+            )
         }
         (Some((scene, _)), Some(path)) => {
             let r = py
                 .detach(|| Resumed::load_for(path, scene))
                 .map_err(job_error)?;
-            (r.scene, r.source, Some((r.accumulator, r.owner)))
+            (
+                r.scene,
+                r.source,
+                Some((r.accumulator, r.owner, r.triangle_test)),
+            )
         }
         (Some((scene, source)), None) => (scene, source, None),
     };
@@ -285,6 +294,11 @@ pub fn render<'py>(
     options
         .apply_to_job(&mut job)
         .map_err(PyValueError::new_err)?;
+    let resumed = resumed.map(|(accumulator, owner, triangle_test)| {
+        // The render goes on in its checkpoint's triangle test.
+        job.structure.triangle_test = triangle_test;
+        (accumulator, owner)
+    });
     if let Some((x, y, width, height)) = region {
         job.region = Region {
             x,

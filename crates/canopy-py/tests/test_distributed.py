@@ -261,7 +261,7 @@ def test_the_command_line_renders_frames_from_a_json_file(tmp_path, address):
 def test_bench_paper_cells_run_as_tasks_into_one_table(canopy_bin, tmp_path):
     seen = []
     md = distributed.bench_paper(tmp_path / "bench", scenes=[2, 3], methods="report", runs=2,
-                                 size=(12, 12), spp=1, canopy_bin=str(canopy_bin),
+                                 size=(12, 12), spp=1, fast_triangles=True, canopy_bin=str(canopy_bin),
                                  progress=lambda done, total: seen.append((done, total)))
     assert seen[-1] == (2 * 6 * 2, 24)
     import json
@@ -274,6 +274,8 @@ def test_bench_paper_cells_run_as_tasks_into_one_table(canopy_bin, tmp_path):
     text = open(md).read()
     assert "paper-3" in text and "Agglom. 8 children" in text and "as Ray tasks" in text
     assert (tmp_path / "bench" / "table3.png").exists()
+    # Every cell rendered with the fast triangle test, and the record says so.
+    assert record["config"]["triangles"] == "fast" and "fast triangle test" in record["settings"]
     with pytest.raises(ValueError, match="scenes are numbers"):
         distributed.bench_paper(tmp_path / "x", scenes=[7], canopy_bin=str(canopy_bin))
     with pytest.raises(ValueError, match="cannot run"):

@@ -60,6 +60,7 @@ def test_a_failing_progress_callback_stops_the_render():
         ({"scene": "cornell", "checkpoint_every": -1}, ValueError, "checkpoint_every"),
         ({}, ValueError, "needs a scene"),
         ({"resume": "x.checkpoint", "spp": 3}, ValueError, "keeps its checkpoint's settings"),
+        ({"resume": "x.checkpoint", "fast_triangles": True}, ValueError, "drop fast_triangles"),
         ({"scene": "cornell", "device": "tpu"}, ValueError, "device must be"),
         ({"scene": "cornell", "integrator": "photons"}, ValueError, "unknown integrator"),
         ({"scene": "cornell", "spp": 0}, ValueError, "spp 0"),
@@ -139,6 +140,24 @@ def test_a_stopped_render_is_saved_and_resumes_to_the_same_image(tmp_path):
     assert calls == [3, 4, 5]
     np.testing.assert_array_equal(resumed, uninterrupted)
     assert not checkpoint.exists(), "a finished render removes its checkpoint"
+
+
+def test_a_fast_mode_render_resumes_in_the_fast_mode(tmp_path):
+    checkpoint = tmp_path / "fast.checkpoint"
+    uninterrupted = canopy.render("paper-3", size=(12, 10), spp=4, fast_triangles=True)
+
+    def stop_after_two(done, total):
+        if done == 2:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        canopy.render("paper-3", size=(12, 10), spp=4, fast_triangles=True, checkpoint=checkpoint,
+                      progress=stop_after_two)
+    # The GPU's test is watertight: it would mix two modes' samples.
+    with pytest.raises(ValueError, match="fast one"):
+        canopy.render(resume=checkpoint, device="gpu")
+    assert checkpoint.exists()
+    np.testing.assert_array_equal(canopy.render(resume=checkpoint), uninterrupted)
 
 
 def test_the_gpu_renders_the_cpus_image_within_noise():

@@ -9,6 +9,7 @@
 //! width u32 | height u32 | spp u32 | max_depth u32 | seed u64 |
 //! integrator u32 (0 path, 1 bsdf) | russian_roulette u32 (0 or 1) |
 //! sampler u32 (0 sobol, 1 independent; from version 7 on, before it independent) |
+//! triangle test u32 (0 watertight, 1 fast; from version 9 on, before it watertight) |
 //! region: x u32 | y u32 | width u32 | height u32 |
 //! samples u32 | rays u64 | invalid u64 | sums: region pixels * 3 f32 |
 //! AOVs (from version 8 on): set u32 | its layers, each region pixels long, in the order
@@ -33,6 +34,7 @@ use crate::output::write_atomically;
 use crate::region::Region;
 use crate::rng::Sampler;
 use crate::scene::{Integrator, RenderSettings, Scene};
+use canopy_bvh::TriangleTest;
 use glam::Vec3;
 use std::io::Write;
 use std::path::Path;
@@ -49,7 +51,9 @@ const MAGIC: &[u8; 8] = b"CANOPYCK";
 /// versions 4 and 5, still read, have owner 0: no render's).
 /// Version 7: the sampler.
 /// Version 8: the AOV layers.
-const VERSION: u32 = 8;
+/// Version 9: the triangle test (`TriangleTest`), which decides the rare pixels whose rays
+/// pass within rounding of an edge.
+const VERSION: u32 = 9;
 /// The oldest version whose samples this canopy can continue.
 const OLDEST_READ: u32 = 4;
 
@@ -97,6 +101,9 @@ pub struct Checkpoint {
     pub fingerprint: u64,
     /// The identity of the render that saves it (0: none given).
     pub owner: u64,
+    /// How the render tests triangles: not part of the scene, but of the image (a
+    /// resumed render must go on in the same mode).
+    pub triangle_test: TriangleTest,
     pub accumulator: Accumulator,
 }
 
@@ -173,7 +180,16 @@ impl Checkpoint {
             settings: scene.settings,
             fingerprint: fingerprint(scene),
             owner: 0,
+            triangle_test: TriangleTest::Watertight,
             accumulator,
+        }
+    }
+
+    /// The checkpoint of a render that tests triangles in mode `test`.
+    pub fn with_triangle_test(self, test: TriangleTest) -> Self {
+        Self {
+            triangle_test: test,
+            ..self
         }
     }
 
@@ -208,6 +224,7 @@ impl Checkpoint {
             .position(|&i| i == s.sampler)
             .expect("every sampler is listed") as u32;
         out.extend(sampler.to_le_bytes());
+        out.extend(triangle_test_code(self.triangle_test).to_le_bytes());
         let r = a.region;
         for v in [r.x, r.y, r.width, r.height] {
             out.extend(v.to_le_bytes());
@@ -294,6 +311,10 @@ impl Checkpoint {
             },
         };
         settings.check()?;
+        let triangle_test = match version {
+            ..9 => TriangleTest::Watertight,
+            _ => triangle_test_of(r.u32()?)?,
+        };
         let region = match version {
             4 => Region::full(settings.width, settings.height),
             _ => Region {
@@ -323,6 +344,7 @@ impl Checkpoint {
             settings,
             fingerprint,
             owner,
+            triangle_test,
             accumulator: Accumulator {
                 region,
                 sums,
@@ -423,6 +445,23 @@ impl Checkpoint {
     }
 }
 
+/// How a checkpoint writes a triangle test.
+fn triangle_test_code(test: TriangleTest) -> u32 {
+    match test {
+        TriangleTest::Watertight => 0,
+        TriangleTest::Fast => 1,
+    }
+}
+
+/// The triangle test a checkpoint's code names.
+fn triangle_test_of(code: u32) -> Result<TriangleTest, String> {
+    match code {
+        0 => Ok(TriangleTest::Watertight),
+        1 => Ok(TriangleTest::Fast),
+        _ => Err(format!("unknown triangle test {code}")),
+    }
+}
+
 /// The scene and samples per pixel of the checkpoint at `path`, read from its header
 /// alone (the samples themselves may be gigabytes): for messages about it.
 fn describe_header(path: &Path) -> Option<(String, u32)> {
@@ -441,10 +480,12 @@ fn describe_header(path: &Path) -> Option<(String, u32)> {
     }
     let scene_len = r.u32().ok()? as usize;
     let scene = String::from_utf8_lossy(r.take(scene_len).ok()?).into_owned();
-    // Settings (4 u32, seed u64, 2 u32, and the sampler's u32 from version 7 on), then
-    // the region (4 u32) from version 5 on.
+    // Settings (4 u32, seed u64, 2 u32, and the sampler's u32 from version 7 on), the
+    // triangle test's u32 from version 9 on, then the region (4 u32) from version 5 on.
     let sampler = if version >= 7 { 4 } else { 0 };
-    r.take(4 * 4 + 8 + 2 * 4 + sampler + if version >= 5 { 16 } else { 0 })
+    let triangle_test = if version >= 9 { 4 } else { 0 };
+    let region = if version >= 5 { 16 } else { 0 };
+    r.take(4 * 4 + 8 + 2 * 4 + sampler + triangle_test + region)
         .ok()?;
     Some((scene, r.u32().ok()?))
 }
@@ -581,6 +622,33 @@ mod tests {
     }
 
     #[test]
+    fn the_triangle_test_round_trips_and_older_files_were_watertight() {
+        let (_, checkpoint) = sample();
+        let fast = checkpoint.clone().with_triangle_test(TriangleTest::Fast);
+        let back = Checkpoint::from_bytes(&fast.to_bytes()).unwrap();
+        assert_eq!(back.triangle_test, TriangleTest::Fast);
+        assert_eq!(back, fast);
+        // Version 8 wrote no triangle test: its renders were watertight.
+        let mut v8 = fast.to_bytes();
+        v8.truncate(v8.len() - 8);
+        v8[8..12].copy_from_slice(&8u32.to_le_bytes());
+        let test_at = 8 + 4 + 8 + 8 + 4 + checkpoint.scene.len() + 4 * 4 + 8 + 4 + 4 + 4;
+        assert_eq!(v8[test_at..test_at + 4], 1u32.to_le_bytes());
+        v8.drain(test_at..test_at + 4);
+        let checksum = fnv1a(&v8, FNV_OFFSET);
+        v8.extend(checksum.to_le_bytes());
+        assert_eq!(Checkpoint::from_bytes(&v8).unwrap(), checkpoint);
+        // A code no canopy wrote is damage.
+        let mut bad = fast.to_bytes();
+        bad.truncate(bad.len() - 8);
+        bad[test_at] = 7;
+        let checksum = fnv1a(&bad, FNV_OFFSET);
+        bad.extend(checksum.to_le_bytes());
+        let what = Checkpoint::from_bytes(&bad).unwrap_err();
+        assert!(what.contains("unknown triangle test 7"), "{what}");
+    }
+
+    #[test]
     fn aov_layers_round_trip_exactly() {
         let (_, mut checkpoint) = sample();
         let set = AovSet::of(&Aov::ALL);
@@ -602,13 +670,14 @@ mod tests {
     }
 
     /// The bytes of `checkpoint` (without AOVs) as version 4 wrote them: no region (the
-    /// whole image), no sampler (independent numbers), no AOV set.
+    /// whole image), no sampler (independent numbers), no triangle test (watertight), no
+    /// AOV set.
     fn version_4_bytes(checkpoint: &Checkpoint) -> Vec<u8> {
         let mut bytes = checkpoint.to_bytes();
         bytes.truncate(bytes.len() - 8 - 4);
         bytes[8..12].copy_from_slice(&4u32.to_le_bytes());
         let sampler_at = 8 + 4 + 8 + 8 + 4 + checkpoint.scene.len() + 4 * 4 + 8 + 4 + 4;
-        bytes.drain(sampler_at..sampler_at + 4 + 16);
+        bytes.drain(sampler_at..sampler_at + 4 + 4 + 16);
         bytes.drain(20..28); // no owner before version 6
         let checksum = fnv1a(&bytes, FNV_OFFSET);
         bytes.extend(checksum.to_le_bytes());

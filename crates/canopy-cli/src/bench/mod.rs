@@ -14,7 +14,7 @@ mod tables;
 use crate::build_args::BuildArgs;
 use crate::limits;
 use anyhow::Context;
-use canopy_bvh::Builder;
+use canopy_bvh::{Builder, TriangleTest};
 use canopy_render::{
     render, render_counted, Accel, AccelKind, BuiltinScene, BvhWidth, Integrator, Scene,
 };
@@ -89,6 +89,10 @@ struct PaperArgs {
     /// its tables; `path` adds light sampling.
     #[arg(long, default_value = "bsdf")]
     integrator: Integrator,
+    /// Test triangles as `canopy render --fast-triangles` does (without the watertight
+    /// test's double-precision step for rays through edges), in every method's render.
+    #[arg(long)]
+    fast_triangles: bool,
     #[command(flatten)]
     build: BuildArgs,
 }
@@ -161,6 +165,22 @@ pub struct RunConfig {
     pub spp: u32,
     pub runs: u32,
     pub threads: usize,
+    /// The triangle test every render used: `watertight` or `fast` (runs written before
+    /// the option existed were watertight).
+    #[serde(default = "watertight")]
+    pub triangles: String,
+}
+
+fn watertight() -> String {
+    triangle_test_name(TriangleTest::Watertight).to_string()
+}
+
+/// The name `--fast-triangles` and the results give a triangle test.
+fn triangle_test_name(test: TriangleTest) -> &'static str {
+    match test {
+        TriangleTest::Watertight => "watertight",
+        TriangleTest::Fast => "fast",
+    }
 }
 
 /// Everything a run measured: what `results.json` holds.
@@ -286,6 +306,11 @@ fn paper(args: &PaperArgs) -> anyhow::Result<()> {
         &format!("a {width}x{height} image"),
     )?;
     let spp = args.spp.unwrap_or(if args.quick { 2 } else { 128 });
+    let triangles = if args.fast_triangles {
+        TriangleTest::Fast
+    } else {
+        TriangleTest::Watertight
+    };
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(args.threads.unwrap_or(0) as usize)
         .build()
@@ -320,7 +345,10 @@ fn paper(args: &PaperArgs) -> anyhow::Result<()> {
         scene.settings.integrator = args.integrator;
         let mut none_mean = None;
         for method in &methods {
-            let m = pool.install(|| measure(&scene, n, method, &params, runs, &progress));
+            let m = pool.install(|| {
+                let accel = accel_for(&scene, method, &params, triangles);
+                measure(&scene, n, method, &accel, &params, runs, &progress)
+            });
             if method.kind == AccelKind::None {
                 none_mean = Some(m.mean_s);
             }
@@ -332,9 +360,10 @@ fn paper(args: &PaperArgs) -> anyhow::Result<()> {
     progress.finish_and_clear();
 
     let settings = format!(
-        "{width}x{height}, {spp} spp, depth {}, {} integrator, {runs} runs per measurement, {} threads ({} cores), canopy {}.",
+        "{width}x{height}, {spp} spp, depth {}, {} integrator, {} triangle test, {runs} runs per measurement, {} threads ({} cores), canopy {}.",
         BuiltinScene::find("paper-1").expect("built in").load()?.settings.max_depth,
         args.integrator,
+        triangle_test_name(triangles),
         pool.current_num_threads(),
         std::thread::available_parallelism().map_or(0, |n| n.get()),
         env!("CARGO_PKG_VERSION")
@@ -348,6 +377,7 @@ fn paper(args: &PaperArgs) -> anyhow::Result<()> {
             spp,
             runs,
             threads: pool.current_num_threads(),
+            triangles: triangle_test_name(triangles).to_string(),
         },
         measurements,
     };
@@ -398,15 +428,25 @@ fn write_outputs(
     )
 }
 
+/// The structure `method` renders `scene` with, its triangles tested by `triangles`.
+fn accel_for(
+    scene: &Scene,
+    method: &Method,
+    params: &canopy_bvh::BuildParams,
+    triangles: TriangleTest,
+) -> Accel {
+    Accel::for_scene(scene, method.kind, method.width, params, None).with_triangle_test(triangles)
+}
+
 fn measure(
     scene: &Scene,
     number: usize,
     method: &Method,
+    accel: &Accel,
     params: &canopy_bvh::BuildParams,
     runs: u32,
     progress: &ProgressBar,
 ) -> Measurement {
-    let accel = Accel::for_scene(scene, method.kind, method.width, params, None);
     let sah_cost = accel
         .tree()
         .map_or(0.0, |tree| tree.stats(&params.sah).sah_cost);
@@ -417,7 +457,7 @@ fn measure(
             "{} · {} · run {run}/{runs}",
             scene.name, method.label
         ));
-        let (_, stats) = render(scene, &accel, &|| {});
+        let (_, stats) = render(scene, accel, &|| {});
         seconds.push(stats.elapsed.as_secs_f64());
         rays = stats.rays;
         progress.inc(1);
@@ -425,7 +465,7 @@ fn measure(
     // Traversal work per ray, from a separate 1-spp render (counting slows rendering).
     let mut one_spp = scene.clone();
     one_spp.settings.spp = 1;
-    let (_, counted) = render_counted(&one_spp, &accel, &|| {});
+    let (_, counted) = render_counted(&one_spp, accel, &|| {});
     let per_ray = |x: u64| x as f64 / counted.rays.max(1) as f64;
     let (mean_s, std_s) = mean_and_std(&seconds);
     Measurement {
@@ -497,5 +537,17 @@ mod tests {
         assert_eq!(methods(false).len(), 6);
         assert_eq!(methods(true).len(), 18);
         assert_eq!(methods(true)[0].kind, AccelKind::None);
+    }
+
+    #[test]
+    fn every_method_renders_with_the_chosen_triangle_test() {
+        let scene = BuiltinScene::find("paper-3").unwrap().load().unwrap();
+        let params = canopy_bvh::BuildParams::default();
+        for method in methods(true) {
+            for test in [TriangleTest::Fast, TriangleTest::Watertight] {
+                let accel = accel_for(&scene, &method, &params, test);
+                assert_eq!(accel.triangle_test(), test, "{}", method.label);
+            }
+        }
     }
 }

@@ -757,6 +757,37 @@ fn bench_paper_quick_writes_consistent_tables() {
 }
 
 #[test]
+fn bench_paper_renders_and_records_the_triangle_test_asked_for() {
+    let dir = scratch("bench-triangles");
+    for (flag, name) in [(Some("--fast-triangles"), "fast"), (None, "watertight")] {
+        let mut args = vec![
+            "bench",
+            "paper",
+            "--quick",
+            "--scenes",
+            "3",
+            "--method",
+            "binned-sah x8",
+            "--json-only",
+            "--out",
+            name,
+        ];
+        args.extend(flag);
+        let out = canopy(&args, &dir);
+        assert!(out.status.success(), "{}", stderr(&out));
+        let text = std::fs::read_to_string(dir.join(name).join("results.json")).unwrap();
+        let json: serde_json::Value = serde_json::from_str(&text).unwrap();
+        assert_eq!(json["config"]["triangles"], name);
+        let settings = json["settings"].as_str().unwrap();
+        assert!(
+            settings.contains(&format!("{name} triangle test")),
+            "{settings}"
+        );
+    }
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+#[test]
 fn check_describes_a_valid_scene_without_rendering() {
     let dir = scratch("check");
     let out = canopy(&["check", "paper-5"], &dir);

@@ -186,6 +186,58 @@ fn the_scene_and_its_meshes_are_never_written_over() {
     std::fs::remove_dir_all(dir).unwrap();
 }
 
+/// A render resumed goes on in the triangle test its checkpoint was rendered with: the
+/// flag cannot contradict it, and the GPU (watertight only) refuses a fast-mode render.
+#[test]
+fn a_resumed_render_keeps_its_checkpoints_triangle_test() {
+    let dir = scratch("fastck");
+    let mut scene = canopy_render::load_scene("paper-3").unwrap();
+    (
+        scene.settings.width,
+        scene.settings.height,
+        scene.settings.spp,
+    ) = (8, 8, 2);
+    canopy_render::checkpoint::Checkpoint::new(
+        "paper-3",
+        &scene,
+        canopy_render::Accumulator::new(8, 8),
+    )
+    .with_triangle_test(canopy_bvh::TriangleTest::Fast)
+    .save(&dir.join("ck"))
+    .unwrap();
+    let before = std::fs::read(dir.join("ck")).unwrap();
+    let flagged = render(&dir, &["--resume", "ck", "--fast-triangles", "-o", "a.png"]);
+    assert_eq!(flagged.status.code(), Some(2), "{}", stderr(&flagged));
+    assert!(
+        stderr(&flagged).contains("cannot be used with"),
+        "{}",
+        stderr(&flagged)
+    );
+    let on_gpu = render(&dir, &["--resume", "ck", "--device", "gpu", "-o", "a.png"]);
+    assert_eq!(on_gpu.status.code(), Some(1), "{}", stderr(&on_gpu));
+    assert!(
+        stderr(&on_gpu).contains("fast mode, which the GPU does not have"),
+        "{}",
+        stderr(&on_gpu)
+    );
+    assert_eq!(std::fs::read(dir.join("ck")).unwrap(), before, "kept");
+    let out = render(&dir, &["--resume", "ck", "-o", "a.png", "--json"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let summary: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(summary["triangles"], "fast");
+    // A render started afresh is watertight unless told.
+    let fresh = render(
+        &dir,
+        &[
+            "paper-3", "-o", "b.png", "--json", "--size", "8x8", "--spp", "1",
+        ],
+    );
+    assert!(fresh.status.success(), "{}", stderr(&fresh));
+    let summary: serde_json::Value = serde_json::from_slice(&fresh.stdout).unwrap();
+    assert_eq!(summary["triangles"], "watertight");
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
 /// A checkpoint belongs to the render that wrote it: a new render given its path is
 /// refused before any work (that checkpoint is someone's unfinished render) and the file
 /// is kept; the render that continues it (`--resume`) finishes and removes it.

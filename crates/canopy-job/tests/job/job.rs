@@ -2,6 +2,7 @@
 //! that an observer sees and stops, checkpoints kept and resumed into the same image,
 //! and jobs that contradict themselves refused before any work.
 
+use canopy_bvh::TriangleTest;
 use canopy_job::{CheckpointPolicy, Device, JobError, Observer, RenderJob, Resumed};
 use canopy_render::checkpoint::Checkpoint;
 use canopy_render::{load_scene, AccelKind, Accumulator, Film, Region, Scene};
@@ -150,6 +151,51 @@ fn a_stopped_render_saves_its_state_and_resumes_into_the_same_image() {
         !checkpoint.exists(),
         "a complete render keeps no checkpoint"
     );
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+#[test]
+fn a_resumed_render_goes_on_in_its_checkpoints_triangle_test() {
+    let dir = temp_dir("resume-fast");
+    let checkpoint = dir.join("fast.checkpoint");
+    let scene = small("paper-3", 16, 12, 4);
+    let fast_job = || {
+        let mut job = RenderJob::new(&scene, "paper-3");
+        job.structure.triangle_test = TriangleTest::Fast;
+        job
+    };
+    let uninterrupted = fast_job().prepare().unwrap().run(&mut ()).unwrap();
+    let mut job = fast_job();
+    job.checkpoint.on_interrupt = Some(checkpoint.clone());
+    let prepared = job.prepare().unwrap();
+    assert_eq!(prepared.triangle_test(), TriangleTest::Fast);
+    let mut stopper = Recorder {
+        stop_after: Some(2),
+        ..Recorder::default()
+    };
+    assert!(!prepared.run(&mut stopper).unwrap().complete);
+    assert_eq!(
+        Checkpoint::load(&checkpoint).unwrap().triangle_test,
+        TriangleTest::Fast
+    );
+
+    let resumed = Resumed::load(&checkpoint, &[]).unwrap();
+    assert_eq!(resumed.triangle_test, TriangleTest::Fast);
+    // On the GPU (whose test is watertight) it would mix two modes' samples: refused
+    // before any GPU is opened.
+    let mut on_gpu = resumed.job();
+    on_gpu.device = Device::Gpu;
+    match on_gpu.prepare() {
+        Err(JobError::Invalid(why)) => assert!(why.contains("fast one"), "{why}"),
+        Err(e) => panic!("{e}"),
+        Ok(_) => panic!("a fast-mode render resumed on the GPU"),
+    }
+    let job = resumed.job();
+    let prepared = job.prepare().unwrap();
+    assert_eq!(prepared.triangle_test(), TriangleTest::Fast);
+    let done = prepared.run(&mut ()).unwrap();
+    assert!(done.complete);
+    assert_eq!(done.accumulator.sums, uninterrupted.accumulator.sums);
     std::fs::remove_dir_all(dir).unwrap();
 }
 

@@ -415,7 +415,7 @@ def render(
     bvh: str = "binned-sah",
     width: int = 8,
     max_leaf_size: Optional[int] = None,
-    fast_triangles: bool = False,
+    fast_triangles: Optional[bool] = None,
     threads: Optional[int] = None,
     schedule: str = "wavefront",
     progress: Optional[Callable[[int, int], None]] = None,
@@ -465,7 +465,8 @@ def render(
     2, 4 or 8) and ``max_leaf_size`` choose the tree; ``fast_triangles=True`` tests
     triangles without the watertight test's double-precision step (Embree's default
     mode: fewer instructions; a ray within rounding of a shared edge may hit every
-    triangle there), on the CPU only. The render options (``RENDER_OPTIONS``) are those
+    triangle there), on the CPU only. Left out, the test is watertight, or for
+    ``resume=`` the mode the render was started in (which it keeps). The render options (``RENDER_OPTIONS``) are those
     ``canopy render`` takes as flags, by the same names.
 
     A scene file reads only the files in its own folder (and below); ``allow_paths``

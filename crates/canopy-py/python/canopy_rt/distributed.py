@@ -632,6 +632,7 @@ def bench_paper(
     size: Tuple[int, int] = (480, 480),
     spp: int = 128,
     integrator: str = "bsdf",
+    fast_triangles: bool = False,
     threads_per_task: int = 1,
     canopy_bin: Optional[str] = None,
     address: Optional[str] = None,
@@ -643,7 +644,9 @@ def bench_paper(
     the driver merges the runs of each cell in run order into ``out/results.json`` and
     makes the tables, plots and pictures from it (``canopy bench paper --from``).
     Returns the path of ``results.md``. A cell's time is one task's render, on a node
-    shared with other tasks: compare methods of one run, as the tables do."""
+    shared with other tasks: compare methods of one run, as the tables do.
+    ``fast_triangles`` renders every cell with the fast triangle test
+    (``canopy bench paper --fast-triangles``)."""
     import subprocess
 
     program = _canopy_command(canopy_bin)
@@ -665,6 +668,8 @@ def bench_paper(
     _canopy.check_output(record_path, "benchmark results", "data")
     arguments = ["--size", f"{int(size[0])}x{int(size[1])}", "--spp", str(int(spp)),
                  "--integrator", str(integrator), "--threads", str(int(threads_per_task))]
+    if fast_triangles:
+        arguments.append("--fast-triangles")
 
     ray, task = _tasks(bench_cell, address, threads_per_task)
     cells = [(n, label, run) for n in scenes for label in labels for run in range(int(runs))]
@@ -699,9 +704,11 @@ def bench_paper(
     record = {
         "settings": settings,
         "command": f"canopy_rt.distributed.bench_paper(scenes={scenes}, methods={methods!r}, "
-                   f"runs={int(runs)}, size={tuple(size)}, spp={int(spp)}, integrator={integrator!r})",
+                   f"runs={int(runs)}, size={tuple(size)}, spp={int(spp)}, integrator={integrator!r}, "
+                   f"fast_triangles={bool(fast_triangles)})",
         "config": {"width": int(size[0]), "height": int(size[1]), "spp": int(spp), "runs": int(runs),
-                   "threads": int(threads_per_task)},
+                   "threads": int(threads_per_task),
+                   "triangles": "fast" if fast_triangles else "watertight"},
         "measurements": measurements,
     }
     _canopy.write_file(record_path, json.dumps(record, indent=2).encode())
