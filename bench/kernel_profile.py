@@ -117,6 +117,9 @@ def main():
     ap.add_argument("--incoherent", type=int, default=20_000)
     ap.add_argument("--runs", type=int, default=5, help="native passes (best is kept)")
     ap.add_argument("--no-valgrind", action="store_true", help="native times and counts only")
+    ap.add_argument("--keep", metavar="DIR",
+                    help="write the mesh, ray files and Embree's profiler into DIR and keep them "
+                         "(for walk_profile, canopy-bvh's example, and repeated counts)")
     args = ap.parse_args()
     rng = np.random.default_rng(7)
     print(f"CPU: {cpu_model()}; one thread; instruction and miss counts from callgrind "
@@ -124,12 +127,14 @@ def main():
     print("| mesh | rays | query | kernel | ns/ray | instructions/ray | L1d misses/ray "
           "| LL misses/ray | mispredicted branches/ray | node visits/ray | primitive tests/ray |")
     print("|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|")
-    with tempfile.TemporaryDirectory(prefix="canopy-profile-") as scratch:
+    with tempfile.TemporaryDirectory(prefix="canopy-profile-") as temporary:
+        scratch = args.keep or temporary
+        os.makedirs(scratch, exist_ok=True)
         embree = compile_embree(scratch)
         for mesh in args.meshes:
             verts, faces = read_ply(mesh)
             name = os.path.splitext(os.path.basename(mesh))[0] + f"-{len(faces) // 1000}k"
-            mesh_file = os.path.join(scratch, "mesh.bin")
+            mesh_file = os.path.join(scratch, f"{name}.bin")
             write_mesh(mesh_file, verts, faces)
             po, pd = primary_rays(verts, args.primary)
             scene = rtcs.EmbreeScene()
@@ -138,7 +143,7 @@ def main():
             order = origin_order(io)
             ray_sets = {"primary": (po, pd), "incoherent": (io[order], idir[order])}
             for kind, (o, d) in ray_sets.items():
-                ray_file = os.path.join(scratch, f"rays-{kind}.bin")
+                ray_file = os.path.join(scratch, f"{name}-{kind}.bin")
                 write_rays(ray_file, o, d)
                 for query in ("closest", "occluded"):
                     canopy = [args.canopy, mesh_file, ray_file, query]

@@ -431,19 +431,50 @@ where
             }
         }
         for (k, pack) in packs.iter().enumerate() {
-            for lane in lanes(pack.others) {
-                c.test_primitive();
-                let prim = pack.prim[lane];
-                let hit = match self.spheres.get((first_pack + k) * PACK_LANES + lane) {
-                    Some(sphere) if sphere.is_sphere() => {
-                        sphere.intersect(&s.ray).map(|t| t.into_hit(prim))
-                    }
-                    _ => (self.test)(prim, &s.ray).map(|hit| hit.into_hit(prim)),
-                };
-                if let Some(hit) = hit {
-                    s.offer(hit);
-                }
+            if pack.others != 0 {
+                let spheres = self.spheres;
+                closest_others(
+                    pack,
+                    (first_pack + k) * PACK_LANES,
+                    spheres,
+                    &mut self.test,
+                    s,
+                    c,
+                );
             }
+        }
+    }
+}
+
+/// Offers the hits of a pack's lanes that are not triangles: spheres stored beside the
+/// packs, the rest by the caller's closure. Out of line and cold: packed trees are built
+/// over meshes of (nearly) only triangles, and inlined, its loop-invariant work (a
+/// sphere test's `|d|²`) was hoisted into every ray's set-up.
+#[cold]
+#[inline(never)]
+fn closest_others<F, P, C>(
+    pack: &TrianglePack,
+    first_lane: usize,
+    spheres: &[SphereRecord],
+    test: &mut F,
+    s: &mut Closest,
+    c: &mut C,
+) where
+    F: FnMut(u32, &Ray) -> Option<P>,
+    P: IntoHit,
+    C: TraversalCounter,
+{
+    for lane in lanes(pack.others) {
+        c.test_primitive();
+        let prim = pack.prim[lane];
+        let hit = match spheres.get(first_lane + lane) {
+            Some(sphere) if sphere.is_sphere() => {
+                sphere.intersect(&s.ray).map(|t| t.into_hit(prim))
+            }
+            _ => test(prim, &s.ray).map(|hit| hit.into_hit(prim)),
+        };
+        if let Some(hit) = hit {
+            s.offer(hit);
         }
     }
 }
@@ -494,19 +525,33 @@ impl<T: PackKernel, F: FnMut(u32, &Ray) -> bool> PackedLeaves<'_, T, F> {
         {
             return true;
         }
-        for (k, pack) in packs.iter().enumerate() {
-            for lane in lanes(pack.others) {
-                let blocked = match self.spheres.get((first_pack + k) * PACK_LANES + lane) {
-                    Some(sphere) if sphere.is_sphere() => sphere.intersect(ray).is_some(),
-                    _ => (self.test)(pack.prim[lane], ray),
-                };
-                if blocked {
-                    return true;
-                }
-            }
-        }
-        false
+        packs.iter().enumerate().any(|(k, pack)| {
+            pack.others != 0
+                && any_other(
+                    pack,
+                    (first_pack + k) * PACK_LANES,
+                    self.spheres,
+                    &mut self.test,
+                    ray,
+                )
+        })
     }
+}
+
+/// Whether a pack's lanes that are not triangles block `ray` (see [`closest_others`]).
+#[cold]
+#[inline(never)]
+fn any_other<F: FnMut(u32, &Ray) -> bool>(
+    pack: &TrianglePack,
+    first_lane: usize,
+    spheres: &[SphereRecord],
+    test: &mut F,
+    ray: &Ray,
+) -> bool {
+    lanes(pack.others).any(|lane| match spheres.get(first_lane + lane) {
+        Some(sphere) if sphere.is_sphere() => sphere.intersect(ray).is_some(),
+        _ => test(pack.prim[lane], ray),
+    })
 }
 
 impl<T: PackKernel, F: FnMut(u32, &Ray) -> bool> AnyLeaves for PackedLeaves<'_, T, F> {
@@ -630,18 +675,38 @@ where
             }
         }
         for (k, pack) in packs.iter().enumerate() {
-            for lane in lanes(pack.others) {
-                let prim = pack.prim[lane];
-                let hit = match leaves.spheres.get((first_pack + k) * PACK_LANES + lane) {
-                    Some(sphere) if sphere.is_sphere() => {
-                        sphere.intersect(ray).map(|t| t.into_hit(prim))
-                    }
-                    _ => (leaves.test)(prim, ray).map(|hit| hit.into_hit(prim)),
-                };
-                if let Some(hit) = hit {
-                    (self.found)(hit, None);
-                }
+            if pack.others != 0 {
+                let first_lane = (first_pack + k) * PACK_LANES;
+                let (spheres, test) = (leaves.spheres, &mut leaves.test);
+                every_other(pack, first_lane, spheres, test, ray, &mut self.found);
             }
+        }
+    }
+}
+
+/// Reports the hits on a pack's lanes that are not triangles (see [`closest_others`]).
+#[cold]
+#[inline(never)]
+fn every_other<F, P, H>(
+    pack: &TrianglePack,
+    first_lane: usize,
+    spheres: &[SphereRecord],
+    test: &mut F,
+    ray: &Ray,
+    found: &mut H,
+) where
+    F: FnMut(u32, &Ray) -> Option<P>,
+    P: IntoHit,
+    H: FnMut(Hit, Option<[Vec3; 3]>),
+{
+    for lane in lanes(pack.others) {
+        let prim = pack.prim[lane];
+        let hit = match spheres.get(first_lane + lane) {
+            Some(sphere) if sphere.is_sphere() => sphere.intersect(ray).map(|t| t.into_hit(prim)),
+            _ => test(prim, ray).map(|hit| hit.into_hit(prim)),
+        };
+        if let Some(hit) = hit {
+            found(hit, None);
         }
     }
 }
