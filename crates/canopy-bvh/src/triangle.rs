@@ -33,6 +33,14 @@ impl TriangleTest {
     pub fn refines_zeros(self) -> bool {
         self == TriangleTest::Watertight
     }
+
+    /// The mode's name where users and records spell it: `watertight` or `fast`.
+    pub fn name(self) -> &'static str {
+        match self {
+            TriangleTest::Watertight => "watertight",
+            TriangleTest::Fast => "fast",
+        }
+    }
 }
 
 /// A ray prepared once for triangle tests: the axis along which the ray runs most

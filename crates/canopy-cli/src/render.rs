@@ -441,10 +441,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         facts: SceneFacts::of(&job.source, scene),
         bvh: args.bvh.to_string(),
         bvh_width: prepared.width().children(),
-        triangles: match prepared.triangle_test() {
-            TriangleTest::Watertight => "watertight",
-            TriangleTest::Fast => "fast",
-        },
+        triangles: prepared.triangle_test().name(),
         build_ms: prepared.build_time().as_secs_f64() * 1e3,
         device: prepared.device_name(),
         threads: prepared.threads(),

@@ -503,7 +503,7 @@ impl Bvh {
         d.set_item("builder", self.name())?;
         d.set_item("primitives", accel.primitives().len())?;
         d.set_item("build_ms", self.build_ms)?;
-        d.set_item("triangles", triangle_test_name(accel.triangle_test()))?;
+        d.set_item("triangles", accel.triangle_test().name())?;
         let Some(tree) = accel.tree() else {
             return Ok(d);
         };
@@ -723,13 +723,5 @@ pub(crate) fn triangle_test(triangles: &str) -> PyResult<TriangleTest> {
         other => Err(PyValueError::new_err(format!(
             "triangles must be 'watertight' or 'fast', not {other:?}"
         ))),
-    }
-}
-
-/// The `triangles=` name of a triangle test.
-pub(crate) fn triangle_test_name(test: TriangleTest) -> &'static str {
-    match test {
-        TriangleTest::Watertight => "watertight",
-        TriangleTest::Fast => "fast",
     }
 }

@@ -355,7 +355,7 @@ impl RayScene {
     /// How ray queries test triangles: "watertight" or "fast".
     #[getter]
     fn triangles(&self) -> &'static str {
-        crate::bvh::triangle_test_name(self.params.triangle_test)
+        self.params.triangle_test.name()
     }
 
     /// Everything the scene was made from, for pickling: (builder, width, each

@@ -172,15 +172,7 @@ pub struct RunConfig {
 }
 
 fn watertight() -> String {
-    triangle_test_name(TriangleTest::Watertight).to_string()
-}
-
-/// The name `--fast-triangles` and the results give a triangle test.
-fn triangle_test_name(test: TriangleTest) -> &'static str {
-    match test {
-        TriangleTest::Watertight => "watertight",
-        TriangleTest::Fast => "fast",
-    }
+    TriangleTest::Watertight.name().to_string()
 }
 
 /// Everything a run measured: what `results.json` holds.
@@ -363,7 +355,7 @@ fn paper(args: &PaperArgs) -> anyhow::Result<()> {
         "{width}x{height}, {spp} spp, depth {}, {} integrator, {} triangle test, {runs} runs per measurement, {} threads ({} cores), canopy {}.",
         BuiltinScene::find("paper-1").expect("built in").load()?.settings.max_depth,
         args.integrator,
-        triangle_test_name(triangles),
+        triangles.name(),
         pool.current_num_threads(),
         std::thread::available_parallelism().map_or(0, |n| n.get()),
         env!("CARGO_PKG_VERSION")
@@ -377,7 +369,7 @@ fn paper(args: &PaperArgs) -> anyhow::Result<()> {
             spp,
             runs,
             threads: pool.current_num_threads(),
-            triangles: triangle_test_name(triangles).to_string(),
+            triangles: triangles.name().to_string(),
         },
         measurements,
     };
