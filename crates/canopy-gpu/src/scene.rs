@@ -69,7 +69,7 @@ impl GpuPrimitive {
             Shape::Cuboid(c) => {
                 // Row i of the world-to-local rotation (its transpose) is column i.
                 for (i, d) in data.iter_mut().take(3).enumerate() {
-                    let row = c.rotation.col(i);
+                    let row = c.rotation().col(i);
                     *d = [row.x, row.y, row.z, c.local.min[i]];
                 }
                 let t = c.translation;

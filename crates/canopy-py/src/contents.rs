@@ -110,7 +110,7 @@ pub fn contents<'py>(py: Python<'py>, scene: &Scene) -> PyResult<Bound<'py, PyDi
                 box_min.push(c.local.min);
                 box_max.push(c.local.max);
                 // Rows of the rotation, so that numpy's `rotation @ p` turns a point.
-                let t = c.rotation.transpose();
+                let t = c.rotation().transpose();
                 box_rotation.extend([t.x_axis, t.y_axis, t.z_axis]);
                 box_translation.push(c.translation);
                 box_materials.push(p.material);

@@ -148,7 +148,7 @@ pub fn fingerprint(scene: &Scene) -> u64 {
             Shape::Cuboid(c) => {
                 words.extend(c.local.min.to_array());
                 words.extend(c.local.max.to_array());
-                words.extend(c.rotation.to_cols_array());
+                words.extend(c.rotation().to_cols_array());
                 words.extend(c.translation.to_array());
             }
         }

@@ -244,11 +244,11 @@ impl Scene {
             return Err("`min` must not exceed `max` on any axis".into());
         }
         self.check_material_index(material)?;
-        let cuboid = Cuboid {
-            local: Aabb::new(min, max),
-            rotation: Mat3::from_quat(rotation_from_degrees(rotate_degrees)),
-            translation: translate,
-        };
+        let cuboid = Cuboid::new(
+            Aabb::new(min, max),
+            Mat3::from_quat(rotation_from_degrees(rotate_degrees)),
+            translate,
+        );
         self.push_primitive(Shape::Cuboid(cuboid), material);
         Ok(())
     }

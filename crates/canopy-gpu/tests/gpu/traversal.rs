@@ -52,14 +52,14 @@ fn scene(n: usize) -> Vec<Primitive> {
             }),
             1 => {
                 let axis = point(2.0).normalize_or(Vec3::Y);
-                Shape::Cuboid(Cuboid {
-                    local: canopy_bvh::Aabb::new(
+                Shape::Cuboid(Cuboid::new(
+                    canopy_bvh::Aabb::new(
                         -point(1.0).abs() - Vec3::splat(0.1),
                         point(1.0).abs() + Vec3::splat(0.1),
                     ),
-                    rotation: Mat3::from_axis_angle(axis, point(6.0).x),
-                    translation: c,
-                })
+                    Mat3::from_axis_angle(axis, point(6.0).x),
+                    c,
+                ))
             }
             _ => Shape::Triangle(Triangle::new(c, c + point(2.0), c + point(2.0))),
         };

@@ -7,17 +7,32 @@ use glam::{Mat3, Vec2, Vec3};
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Cuboid {
     pub local: Aabb,
-    pub rotation: Mat3,
+    rotation: Mat3,
     pub translation: Vec3,
+    /// Whether `rotation` is the identity: the box is only moved, as floors, walls and
+    /// lights mostly are, and rays need no turning into its frame (see
+    /// [`Cuboid::intersect`]). Kept beside the rotation, which is why that is private:
+    /// comparing the matrix at every test spent most of what the shortcut saves.
+    unturned: bool,
 }
 
 impl Cuboid {
-    pub fn axis_aligned(min: Vec3, max: Vec3) -> Self {
+    pub fn new(local: Aabb, rotation: Mat3, translation: Vec3) -> Self {
         Self {
-            local: Aabb::new(min, max),
-            rotation: Mat3::IDENTITY,
-            translation: Vec3::ZERO,
+            local,
+            rotation,
+            translation,
+            unturned: rotation == Mat3::IDENTITY,
         }
+    }
+
+    pub fn axis_aligned(min: Vec3, max: Vec3) -> Self {
+        Self::new(Aabb::new(min, max), Mat3::IDENTITY, Vec3::ZERO)
+    }
+
+    /// The rotation from the box's frame to the world's.
+    pub fn rotation(&self) -> Mat3 {
+        self.rotation
     }
 
     fn transform_point(&self, p: Vec3) -> Vec3 {
@@ -96,9 +111,23 @@ impl Cuboid {
     /// starts inside (refraction through a glass box) finds the far wall.
     #[inline]
     pub fn intersect(&self, ray: &Ray) -> Option<f32> {
-        let r = self.local_ray(ray);
-        let t0 = (self.local.min - r.origin) * r.inv_dir;
-        let t1 = (self.local.max - r.origin) * r.inv_dir;
+        self.intersect_in(self.unturned, ray)
+    }
+
+    /// [`Cuboid::intersect`], unturned boxes (`unturned`) taking the ray's own inverse
+    /// direction. Turning by the identity gives the same numbers but for the sign of a
+    /// zero, which only swaps a slab's two distances; it costs three divisions and two
+    /// matrix products, where every ray of the lit dragon meets a floor and a wall.
+    #[inline(always)]
+    fn intersect_in(&self, unturned: bool, ray: &Ray) -> Option<f32> {
+        let (origin, inv_dir) = if unturned {
+            (ray.origin - self.translation, ray.inv_dir)
+        } else {
+            let r = self.local_ray(ray);
+            (r.origin, r.inv_dir)
+        };
+        let t0 = (self.local.min - origin) * inv_dir;
+        let t1 = (self.local.max - origin) * inv_dir;
         let enter = t0.min(t1).max_element();
         let exit = t0.max(t1).min_element();
         if enter > exit {
@@ -137,6 +166,13 @@ impl Cuboid {
     /// A point uniform over the surface's area: an axis by the area across it, a face,
     /// then a point on it. A flat box's rectangle faces the reference.
     pub fn sample_toward(&self, reference: Vec3, u: Vec2) -> Option<SurfaceSample> {
+        self.sample_toward_in(self.unturned, reference, u)
+    }
+
+    /// [`Cuboid::sample_toward`], unturned boxes skipping the products with the identity,
+    /// as in [`Cuboid::intersect_in`].
+    #[inline(always)]
+    fn sample_toward_in(&self, unturned: bool, reference: Vec3, u: Vec2) -> Option<SurfaceSample> {
         let areas = self.surface_areas();
         // Pick the axis with u.x and reuse what is left of it for the face and the point.
         let mut pick = u.x * areas.element_sum();
@@ -152,7 +188,10 @@ impl Cuboid {
         let (lo, hi) = (self.local.min, self.local.max);
         let flat = lo[axis] == hi[axis];
         let (positive, along) = if flat {
-            let to_reference = self.rotation.transpose() * (reference - self.translation);
+            let to_reference = match unturned {
+                true => reference - self.translation,
+                false => self.rotation.transpose() * (reference - self.translation),
+            };
             (to_reference[axis] >= lo[axis], rest)
         } else if rest >= 0.5 {
             (true, 2.0 * rest - 1.0)
@@ -166,8 +205,10 @@ impl Cuboid {
         local[b] = lo[b] + u.y * (hi[b] - lo[b]);
         let mut local_normal = Vec3::ZERO;
         local_normal[axis] = if positive { 1.0 } else { -1.0 };
-        let p = self.transform_point(local);
-        let normal = self.rotation * local_normal;
+        let (p, normal) = match unturned {
+            true => (local + self.translation, local_normal),
+            false => (self.transform_point(local), self.rotation * local_normal),
+        };
         SurfaceSample::by_area(self.area(), reference, p, normal, self.error())
     }
 
@@ -176,8 +217,23 @@ impl Cuboid {
     }
 
     pub fn surface(&self, ray: &Ray, t: f32) -> Surface {
-        let r = self.local_ray(ray);
-        let mut p = r.at(t);
+        self.surface_in(self.unturned, ray, t)
+    }
+
+    /// [`Cuboid::surface`], unturned boxes skipping the products with the identity, as in
+    /// [`Cuboid::intersect_in`].
+    #[inline(always)]
+    fn surface_in(&self, unturned: bool, ray: &Ray, t: f32) -> Surface {
+        let (origin, dir) = if unturned {
+            (ray.origin - self.translation, ray.dir)
+        } else {
+            let to_local = self.rotation.transpose();
+            (
+                to_local * (ray.origin - self.translation),
+                to_local * ray.dir,
+            )
+        };
+        let mut p = origin + t * dir;
         // The face hit is the one the point is relatively closest to; a flat box's thin
         // axis always wins.
         let center = self.local.center();
@@ -197,7 +253,7 @@ impl Cuboid {
         let positive = if half[axis] > 0.0 {
             offset[axis] >= 0.0
         } else {
-            r.dir[axis] < 0.0
+            dir[axis] < 0.0
         };
         let mut local_normal = Vec3::ZERO;
         local_normal[axis] = if positive { 1.0 } else { -1.0 };
@@ -207,9 +263,13 @@ impl Cuboid {
         } else {
             self.local.min[axis]
         };
-        let normal = self.rotation * local_normal;
+        let (normal, p) = if unturned {
+            (local_normal, p + self.translation)
+        } else {
+            (self.rotation * local_normal, self.transform_point(p))
+        };
         Surface {
-            p: self.transform_point(p),
+            p,
             geometric_normal: normal,
             shading_normal: normal,
             error: self.error(),
@@ -264,11 +324,11 @@ mod tests {
     #[test]
     fn rotated_box_is_hit_on_its_rotated_face() {
         // Rotate 45 degrees about y: the corner now points at a ray coming along +x.
-        let c = Cuboid {
-            local: Aabb::new(Vec3::splat(-1.0), Vec3::splat(1.0)),
-            rotation: Mat3::from_rotation_y(std::f32::consts::FRAC_PI_4),
-            translation: Vec3::new(5.0, 0.0, 0.0),
-        };
+        let c = Cuboid::new(
+            Aabb::new(Vec3::splat(-1.0), Vec3::splat(1.0)),
+            Mat3::from_rotation_y(std::f32::consts::FRAC_PI_4),
+            Vec3::new(5.0, 0.0, 0.0),
+        );
         let r = ray(Vec3::new(0.0, 0.0, 0.0), Vec3::X);
         let t = c.intersect(&r).unwrap();
         assert!((t - (5.0 - 2f32.sqrt())).abs() < 1e-5, "t = {t}");
@@ -278,11 +338,11 @@ mod tests {
 
     #[test]
     fn face_triangles_cover_the_surface() {
-        let c = Cuboid {
-            local: Aabb::new(Vec3::ZERO, Vec3::new(1.0, 2.0, 3.0)),
-            rotation: Mat3::from_rotation_z(0.3),
-            translation: Vec3::ONE,
-        };
+        let c = Cuboid::new(
+            Aabb::new(Vec3::ZERO, Vec3::new(1.0, 2.0, 3.0)),
+            Mat3::from_rotation_z(0.3),
+            Vec3::ONE,
+        );
         let area: f32 = c
             .face_triangles()
             .iter()
@@ -300,5 +360,54 @@ mod tests {
         let t = light.intersect(&r).unwrap();
         assert_eq!(t, 2.0);
         assert_eq!(light.surface(&r, t).geometric_normal, -Vec3::Y);
+    }
+
+    /// An unturned box's shortcuts answer as turning by the identity does (the general
+    /// path): hits, misses, surfaces and light samples, from outside and inside, for solid
+    /// and flat boxes.
+    #[test]
+    fn unturned_boxes_answer_as_turning_by_the_identity_does() {
+        let boxes = [
+            Cuboid::axis_aligned(Vec3::new(-1.0, 0.5, -2.0), Vec3::new(2.0, 1.5, 0.25)),
+            Cuboid::axis_aligned(Vec3::new(-0.5, 3.0, 0.2), Vec3::new(0.5, 3.0, 1.2)),
+            Cuboid::new(
+                Aabb::new(Vec3::new(0.0, -1.0, -1.0), Vec3::new(0.0, 1.0, 2.0)),
+                Mat3::IDENTITY,
+                Vec3::new(0.3, -0.2, 1.7),
+            ),
+        ];
+        let mut rng = crate::rng::Rng::for_sample(7, 0, 0);
+        let mut point = |scale: f32| {
+            let v = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
+            (v * 2.0 - Vec3::ONE) * scale
+        };
+        for c in boxes {
+            assert!(c.unturned);
+            let mut hits = 0;
+            // Rays aimed about the box, a quarter of them from within its bounds.
+            let (center, extent) = (c.bounds().center(), c.bounds().extent());
+            for i in 0..4000 {
+                let origin = match i % 4 {
+                    0 => center + 0.4 * point(1.0) * extent,
+                    _ => point(5.0),
+                };
+                let r = ray(origin, center + 0.75 * point(1.0) * extent - origin);
+                let t = c.intersect_in(true, &r);
+                assert_eq!(t, c.intersect_in(false, &r), "{r:?}");
+                if let Some(t) = t {
+                    hits += 1;
+                    assert_eq!(c.surface_in(true, &r, t), c.surface_in(false, &r, t));
+                }
+                let (reference, u) = (point(5.0), point(1.0).abs().truncate());
+                assert_eq!(
+                    c.sample_toward_in(true, reference, u),
+                    c.sample_toward_in(false, reference, u),
+                    "{reference} {u}"
+                );
+            }
+            assert!((1000..4000).contains(&hits), "{hits} hits");
+        }
+        let turned = Cuboid::new(boxes[0].local, Mat3::from_rotation_x(0.5), Vec3::ONE);
+        assert!(!turned.unturned);
     }
 }
