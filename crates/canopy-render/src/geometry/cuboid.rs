@@ -95,16 +95,40 @@ impl Cuboid {
         triangles
     }
 
-    /// The ray in the box's frame (rotation keeps lengths, so `t` is unchanged).
-    #[inline]
-    fn local_ray(&self, ray: &Ray) -> Ray {
-        let to_local = self.rotation.transpose();
-        Ray::new(
-            to_local * (ray.origin - self.translation),
-            to_local * ray.dir,
-            ray.t_min,
-            ray.t_max,
-        )
+    // Between the box's frame and the world's (rotation keeps lengths, so a ray's `t` is
+    // the same in both). `unturned` is the box's flag or false: an unturned box skips the
+    // products with the identity, which give the same numbers but for the sign of a zero.
+
+    #[inline(always)]
+    fn point_in_box_frame(&self, unturned: bool, p: Vec3) -> Vec3 {
+        match unturned {
+            true => p - self.translation,
+            false => self.rotation.transpose() * (p - self.translation),
+        }
+    }
+
+    #[inline(always)]
+    fn direction_in_box_frame(&self, unturned: bool, d: Vec3) -> Vec3 {
+        match unturned {
+            true => d,
+            false => self.rotation.transpose() * d,
+        }
+    }
+
+    #[inline(always)]
+    fn point_in_world(&self, unturned: bool, p: Vec3) -> Vec3 {
+        match unturned {
+            true => p + self.translation,
+            false => self.transform_point(p),
+        }
+    }
+
+    #[inline(always)]
+    fn direction_in_world(&self, unturned: bool, d: Vec3) -> Vec3 {
+        match unturned {
+            true => d,
+            false => self.rotation * d,
+        }
     }
 
     /// Slab test in the box's frame, returning the exit distance too, so that a ray that
@@ -115,16 +139,15 @@ impl Cuboid {
     }
 
     /// [`Cuboid::intersect`], unturned boxes (`unturned`) taking the ray's own inverse
-    /// direction. Turning by the identity gives the same numbers but for the sign of a
-    /// zero, which only swaps a slab's two distances; it costs three divisions and two
-    /// matrix products, where every ray of the lit dragon meets a floor and a wall.
+    /// direction. A zero's sign, the only difference, just swaps a slab's two distances;
+    /// turning costs three divisions and two matrix products, where every ray of the lit
+    /// dragon meets a floor and a wall.
     #[inline(always)]
     fn intersect_in(&self, unturned: bool, ray: &Ray) -> Option<f32> {
-        let (origin, inv_dir) = if unturned {
-            (ray.origin - self.translation, ray.inv_dir)
-        } else {
-            let r = self.local_ray(ray);
-            (r.origin, r.inv_dir)
+        let origin = self.point_in_box_frame(unturned, ray.origin);
+        let inv_dir = match unturned {
+            true => ray.inv_dir,
+            false => self.direction_in_box_frame(false, ray.dir).recip(),
         };
         let t0 = (self.local.min - origin) * inv_dir;
         let t1 = (self.local.max - origin) * inv_dir;
@@ -169,8 +192,7 @@ impl Cuboid {
         self.sample_toward_in(self.unturned, reference, u)
     }
 
-    /// [`Cuboid::sample_toward`], unturned boxes skipping the products with the identity,
-    /// as in [`Cuboid::intersect_in`].
+    /// [`Cuboid::sample_toward`], `unturned` as in [`Cuboid::intersect_in`].
     #[inline(always)]
     fn sample_toward_in(&self, unturned: bool, reference: Vec3, u: Vec2) -> Option<SurfaceSample> {
         let areas = self.surface_areas();
@@ -188,10 +210,7 @@ impl Cuboid {
         let (lo, hi) = (self.local.min, self.local.max);
         let flat = lo[axis] == hi[axis];
         let (positive, along) = if flat {
-            let to_reference = match unturned {
-                true => reference - self.translation,
-                false => self.rotation.transpose() * (reference - self.translation),
-            };
+            let to_reference = self.point_in_box_frame(unturned, reference);
             (to_reference[axis] >= lo[axis], rest)
         } else if rest >= 0.5 {
             (true, 2.0 * rest - 1.0)
@@ -205,10 +224,8 @@ impl Cuboid {
         local[b] = lo[b] + u.y * (hi[b] - lo[b]);
         let mut local_normal = Vec3::ZERO;
         local_normal[axis] = if positive { 1.0 } else { -1.0 };
-        let (p, normal) = match unturned {
-            true => (local + self.translation, local_normal),
-            false => (self.transform_point(local), self.rotation * local_normal),
-        };
+        let p = self.point_in_world(unturned, local);
+        let normal = self.direction_in_world(unturned, local_normal);
         SurfaceSample::by_area(self.area(), reference, p, normal, self.error())
     }
 
@@ -220,20 +237,11 @@ impl Cuboid {
         self.surface_in(self.unturned, ray, t)
     }
 
-    /// [`Cuboid::surface`], unturned boxes skipping the products with the identity, as in
-    /// [`Cuboid::intersect_in`].
+    /// [`Cuboid::surface`], `unturned` as in [`Cuboid::intersect_in`].
     #[inline(always)]
     fn surface_in(&self, unturned: bool, ray: &Ray, t: f32) -> Surface {
-        let (origin, dir) = if unturned {
-            (ray.origin - self.translation, ray.dir)
-        } else {
-            let to_local = self.rotation.transpose();
-            (
-                to_local * (ray.origin - self.translation),
-                to_local * ray.dir,
-            )
-        };
-        let mut p = origin + t * dir;
+        let dir = self.direction_in_box_frame(unturned, ray.dir);
+        let mut p = self.point_in_box_frame(unturned, ray.origin) + t * dir;
         // The face hit is the one the point is relatively closest to; a flat box's thin
         // axis always wins.
         let center = self.local.center();
@@ -263,13 +271,9 @@ impl Cuboid {
         } else {
             self.local.min[axis]
         };
-        let (normal, p) = if unturned {
-            (local_normal, p + self.translation)
-        } else {
-            (self.rotation * local_normal, self.transform_point(p))
-        };
+        let normal = self.direction_in_world(unturned, local_normal);
         Surface {
-            p,
+            p: self.point_in_world(unturned, p),
             geometric_normal: normal,
             shading_normal: normal,
             error: self.error(),
