@@ -10,8 +10,13 @@
 //! [`RayQuery::occluded_coherent`]; `bench/scenes/spheres-lit.toml`, and
 //! `dragon-lit.toml` run from `bench/scenes`).
 //!
+//! With `--bounces`, the rays are diffuse bounces: from where those camera rays hit, in
+//! random directions on the side they came from (closest hits, as camera rays). They
+//! part ways below the top of the tree, so a packet goes on ray by ray once few of its
+//! rays remain together.
+//!
 //! `cargo run --release -p canopy-render --example packet_speed -- [scene ...]
-//!  [--size 480x480] [--samples 8] [--turns 5] [--shadows]`
+//!  [--size 480x480] [--samples 8] [--turns 5] [--shadows | --bounces]`
 use canopy_bvh::{Hit, Ray, RayQuery, ALL_MASKS};
 use canopy_render::accel::Accel;
 use canopy_render::camera::Camera;
@@ -25,7 +30,7 @@ use std::time::{Duration, Instant};
 fn main() {
     let mut args = std::env::args().skip(1);
     let (mut scenes, mut size, mut samples, mut turns) = (Vec::new(), (480, 480), 8u32, 5);
-    let mut shadows = false;
+    let (mut shadows, mut bounces) = (false, false);
     while let Some(arg) = args.next() {
         let mut value = || args.next().expect("a value after each option");
         match arg.as_str() {
@@ -37,6 +42,7 @@ fn main() {
             "--samples" => samples = value().parse().expect("samples"),
             "--turns" => turns = value().parse().expect("turns"),
             "--shadows" => shadows = true,
+            "--bounces" => bounces = true,
             _ => scenes.push(arg),
         }
     }
@@ -63,6 +69,12 @@ fn main() {
             time_shadows(name, &scene, &accel, &rays, turns);
             continue;
         }
+        let kind = if bounces {
+            rays = bounce_rays(&accel, &rays);
+            "bounce"
+        } else {
+            "camera"
+        };
         let mut single = vec![None; rays.len()];
         let mut packets = vec![None; rays.len()];
         let (mut best_single, mut best_packets) = (Duration::MAX, Duration::MAX);
@@ -90,7 +102,7 @@ fn main() {
         let same = single == packets;
         let rate = |d: Duration| rays.len() as f64 / d.as_secs_f64() / 1e6;
         println!(
-            "{name}: {} camera rays; one by one {:.2} Mrays/s, packets {:.2} Mrays/s ({:.2}x); same hits: {same}",
+            "{name}: {} {kind} rays; one by one {:.2} Mrays/s, packets {:.2} Mrays/s ({:.2}x); same hits: {same}",
             rays.len(),
             rate(best_single),
             rate(best_packets),
@@ -114,6 +126,32 @@ fn time(
         trace(rays, hits);
     }
     start.elapsed()
+}
+
+/// Diffuse bounces from the hits of `camera_rays`: uniform directions on the side each
+/// ray came from, in the stream's order (a pixel's samples side by side).
+fn bounce_rays(accel: &Accel, camera_rays: &[Ray]) -> Vec<Ray> {
+    let mut hits = vec![None; camera_rays.len()];
+    accel.intersect_each(
+        camera_rays.len(),
+        ALL_MASKS,
+        |i| camera_rays[i],
+        |i, h| hits[i] = h,
+    );
+    let mut rays = Vec::new();
+    for (i, (ray, hit)) in camera_rays.iter().zip(&hits).enumerate() {
+        let Some(hit) = hit else { continue };
+        let mut rng = Rng::for_sample(11, i as u64, 0);
+        let z = 1.0 - 2.0 * rng.next_f32();
+        let phi = std::f32::consts::TAU * rng.next_f32();
+        let r = (1.0 - z * z).max(0.0).sqrt();
+        let mut dir = Vec3::new(r * phi.cos(), r * phi.sin(), z);
+        if dir.dot(ray.dir) > 0.0 {
+            dir = -dir;
+        }
+        rays.push(Ray::new(ray.at(hit.t * 0.9999), dir, 1e-4, f32::INFINITY));
+    }
+    rays
 }
 
 /// Shadow rays from the hits of `camera_rays` towards the scene's first light, one by

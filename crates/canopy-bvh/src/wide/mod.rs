@@ -372,13 +372,17 @@ impl<const N: usize> BvhN<N> {
     /// spheres and packed triangles tested for all its rays at once, anything else by
     /// `test`. Each ray goes to its closest hit, or with `ANY` stops at its first; returns
     /// each lane's hit and the lanes that stopped ([`packet::walk_packet`]).
+    ///
+    /// # Safety
+    /// The instruction sets of `K` and `T` must be available.
     #[inline(always)]
-    fn walk_packet<T, F, P, const ANY: bool>(
+    unsafe fn walk_packet<K, T, F, P, const ANY: bool>(
         &self,
         rays: &[Ray],
         test: F,
     ) -> ([Option<Hit>; PACKET], u32)
     where
+        K: kernels::NodeKernel<N>,
         T: crate::triangle::PackKernel,
         F: FnMut(u32, &Ray) -> Option<P>,
         P: IntoHit,
@@ -386,13 +390,15 @@ impl<const N: usize> BvhN<N> {
         if self.nodes.is_empty() {
             return ([None; PACKET], 0);
         }
+        let (nodes, prefetch) = (&self.nodes, self.prefetches());
+        // SAFETY (both): the caller guarantees the instruction sets.
         if self.packs.is_empty() {
             let mut leaves = SphereLeaves {
                 prims: &self.prim_indices,
                 spheres: &self.spheres,
                 test,
             };
-            walk_packet::<N, _, ANY>(&self.nodes, rays, &mut leaves)
+            unsafe { walk_packet::<N, K, _, ANY>(nodes, rays, &mut leaves, prefetch) }
         } else {
             let mut leaves = PackedPacketLeaves::<T, _>::new(
                 &self.packs,
@@ -400,7 +406,7 @@ impl<const N: usize> BvhN<N> {
                 self.triangle_test,
                 test,
             );
-            walk_packet::<N, _, ANY>(&self.nodes, rays, &mut leaves)
+            unsafe { walk_packet::<N, K, _, ANY>(nodes, rays, &mut leaves, prefetch) }
         }
     }
 
@@ -802,7 +808,8 @@ where
             for (lane, ray) in rays.iter_mut().enumerate() {
                 *ray = (self.ray)(start + lane);
             }
-            let (hits, _) = bvh.walk_packet::<T, _, _, false>(rays, &mut self.test);
+            // SAFETY: the caller guarantees the instruction sets.
+            let (hits, _) = unsafe { bvh.walk_packet::<K, T, _, _, false>(rays, &mut self.test) };
             for (lane, hit) in hits.into_iter().take(rays.len()).enumerate() {
                 (self.answer)(start + lane, hit);
             }
@@ -860,7 +867,8 @@ where
             for (lane, ray) in rays.iter_mut().enumerate() {
                 *ray = (self.ray)(start + lane);
             }
-            let (_, blocked) = bvh.walk_packet::<T, _, _, true>(rays, &mut blocker);
+            // SAFETY: the caller guarantees the instruction sets.
+            let (_, blocked) = unsafe { bvh.walk_packet::<K, T, _, _, true>(rays, &mut blocker) };
             for lane in 0..rays.len() {
                 (self.answer)(start + lane, blocked >> lane & 1 == 1);
             }

@@ -12,10 +12,16 @@
 //! than the subtree's box, so every ray gets the closest hit a single-ray query gives
 //! (ties go to the lower index whatever the order of the tests).
 //!
+//! Rays that part ways (bounces, shadow rays towards a large light over a large mesh) soon
+//! leave a packet with few rays in each subtree; where [`ALONE_AT`] or fewer enter a node,
+//! each goes on from there alone through the single-ray walk ([`super::traverse`]), with
+//! its closest hit so far, as Embree's hybrid kernels do.
+//!
 //! The lane loops are plain arrays: compiled inside the dispatch's AVX2 or AVX-512
 //! function they become vector instructions, and elsewhere they are the scalar twin.
 
-use super::traverse::{lanes, Closest, ClosestLeaves, PacketLeaves};
+use super::kernels::NodeKernel;
+use super::traverse::{lanes, AloneWalk, Closest, ClosestLeaves, PacketLeaves};
 use super::{WideNode, EMPTY_SLOT};
 use crate::aabb::{fast_max, fast_min, FAR_SLACK};
 use crate::traverse::TraversalStack;
@@ -175,17 +181,37 @@ struct Entry {
     entry: [f32; PACKET],
 }
 
-/// The walk of `rays` (at most [`PACKET`]) through `nodes` (non-empty). Without `ANY`,
-/// each ray goes on to the closest hit [`super::traverse::closest`] gives it; with `ANY`,
-/// each stops at its first hit (any-hit, as [`super::traverse::any`] answers), leaving
-/// the packet, and the walk ends when every ray has. Returns each lane's hit (with
-/// `ANY`, a hit, not necessarily the closest) and the lanes that stopped.
+/// A packet goes on ray by ray once this few of its rays (or fewer) enter a node
+/// together: a node's test for the packet costs about what it costs a ray alone, so
+/// with few rays left the packet's stack work and box tests of absent lanes outweigh
+/// what they share (Embree's hybrid kernels switch likewise; Benthin et al., "Combining
+/// Single and Packet-Ray Tracing for Arbitrary Ray Distributions on the Intel MIC
+/// Architecture", 2012). 2 to 6 measured alike on the 202k dragon's camera, shadow and
+/// bounce rays; never switching left its bounce rays at 0.68x the single-ray walk's
+/// speed, 4 at 0.81x (docs/performance.md, "Packets that go on ray by ray").
+const ALONE_AT: u32 = 4;
+
+/// The walk of `rays` (at most [`PACKET`]) through `nodes` (non-empty) with the node
+/// kernel `K`. Without `ANY`, each ray goes on to the closest hit
+/// [`super::traverse::closest`] gives it; with `ANY`, each stops at its first hit
+/// (any-hit, as [`super::traverse::any`] answers), leaving the packet, and the walk ends
+/// when every ray has. Returns each lane's closest hit (without `ANY`) and the lanes that
+/// stopped (with `ANY`). Where [`ALONE_AT`] rays or fewer enter a node, each goes on
+/// alone from there ([`PacketLeaves::closest_alone`]).
+///
+/// # Safety
+/// `K`'s instruction set must be available.
 #[inline(always)]
-pub(crate) fn walk_packet<const N: usize, L: PacketLeaves, const ANY: bool>(
+pub(crate) unsafe fn walk_packet<const N: usize, K, L, const ANY: bool>(
     nodes: &[WideNode<N>],
     rays: &[Ray],
     leaves: &mut L,
-) -> ([Option<Hit>; PACKET], u32) {
+    prefetch: bool,
+) -> ([Option<Hit>; PACKET], u32)
+where
+    K: NodeKernel<N>,
+    L: PacketLeaves,
+{
     debug_assert!(rays.len() <= PACKET);
     // A NaN or degenerate ray misses everything (see Ray); so do the lanes past the end.
     let traceable = rays.iter().enumerate().fold(0u32, |mask, (lane, r)| {
@@ -201,6 +227,7 @@ pub(crate) fn walk_packet<const N: usize, L: PacketLeaves, const ANY: bool>(
     // The lanes that stopped (any-hit only): they take no further part.
     let mut stopped = 0u32;
     let mut stack = TraversalStack::<Entry>::new();
+    let mut alone = AloneWalk::new(prefetch);
     let (mut child, mut count, mut active) = (0u32, 0u32, traceable);
     while active != 0 {
         if count > 0 {
@@ -219,6 +246,33 @@ pub(crate) fn walk_packet<const N: usize, L: PacketLeaves, const ANY: bool>(
                 if stopped == traceable {
                     break;
                 }
+            }
+        } else if active.count_ones() <= ALONE_AT {
+            for lane in lanes(active) {
+                let ray = Ray {
+                    t_max: t_max[lane],
+                    ..rays[lane]
+                };
+                let start = (child, count);
+                if ANY {
+                    // SAFETY: the caller guarantees the instruction set; `child` is the
+                    // root or a node's slot.
+                    if unsafe { leaves.any_alone::<N, K>(nodes, start, &ray, &mut alone) } {
+                        stopped |= 1 << lane;
+                    }
+                } else {
+                    let search = Closest {
+                        ray,
+                        best: best[lane],
+                    };
+                    // SAFETY: as above.
+                    let search =
+                        unsafe { leaves.closest_alone::<N, K>(nodes, start, search, &mut alone) };
+                    (t_max[lane], best[lane]) = (search.ray.t_max, search.best);
+                }
+            }
+            if ANY && stopped == traceable {
+                break;
             }
         } else {
             let node = &nodes[child as usize];

@@ -9,8 +9,13 @@
 //! Each ray then gets the distance and barycentrics the pack kernels give it, bit for
 //! bit. A packet whose rays are sheared differently tests its leaves ray by ray.
 
+use super::kernels::NodeKernel;
 use super::packet::{lane_mask, Lanes, PACKET};
-use super::traverse::{lanes, leaf_packs, offer_lane, sphere_packet, PackedLeaves, PacketLeaves};
+use super::traverse::{
+    any_from, closest_from, lanes, leaf_packs, offer_lane, sphere_packet, AloneWalk, Closest,
+    PackedLeaves, PacketLeaves,
+};
+use super::WideNode;
 use crate::sphere::SphereRecord;
 use crate::triangle::{PackKernel, ShearedRay, TrianglePack, TriangleTest, PACK_LANES};
 use crate::{Hit, IntoHit, PrimHit, Ray};
@@ -230,6 +235,73 @@ where
                             }
                         }
                     }
+                }
+            }
+        }
+    }
+    #[inline(always)]
+    unsafe fn closest_alone<const N: usize, K: NodeKernel<N>>(
+        &mut self,
+        nodes: &[WideNode<N>],
+        start: (u32, u32),
+        search: Closest,
+        walk: &mut AloneWalk,
+    ) -> Closest {
+        let (packs, spheres, test) = (self.packs, self.spheres, &mut self.test);
+        let (prefetch, stack, counter) = (walk.prefetch, &mut walk.closest, &mut ());
+        // SAFETY: the caller's guarantee; the pack kernels share the node kernel's
+        // instruction set.
+        unsafe {
+            match self.triangle_test {
+                TriangleTest::Watertight => {
+                    let mut single = PackedLeaves::<T, _>::new(packs, spheres, test);
+                    closest_from::<N, K, _, _>(
+                        nodes,
+                        start,
+                        search,
+                        &mut single,
+                        counter,
+                        prefetch,
+                        stack,
+                    )
+                }
+                TriangleTest::Fast => {
+                    let mut single = PackedLeaves::<T::Fast, _>::new(packs, spheres, test);
+                    closest_from::<N, K, _, _>(
+                        nodes,
+                        start,
+                        search,
+                        &mut single,
+                        counter,
+                        prefetch,
+                        stack,
+                    )
+                }
+            }
+        }
+    }
+
+    #[inline(always)]
+    unsafe fn any_alone<const N: usize, K: NodeKernel<N>>(
+        &mut self,
+        nodes: &[WideNode<N>],
+        start: (u32, u32),
+        ray: &Ray,
+        walk: &mut AloneWalk,
+    ) -> bool {
+        let (packs, spheres, test) = (self.packs, self.spheres, &mut self.test);
+        let blocks = |prim: u32, ray: &Ray| test(prim, ray).is_some();
+        let (prefetch, stack) = (walk.prefetch, &mut walk.any);
+        // SAFETY: as in `closest_alone`.
+        unsafe {
+            match self.triangle_test {
+                TriangleTest::Watertight => {
+                    let mut single = PackedLeaves::<T, _>::new(packs, spheres, blocks);
+                    any_from::<N, K, _>(nodes, start, ray, &mut single, prefetch, stack)
+                }
+                TriangleTest::Fast => {
+                    let mut single = PackedLeaves::<T::Fast, _>::new(packs, spheres, blocks);
+                    any_from::<N, K, _>(nodes, start, ray, &mut single, prefetch, stack)
                 }
             }
         }

@@ -62,6 +62,51 @@ pub(crate) trait PacketLeaves {
         t_max: &mut [f32; PACKET],
         best: &mut [Option<Hit>; PACKET],
     );
+
+    /// Walks one of the packet's rays on alone through the subtree `start` (once too few
+    /// remain to share the nodes' tests): [`closest_from`] over these leaves tested ray
+    /// by ray.
+    ///
+    /// # Safety
+    /// As [`closest_from`].
+    unsafe fn closest_alone<const N: usize, K: NodeKernel<N>>(
+        &mut self,
+        nodes: &[WideNode<N>],
+        start: (u32, u32),
+        search: Closest,
+        walk: &mut AloneWalk,
+    ) -> Closest;
+
+    /// Whether anything in the subtree `start` blocks `ray` ([`any_from`], as
+    /// [`PacketLeaves::closest_alone`]): the caller's test blocks where it offers a hit.
+    ///
+    /// # Safety
+    /// As [`closest_from`].
+    unsafe fn any_alone<const N: usize, K: NodeKernel<N>>(
+        &mut self,
+        nodes: &[WideNode<N>],
+        start: (u32, u32),
+        ray: &Ray,
+        walk: &mut AloneWalk,
+    ) -> bool;
+}
+
+/// What a packet's rays walking on alone share: the stacks and whether to prefetch.
+pub(crate) struct AloneWalk {
+    pub prefetch: bool,
+    pub closest: ClosestStack,
+    pub any: AnyStack,
+}
+
+impl AloneWalk {
+    #[inline(always)]
+    pub fn new(prefetch: bool) -> Self {
+        Self {
+            prefetch,
+            closest: ClosestStack::new(),
+            any: AnyStack::new(),
+        }
+    }
 }
 
 pub(crate) trait AnyLeaves {
@@ -210,6 +255,44 @@ where
             }
             sphere_packet(sphere, prim, &lanes, t_max, best);
         }
+    }
+
+    #[inline(always)]
+    unsafe fn closest_alone<const N: usize, K: NodeKernel<N>>(
+        &mut self,
+        nodes: &[WideNode<N>],
+        start: (u32, u32),
+        search: Closest,
+        walk: &mut AloneWalk,
+    ) -> Closest {
+        let mut single = SphereLeaves {
+            prims: self.prims,
+            spheres: self.spheres,
+            test: &mut self.test,
+        };
+        let (prefetch, stack) = (walk.prefetch, &mut walk.closest);
+        // SAFETY: the caller's guarantee.
+        unsafe {
+            closest_from::<N, K, _, _>(nodes, start, search, &mut single, &mut (), prefetch, stack)
+        }
+    }
+
+    #[inline(always)]
+    unsafe fn any_alone<const N: usize, K: NodeKernel<N>>(
+        &mut self,
+        nodes: &[WideNode<N>],
+        start: (u32, u32),
+        ray: &Ray,
+        walk: &mut AloneWalk,
+    ) -> bool {
+        let test = &mut self.test;
+        let mut single = SphereLeaves {
+            prims: self.prims,
+            spheres: self.spheres,
+            test: |prim: u32, ray: &Ray| test(prim, ray).is_some(),
+        };
+        // SAFETY: the caller's guarantee.
+        unsafe { any_from::<N, K, _>(nodes, start, ray, &mut single, walk.prefetch, &mut walk.any) }
     }
 }
 
@@ -819,6 +902,10 @@ pub(crate) type ClosestStack = TraversalStack<Entry>;
 /// A walk's stack of any-hit entries (see [`ClosestStack`]).
 pub(crate) type AnyStack = TraversalStack<(u32, u32)>;
 
+/// Where a walk from the top starts: the root, as a slot's `child` and `count` would
+/// name it (see [`WideNode`]).
+pub(crate) const ROOT: (u32, u32) = (0, 0);
+
 /// Closest hit, nearest child first. `nodes` is non-empty; `stack` is empty and left so.
 ///
 /// # Safety
@@ -841,14 +928,42 @@ where
     if !ray.is_traceable() {
         return None;
     }
-    let oct = OctRay::new(ray);
-    // SAFETY: the caller guarantees the instruction set.
-    let kray = unsafe { K::prepare(&oct) };
-    let mut search = Closest {
+    let search = Closest {
         ray: *ray,
         best: None,
     };
-    let (mut child, mut count) = (0u32, 0u32);
+    // SAFETY: the caller's guarantee.
+    unsafe { closest_from::<N, K, L, C>(nodes, ROOT, search, leaves, counter, prefetch, stack) }
+        .best
+}
+
+/// The closest-hit walk of `search`'s ray (traceable) through the subtree `start` (a
+/// slot's `child` and `count`, or [`ROOT`]), nearest child first: `search` with the
+/// closest hit found before its `t_max`, if that comes before its best. `stack` is
+/// empty and left so. (By value, not by reference: the search then stays in registers.)
+///
+/// # Safety
+/// `K`'s instruction set must be available; `start` is [`ROOT`] of a non-empty tree or
+/// a slot of one of its nodes.
+#[inline(always)]
+pub(crate) unsafe fn closest_from<const N: usize, K, L, C>(
+    nodes: &[WideNode<N>],
+    start: (u32, u32),
+    mut search: Closest,
+    leaves: &mut L,
+    counter: &mut C,
+    prefetch: bool,
+    stack: &mut ClosestStack,
+) -> Closest
+where
+    K: NodeKernel<N>,
+    L: ClosestLeaves + PrefetchLeaves,
+    C: TraversalCounter,
+{
+    let oct = OctRay::new(&search.ray);
+    // SAFETY: the caller guarantees the instruction set.
+    let kray = unsafe { K::prepare(&oct) };
+    let (mut child, mut count) = start;
     loop {
         counter.visit_node();
         if count > 0 {
@@ -894,7 +1009,7 @@ where
         // Pop the next subtree that can still hold a closer (or equally close) hit.
         loop {
             match stack.pop() {
-                None => return search.best,
+                None => return search,
                 Some((c, n, t_entry)) if t_entry <= search.ray.t_max => {
                     (child, count) = (c, n);
                     break;
@@ -925,10 +1040,32 @@ where
     if !ray.is_traceable() {
         return false;
     }
+    // SAFETY: the caller's guarantee.
+    unsafe { any_from::<N, K, L>(nodes, ROOT, ray, leaves, prefetch, stack) }
+}
+
+/// Whether anything in the subtree `start` (as [`closest_from`] takes it) blocks `ray`
+/// (traceable); stops at the first hit. `stack` is left empty.
+///
+/// # Safety
+/// As [`closest_from`].
+#[inline(always)]
+pub(crate) unsafe fn any_from<const N: usize, K, L>(
+    nodes: &[WideNode<N>],
+    start: (u32, u32),
+    ray: &Ray,
+    leaves: &mut L,
+    prefetch: bool,
+    stack: &mut AnyStack,
+) -> bool
+where
+    K: NodeKernel<N>,
+    L: AnyLeaves + PrefetchLeaves,
+{
     let oct = OctRay::new(ray);
     // SAFETY: the caller guarantees the instruction set.
     let kray = unsafe { K::prepare(&oct) };
-    let (mut child, mut count) = (0u32, 0u32);
+    let (mut child, mut count) = start;
     loop {
         if count > 0 {
             if leaves.any(child, count, ray) {
@@ -936,7 +1073,7 @@ where
                 return true;
             }
         } else {
-            // SAFETY: as in `closest`.
+            // SAFETY: as in `closest_from`.
             let node = unsafe { node_at(nodes, child) };
             let (mask, t) = unsafe { K::hit_mask(node, &kray, ray.t_max) };
             if mask != 0 {

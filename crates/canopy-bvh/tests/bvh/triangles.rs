@@ -354,7 +354,8 @@ fn grid_rays_through_shared_vertices_hit_in_every_kernel() {
 
 /// Packets whose rays tie on duplicated triangles, pass exactly through shared vertices
 /// and edges, run most steeply along different axes within one packet (so the packet
-/// tests its leaves ray by ray), or cannot be traced: every layout and instruction set
+/// tests its leaves ray by ray), part ways (so the packet goes on ray by ray) or cannot
+/// be traced: every layout and instruction set
 /// answers each ray as brute force does, bit for bit.
 #[test]
 fn packets_of_awkward_rays_match_brute_force_in_every_layout() {
@@ -380,6 +381,23 @@ fn packets_of_awkward_rays_match_brute_force_in_every_layout() {
             // Alternately steepest along x and y: packets that mix shears.
             let sideways = Vec3::new(if (i + j) % 2 == 0 { 3.0 } else { 0.2 }, -1.0, 0.1);
             rays.push(Ray::new(p - sideways, sideways, 0.0, 2.0));
+            // A fan from one point over the whole sphere, as diffuse bounces are: packets
+            // whose rays part ways below the root, and go on ray by ray.
+            let (theta, phi) = (
+                std::f32::consts::PI * i as f32 / (2 * n) as f32,
+                std::f32::consts::TAU * j as f32 / (2 * n) as f32,
+            );
+            let dir = Vec3::new(
+                theta.sin() * phi.cos(),
+                theta.cos(),
+                theta.sin() * phi.sin(),
+            );
+            rays.push(Ray::new(
+                Vec3::new(0.5, 0.35, 0.45),
+                dir,
+                0.0,
+                f32::INFINITY,
+            ));
         }
     }
     rays.insert(37, Ray::new(Vec3::NAN, -Vec3::Y, 0.0, f32::INFINITY));
