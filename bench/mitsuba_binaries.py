@@ -6,7 +6,9 @@ to the renderer against Mitsuba without building the release wheel.
         --scenes bench/scenes/dragon-lit.toml cornell [--spp 64 --depth 5 --threads 2 --turns 2]
 
 (after `bench/mitsuba_render.sh` has made bench/.venv with Mitsuba and a canopy wheel; the
-wheel only exports the scene, the binaries render it). Each binary's time is the `render`
+wheel only exports the scene, the binaries render it). Run that script again when the
+scene export may have changed: an older wheel's export once doubled Mitsuba's time on
+paper-3 (docs/performance.md, "Rerun on 2026-12-06"). Each binary's time is the `render`
 line it prints (the scene's loading and tree left out), Mitsuba's that of `mi.render`;
 each is the best of the turns, and each binary's speed over Mitsuba's is printed. Mitsuba
 renders with `--sampler` (multijitter was its best on every scene of docs/performance.md).
