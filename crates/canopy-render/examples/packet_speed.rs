@@ -128,9 +128,8 @@ fn time(
     start.elapsed()
 }
 
-/// Diffuse bounces from the hits of `camera_rays`: uniform directions on the side each
-/// ray came from, in the stream's order (a pixel's samples side by side).
-fn bounce_rays(accel: &Accel, camera_rays: &[Ray]) -> Vec<Ray> {
+/// The closest hit of each of `camera_rays`, one by one.
+fn camera_hits(accel: &Accel, camera_rays: &[Ray]) -> Vec<Option<Hit>> {
     let mut hits = vec![None; camera_rays.len()];
     accel.intersect_each(
         camera_rays.len(),
@@ -138,6 +137,13 @@ fn bounce_rays(accel: &Accel, camera_rays: &[Ray]) -> Vec<Ray> {
         |i| camera_rays[i],
         |i, h| hits[i] = h,
     );
+    hits
+}
+
+/// Diffuse bounces from the hits of `camera_rays`: uniform directions on the side each
+/// ray came from, in the stream's order (a pixel's samples side by side).
+fn bounce_rays(accel: &Accel, camera_rays: &[Ray]) -> Vec<Ray> {
+    let hits = camera_hits(accel, camera_rays);
     let mut rays = Vec::new();
     for (i, (ray, hit)) in camera_rays.iter().zip(&hits).enumerate() {
         let Some(hit) = hit else { continue };
@@ -160,13 +166,7 @@ fn time_shadows(name: &str, scene: &Scene, accel: &Accel, camera_rays: &[Ray], t
     let lights = Lights::new(scene);
     let &(_, light) = lights.emitters().first().expect("a scene with a light");
     let bounds = scene.primitives[light as usize].shape.bounds();
-    let mut hits = vec![None; camera_rays.len()];
-    accel.intersect_each(
-        camera_rays.len(),
-        ALL_MASKS,
-        |i| camera_rays[i],
-        |i, h| hits[i] = h,
-    );
+    let hits = camera_hits(accel, camera_rays);
     let mut rays = Vec::new();
     for (i, (ray, hit)) in camera_rays.iter().zip(&hits).enumerate() {
         let Some(hit) = hit else { continue };
