@@ -66,6 +66,50 @@ pub trait NodeKernel<const N: usize> {
     /// # Safety
     /// The kernel's instruction set must be available.
     unsafe fn hit_mask(node: &WideNode<N>, ray: &Self::Ray, t_max: f32) -> (u32, [f32; N]);
+
+    /// The slots of `mask` (entered, with entry distances `t`) farthest first, by
+    /// [`order_key`]: a walk pushes all but the last and descends into the last.
+    /// Positions from `mask.count_ones()` on hold some slot below `N`.
+    ///
+    /// # Safety
+    /// The kernel's instruction set must be available.
+    #[inline(always)]
+    unsafe fn far_to_near(mask: u32, t: &[f32; N]) -> [u32; N] {
+        far_to_near_scalar(mask, t)
+    }
+}
+
+/// The key by which a walk orders the slots it enters, largest (farthest) first: the entry
+/// distance as an integer in the float's total order, its 3 lowest bits replaced by the
+/// slot. So slots within 8 ulps of one another come in slot order, and no two keys are
+/// equal: every kernel orders them alike.
+#[inline(always)]
+pub(crate) fn order_key(t: f32, slot: usize) -> i32 {
+    let bits = t.to_bits() as i32;
+    // Negative floats order backwards as integers: flip their magnitude bits.
+    let total = bits ^ (((bits >> 31) as u32) >> 1) as i32;
+    (total & !7) | slot as i32
+}
+
+/// [`NodeKernel::far_to_near`] by insertion, for any width.
+#[inline(always)]
+pub(crate) fn far_to_near_scalar<const N: usize>(mask: u32, t: &[f32; N]) -> [u32; N] {
+    let mut keys = [i32::MIN; N];
+    let mut n = 0;
+    let mut lanes = mask;
+    while lanes != 0 {
+        let i = lanes.trailing_zeros() as usize;
+        lanes &= lanes - 1;
+        let key = order_key(t[i], i);
+        let mut j = n;
+        while j > 0 && keys[j - 1] < key {
+            keys[j] = keys[j - 1];
+            j -= 1;
+        }
+        keys[j] = key;
+        n += 1;
+    }
+    keys.map(|k| (k & 7) as u32)
 }
 
 /// The portable twin.
@@ -235,6 +279,46 @@ mod x86 {
         }
     }
 
+    /// [`NodeKernel::far_to_near`] of 8 slots in AVX2 registers: the keys of the entered
+    /// slots (the others the least key) through a bitonic sorting network, no branches.
+    #[inline(always)]
+    unsafe fn avx2_far_to_near(mask: u32, t: &[f32; 8]) -> [u32; 8] {
+        // SAFETY: called only where AVX2 is enabled.
+        unsafe {
+            let bits = _mm256_loadu_si256(t.as_ptr().cast());
+            let flip = _mm256_srli_epi32::<1>(_mm256_srai_epi32::<31>(bits));
+            let slots = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+            let keys = _mm256_or_si256(
+                _mm256_and_si256(_mm256_xor_si256(bits, flip), _mm256_set1_epi32(!7)),
+                slots,
+            );
+            let lane_bit = _mm256_sllv_epi32(_mm256_set1_epi32(1), slots);
+            let mask = _mm256_and_si256(_mm256_set1_epi32(mask as i32), lane_bit);
+            let entered = _mm256_cmpeq_epi32(mask, lane_bit);
+            let v = _mm256_blendv_epi8(_mm256_set1_epi32(i32::MIN), keys, entered);
+            // Each stage compares every lane with its partner (`lane ^ j`) and keeps the
+            // larger key where the blend's bit is set, the smaller elsewhere.
+            macro_rules! stage {
+                ($v:expr, $partner:expr, $larger:literal) => {{
+                    let p = $partner;
+                    _mm256_blend_epi32::<$larger>(_mm256_min_epi32($v, p), _mm256_max_epi32($v, p))
+                }};
+            }
+            let v = stage!(v, _mm256_shuffle_epi32::<0xB1>(v), 0b1001_1001);
+            let v = stage!(v, _mm256_shuffle_epi32::<0x4E>(v), 0b1100_0011);
+            let v = stage!(v, _mm256_shuffle_epi32::<0xB1>(v), 0b1010_0101);
+            let v = stage!(v, _mm256_permute2x128_si256::<0x01>(v, v), 0b0000_1111);
+            let v = stage!(v, _mm256_shuffle_epi32::<0x4E>(v), 0b0011_0011);
+            let v = stage!(v, _mm256_shuffle_epi32::<0xB1>(v), 0b0101_0101);
+            let mut out = [0u32; 8];
+            _mm256_storeu_si256(
+                out.as_mut_ptr().cast(),
+                _mm256_and_si256(v, _mm256_set1_epi32(7)),
+            );
+            out
+        }
+    }
+
     macro_rules! avx_prepare {
         ($ray:expr) => {{
             let r: &OctRay = $ray;
@@ -268,6 +352,12 @@ mod x86 {
                 (_mm256_movemask_ps(hit) as u32, t)
             }
         }
+
+        #[inline(always)]
+        unsafe fn far_to_near(mask: u32, t: &[f32; 8]) -> [u32; 8] {
+            // SAFETY: the caller guarantees AVX2.
+            unsafe { avx2_far_to_near(mask, t) }
+        }
     }
 
     /// Eight lanes of AVX-512 (VL): the same test, the compare straight into a mask
@@ -294,5 +384,85 @@ mod x86 {
                 (mask as u32, t)
             }
         }
+
+        #[inline(always)]
+        unsafe fn far_to_near(mask: u32, t: &[f32; 8]) -> [u32; 8] {
+            // SAFETY: the caller guarantees AVX-512, which implies AVX2.
+            unsafe { avx2_far_to_near(mask, t) }
+        }
+    }
+}
+
+#[cfg(all(test, target_arch = "x86_64"))]
+mod tests {
+    use super::*;
+    use crate::Isa;
+
+    fn far_to_near_in(isa: Isa, mask: u32, t: &[f32; 8]) -> [u32; 8] {
+        // SAFETY: only instruction sets this CPU supports are asked for.
+        unsafe {
+            match isa {
+                Isa::Scalar => <ScalarNode as NodeKernel<8>>::far_to_near(mask, t),
+                Isa::Sse2 => <Sse2Node as NodeKernel<8>>::far_to_near(mask, t),
+                Isa::Avx2 => <Avx2Node as NodeKernel<8>>::far_to_near(mask, t),
+                Isa::Avx512 => <Avx512Node as NodeKernel<8>>::far_to_near(mask, t),
+            }
+        }
+    }
+
+    /// Entry distances with exact ties, ties within 8 ulps, signed zeros, negatives and
+    /// infinities.
+    fn distances(round: usize) -> [f32; 8] {
+        const VALUES: [f32; 9] = [
+            0.0,
+            -0.0,
+            1.0,
+            -2.5,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            3.0,
+            f32::from_bits(3.0f32.to_bits() + 3),
+            f32::from_bits(3.0f32.to_bits() + 9),
+        ];
+        std::array::from_fn(|i| VALUES[(i * 7 + round * 5) % VALUES.len()])
+    }
+
+    /// Every kernel puts the entered slots in the order of their keys, largest first, for
+    /// every mask of an 8-wide node: the same order, so every kernel visits the same nodes.
+    #[test]
+    fn every_kernel_orders_the_entered_slots_far_to_near_by_key() {
+        for round in 0..9 {
+            let t = distances(round);
+            for mask in 1u32..256 {
+                let mut expected: Vec<usize> = (0..8).filter(|&i| mask >> i & 1 != 0).collect();
+                expected.sort_by_key(|&i| std::cmp::Reverse(order_key(t[i], i)));
+                let n = expected.len();
+                for isa in Isa::supported() {
+                    let slots = far_to_near_in(isa, mask, &t).map(|s| s as usize);
+                    assert_eq!(&slots[..n], &expected[..], "{isa}, mask {mask:#b}, t {t:?}");
+                }
+            }
+        }
+    }
+
+    /// Keys order distances as `total_cmp` does where they lie 8 ulps or more apart, and
+    /// by slot within 8 ulps; no two slots share a key.
+    #[test]
+    fn order_keys_follow_the_distances() {
+        let t = [-3.0, -0.0, 0.0, 1e-30, 1.0, 1.0, 2.0, f32::INFINITY];
+        for (i, &a) in t.iter().enumerate() {
+            for (j, &b) in t.iter().enumerate().skip(i + 1) {
+                let (ka, kb) = (order_key(a, i), order_key(b, j));
+                assert_ne!(ka, kb);
+                if a.total_cmp(&b).is_lt() && a.to_bits().abs_diff(b.to_bits()) >= 8 {
+                    assert!(ka < kb, "{a} before {b}");
+                }
+            }
+        }
+        let near = f32::from_bits(1.0f32.to_bits() + 1);
+        assert!(
+            order_key(1.0, 5) > order_key(near, 2),
+            "within 8 ulps the slot decides"
+        );
     }
 }
