@@ -3,9 +3,12 @@
 //! of a file in order, as `bench/kernel_profile.py` writes them. It needs only canopy-bvh,
 //! so a change to the kernel rebuilds in a fraction of the renderer's time.
 //!
-//! `walk_profile MESH RAYS closest|occluded RUNS [--no-stats] [--fast]` prints the best
-//! pass's nanoseconds per ray and, unless `--no-stats`, node visits and primitive tests
-//! per ray. Under callgrind, count the `profiled_*` functions alone
+//! `walk_profile MESH RAYS closest|occluded RUNS [--no-stats] [--fast] [--made]` prints the
+//! best pass's nanoseconds per ray and, unless `--no-stats`, node visits and primitive
+//! tests per ray. With `--made`, each ray is made as the walk asks for it, from arrays of
+//! origins and directions, by a function out of line (as a caller's closure that the
+//! compiler does not inline makes it: `canopy.Bvh`'s batch calls), instead of copied from
+//! an array of rays made before. Under callgrind, count the `profiled_*` functions alone
 //! (`--collect-atstart=no --toggle-collect='*profiled_*'`).
 use canopy_bvh::{
     Blas, BlasParams, Builder, BvhWidth, Hit, Ray, RayQuery, TraversalStats, TriangleMesh,
@@ -77,13 +80,22 @@ fn main() {
         ..BlasParams::new(Some(Builder::BinnedSah), BvhWidth::Eight)
     };
     let blas = Blas::build(mesh, &params);
+    let made = args.iter().any(|a| a == "--made");
+    let origins: Vec<[f32; 3]> = rays.iter().map(|r| r.origin.to_array()).collect();
+    let directions: Vec<[f32; 3]> = rays.iter().map(|r| r.dir.to_array()).collect();
     let mut answered = 0;
     let mut best = f64::MAX;
     for _ in 0..runs.max(1) {
         let start = Instant::now();
-        answered = match closest {
-            true => profiled_closest(&blas, &rays),
-            false => profiled_occluded(&blas, &rays),
+        answered = match (closest, made) {
+            (true, false) => profiled_closest(&blas, rays.len(), |i| rays[i]),
+            (false, false) => profiled_occluded(&blas, rays.len(), |i| rays[i]),
+            (true, true) => {
+                profiled_closest(&blas, rays.len(), |i| make_ray(&origins, &directions, i))
+            }
+            (false, true) => {
+                profiled_occluded(&blas, rays.len(), |i| make_ray(&origins, &directions, i))
+            }
         };
         best = best.min(start.elapsed().as_secs_f64());
     }
@@ -106,27 +118,32 @@ fn main() {
     println!();
 }
 
+/// Ray `i` of the arrays, made out of line (`--made`).
+#[inline(never)]
+fn make_ray(origins: &[[f32; 3]], directions: &[[f32; 3]], i: usize) -> Ray {
+    Ray::new(
+        Vec3::from(origins[i]),
+        Vec3::from(directions[i]),
+        0.0,
+        f32::INFINITY,
+    )
+}
+
 // The counted passes, kept out of line so that a profiler can count them alone.
 #[inline(never)]
-fn profiled_closest(blas: &Blas<TriangleMesh>, rays: &[Ray]) -> usize {
+fn profiled_closest(blas: &Blas<TriangleMesh>, n: usize, ray: impl FnMut(usize) -> Ray) -> usize {
     let mut hits = 0;
-    blas.intersect_each(
-        rays.len(),
-        ALL_MASKS,
-        |i| rays[i],
-        |_, hit: Option<Hit>| hits += hit.is_some() as usize,
-    );
+    blas.intersect_each(n, ALL_MASKS, ray, |_, hit: Option<Hit>| {
+        hits += hit.is_some() as usize
+    });
     hits
 }
 
 #[inline(never)]
-fn profiled_occluded(blas: &Blas<TriangleMesh>, rays: &[Ray]) -> usize {
+fn profiled_occluded(blas: &Blas<TriangleMesh>, n: usize, ray: impl FnMut(usize) -> Ray) -> usize {
     let mut blocked = 0;
-    blas.occluded_each(
-        rays.len(),
-        ALL_MASKS,
-        |i| rays[i],
-        |_, occluded: bool| blocked += occluded as usize,
-    );
+    blas.occluded_each(n, ALL_MASKS, ray, |_, occluded: bool| {
+        blocked += occluded as usize
+    });
     blocked
 }
