@@ -185,7 +185,7 @@ pub(crate) enum PerRay<'a> {
 }
 
 impl PerRay<'_> {
-    #[inline(always)]
+    #[inline]
     fn get(self, i: usize) -> f32 {
         match self {
             PerRay::All(v) => v,
@@ -196,7 +196,7 @@ impl PerRay<'_> {
 
 /// Writes ray `i`'s closest hit into the output arrays (t = inf, prim = -1, uv = 0 on a
 /// miss).
-#[inline(always)]
+#[inline]
 fn write_hit(t: &mut [f32], prim: &mut [i64], uv: &mut [f32], i: usize, hit: Option<Hit>) {
     match hit {
         Some(hit) => {
@@ -229,15 +229,12 @@ impl Batch<'_> {
         self.origins.len()
     }
 
-    #[inline(always)]
+    #[inline]
     pub(crate) fn origin(&self, i: usize) -> Vec3 {
         Vec3::from(self.origins[i])
     }
 
-    /// Made inside the closure that gives the walk its rays (which the compiler keeps out
-    /// of line all the same: the walk makes each ray one ahead, see canopy-bvh's
-    /// `wide/traverse.rs`).
-    #[inline(always)]
+    #[inline]
     pub(crate) fn ray(&self, i: usize) -> Ray {
         Ray::new(
             Vec3::from(self.origins[i]),

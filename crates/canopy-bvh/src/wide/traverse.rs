@@ -1098,7 +1098,7 @@ where
 pub(crate) unsafe fn closest_each<const N: usize, K, L, C>(
     nodes: &[WideNode<N>],
     count: usize,
-    mut ray: impl FnMut(usize) -> Ray,
+    ray: impl FnMut(usize) -> Ray,
     mut answer: impl FnMut(usize, Option<Hit>),
     mut leaves: L,
     counter: &mut C,
@@ -1109,9 +1109,9 @@ pub(crate) unsafe fn closest_each<const N: usize, K, L, C>(
     C: TraversalCounter,
 {
     let mut stack = ClosestStack::new();
-    let mut rays = Upcoming::new(count, &mut ray);
+    let mut rays = Upcoming::new(count, ray);
     for i in 0..count {
-        let ray = rays.next(i, count, &mut ray);
+        let ray = rays.take(i);
         leaves.new_ray();
         // SAFETY: the caller guarantees the instruction set.
         let hit = unsafe {
@@ -1126,27 +1126,29 @@ pub(crate) unsafe fn closest_each<const N: usize, K, L, C>(
 /// through memory, written in pieces; read at once by the walk, in wider loads, the loads
 /// waited for the pieces (a failed store forward: 15–20 ns a ray, a quarter of a primary
 /// ray's time). Made a walk earlier, the ray has long been written.
-struct Upcoming {
+struct Upcoming<R> {
+    make: R,
+    count: usize,
     ray: Ray,
 }
 
-impl Upcoming {
+impl<R: FnMut(usize) -> Ray> Upcoming<R> {
     #[inline(always)]
-    fn new(count: usize, ray: &mut impl FnMut(usize) -> Ray) -> Self {
+    fn new(count: usize, mut make: R) -> Self {
         // An empty batch never reads its placeholder.
-        let first = match count {
+        let ray = match count {
             0 => Ray::new(Vec3::ZERO, Vec3::X, 0.0, 0.0),
-            _ => ray(0),
+            _ => make(0),
         };
-        Self { ray: first }
+        Self { make, count, ray }
     }
 
-    /// Ray `i` (made at the call before), having made ray `i + 1` of `count`.
+    /// Ray `i` (made at the call before), having made ray `i + 1`.
     #[inline(always)]
-    fn next(&mut self, i: usize, count: usize, ray: &mut impl FnMut(usize) -> Ray) -> Ray {
+    fn take(&mut self, i: usize) -> Ray {
         let this = self.ray;
-        if i + 1 < count {
-            self.ray = ray(i + 1);
+        if i + 1 < self.count {
+            self.ray = (self.make)(i + 1);
         }
         this
     }
@@ -1160,7 +1162,7 @@ impl Upcoming {
 pub(crate) unsafe fn any_each<const N: usize, K, L>(
     nodes: &[WideNode<N>],
     count: usize,
-    mut ray: impl FnMut(usize) -> Ray,
+    ray: impl FnMut(usize) -> Ray,
     mut answer: impl FnMut(usize, bool),
     mut leaves: L,
     prefetch: bool,
@@ -1169,9 +1171,9 @@ pub(crate) unsafe fn any_each<const N: usize, K, L>(
     L: AnyLeaves + PrefetchLeaves,
 {
     let mut stack = AnyStack::new();
-    let mut rays = Upcoming::new(count, &mut ray);
+    let mut rays = Upcoming::new(count, ray);
     for i in 0..count {
-        let ray = rays.next(i, count, &mut ray);
+        let ray = rays.take(i);
         leaves.new_ray();
         // SAFETY: the caller guarantees the instruction set.
         let blocked = unsafe { any::<N, K, L>(nodes, &ray, &mut leaves, prefetch, &mut stack) };
