@@ -3,16 +3,18 @@
 //! of a file in order, as `bench/kernel_profile.py` writes them. It needs only canopy-bvh,
 //! so a change to the kernel rebuilds in a fraction of the renderer's time.
 //!
-//! `walk_profile MESH RAYS closest|occluded RUNS [--no-stats] [--fast] [--made]` prints the
-//! best pass's nanoseconds per ray and, unless `--no-stats`, node visits and primitive
-//! tests per ray. With `--made`, each ray is made as the walk asks for it, from arrays of
-//! origins and directions, by a function out of line (as a caller's closure that the
-//! compiler does not inline makes it: `canopy.Bvh`'s batch calls), instead of copied from
-//! an array of rays made before. Under callgrind, count the `profiled_*` functions alone
+//! `walk_profile MESH RAYS closest|occluded|count RUNS [--no-stats] [--fast] [--made]`
+//! prints the best pass's nanoseconds per ray and, unless `--no-stats`, node visits and
+//! primitive tests per ray (of the closest-hit walk). `count` counts each ray's crossings
+//! of the surface, one ray at a time, as `canopy.RayScene.count_intersections` does.
+//! With `--made`, each ray is made as the walk asks for it, from arrays of origins and
+//! directions, by a function out of line (as a caller's closure that the compiler does
+//! not inline makes it: `canopy.Bvh`'s batch calls), instead of copied from an array of
+//! rays made before. Under callgrind, count the `profiled_*` functions alone
 //! (`--collect-atstart=no --toggle-collect='*profiled_*'`).
 use canopy_bvh::{
-    Blas, BlasParams, Builder, BvhWidth, Hit, Ray, RayQuery, TraversalStats, TriangleMesh,
-    TriangleTest, ALL_MASKS,
+    Blas, BlasParams, Builder, BvhWidth, Hit, HitsAlong, Ray, RayQuery, SurfaceQuery,
+    TraversalStats, TriangleMesh, TriangleTest, ALL_MASKS,
 };
 use glam::Vec3;
 use std::time::Instant;
@@ -65,12 +67,15 @@ fn read_rays(path: &str) -> Vec<Ray> {
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     if args.len() < 4 {
-        eprintln!("usage: walk_profile MESH RAYS closest|occluded RUNS [--no-stats] [--fast]");
+        eprintln!(
+            "usage: walk_profile MESH RAYS closest|occluded|count RUNS [--no-stats] [--fast]"
+        );
         std::process::exit(2);
     }
     let mesh = read_mesh(&args[0]);
     let rays = read_rays(&args[1]);
     let closest = args[2] == "closest";
+    let count = args[2] == "count";
     let runs: usize = args[3].parse().expect("a number of passes");
     let params = BlasParams {
         triangle_test: match args.iter().any(|a| a == "--fast") {
@@ -88,6 +93,7 @@ fn main() {
     for _ in 0..runs.max(1) {
         let start = Instant::now();
         answered = match (closest, made) {
+            _ if count => profiled_count(&blas, &rays),
             (true, false) => profiled_closest(&blas, rays.len(), |i| rays[i]),
             (false, false) => profiled_occluded(&blas, rays.len(), |i| rays[i]),
             (true, true) => {
@@ -137,6 +143,13 @@ fn profiled_closest(blas: &Blas<TriangleMesh>, n: usize, ray: impl FnMut(usize) 
         hits += hit.is_some() as usize
     });
     hits
+}
+
+#[inline(never)]
+fn profiled_count(blas: &Blas<TriangleMesh>, rays: &[Ray]) -> usize {
+    rays.iter()
+        .map(|ray| blas.count_hits(ray, ALL_MASKS, HitsAlong::Crossings))
+        .sum()
 }
 
 #[inline(never)]
