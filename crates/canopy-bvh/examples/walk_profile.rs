@@ -7,11 +7,11 @@
 //! prints the best pass's nanoseconds per ray and, unless `--no-stats`, node visits and
 //! primitive tests per ray (of the closest-hit walk). `count` counts each ray's crossings
 //! of the surface, one ray at a time, as `canopy.RayScene.count_intersections` does.
-//! With `--made`, each ray is made as the walk asks for it, from arrays of origins and
-//! directions, by a function out of line (as a caller's closure that the compiler does
-//! not inline makes it: `canopy.Bvh`'s batch calls), instead of copied from an array of
-//! rays made before. Under callgrind, count the `profiled_*` functions alone
-//! (`--collect-atstart=no --toggle-collect='*profiled_*'`).
+//! With `--made` (closest and occluded only), each ray is made as the walk asks for it,
+//! from arrays of origins and directions, by a function out of line (as a caller's
+//! closure that the compiler does not inline makes it: `canopy.Bvh`'s batch calls),
+//! instead of copied from an array of rays made before. Under callgrind, count the
+//! `profiled_*` functions alone (`--collect-atstart=no --toggle-collect='*profiled_*'`).
 use canopy_bvh::{
     Blas, BlasParams, Builder, BvhWidth, Hit, HitsAlong, Ray, RayQuery, SurfaceQuery,
     TraversalStats, TriangleMesh, TriangleTest, ALL_MASKS,
