@@ -3,9 +3,10 @@
 //! of a file in order, as `bench/kernel_profile.py` writes them. It needs only canopy-bvh,
 //! so a change to the kernel rebuilds in a fraction of the renderer's time.
 //!
-//! `walk_profile MESH RAYS closest|occluded|count RUNS [--no-stats] [--fast] [--made]`
-//! prints the best pass's nanoseconds per ray and, unless `--no-stats`, node visits and
-//! primitive tests per ray (of the closest-hit walk). `count` counts each ray's crossings
+//! `walk_profile MESH RAYS closest|occluded|count RUNS [--no-stats] [--fast] [--made]
+//! [--isa NAME]` prints the best pass's nanoseconds per ray and, unless `--no-stats`, node
+//! visits and primitive tests per ray (of the closest-hit walk). `--isa` picks the
+//! kernels' instruction set (`avx2` times the AVX2 kernels on an AVX-512 CPU). `count` counts each ray's crossings
 //! of the surface, one ray at a time, as `canopy.RayScene.count_intersections` does.
 //! With `--made` (closest and occluded only), each ray is made as the walk asks for it,
 //! from arrays of origins and directions, by a function out of line (as a caller's
@@ -84,7 +85,13 @@ fn main() {
         },
         ..BlasParams::new(Some(Builder::BinnedSah), BvhWidth::Eight)
     };
-    let blas = Blas::build(mesh, &params);
+    let mut blas = Blas::build(mesh, &params);
+    if let Some(at) = args.iter().position(|a| a == "--isa") {
+        let isa = args.get(at + 1).expect("--isa NAME");
+        let isa = isa.parse().unwrap_or_else(|e| panic!("{e}"));
+        let tree = blas.tree_mut().expect("a tree");
+        tree.set_isa(isa).unwrap_or_else(|e| panic!("{e}"));
+    }
     let made = args.iter().any(|a| a == "--made");
     let origins: Vec<[f32; 3]> = rays.iter().map(|r| r.origin.to_array()).collect();
     let directions: Vec<[f32; 3]> = rays.iter().map(|r| r.dir.to_array()).collect();

@@ -4,8 +4,10 @@ use crate::aabb::SlabRay;
 use crate::{Bvh2, Bvh2Node, Hit, IntoHit, Ray};
 use std::mem::MaybeUninit;
 
-/// Entries a [`TraversalStack`] holds before it spills to the heap.
-const STACK_INLINE: usize = 64;
+/// Entries a [`TraversalStack`] holds before it spills to the heap: a wide walk's room
+/// ([`crate::wide::BvhN`]'s `stack_room`) for 18 levels of 8-wide nodes (the 202k dragon
+/// has 7), so that walks of one ray (counts, lists) make their room without allocating.
+const STACK_INLINE: usize = 128;
 
 /// Traversal stack: a fixed array for the common case, spilling to the heap only for
 /// trees deeper than its capacity (degenerate inputs can make very deep trees). The array
@@ -42,6 +44,48 @@ impl<T: Copy> TraversalStack<T> {
             self.len += 1;
         } else {
             self.spill.push(item);
+        }
+    }
+
+    /// Makes room for `entries` entries in all, so that [`TraversalStack::push_in_room`]
+    /// never allocates: a walk's loop then holds no call, and the compiler keeps the
+    /// walk's values in registers through it (a call in the loop, even one never made,
+    /// had them all reloaded from the stack at every node).
+    #[inline(always)]
+    pub(crate) fn make_room(&mut self, entries: usize) {
+        let heap = entries.saturating_sub(STACK_INLINE);
+        if self.spill.capacity() - self.spill.len() < heap {
+            self.reserve(heap);
+        }
+    }
+
+    #[cold]
+    #[inline(never)]
+    fn reserve(&mut self, heap: usize) {
+        self.spill.reserve(heap);
+    }
+
+    /// [`TraversalStack::push`] without a call that returns: the entry goes into the room
+    /// made by [`TraversalStack::make_room`].
+    ///
+    /// # Panics
+    /// If no room is left: the room made was too small for the walk (a bug; a panic,
+    /// whose call never returns, keeps the walk's values in registers as no allocating
+    /// call would).
+    #[inline(always)]
+    pub(crate) fn push_in_room(&mut self, item: T) {
+        if self.len < STACK_INLINE {
+            self.inline[self.len].write(item);
+            self.len += 1;
+        } else {
+            let at = self.spill.len();
+            assert!(at < self.spill.capacity(), "no room made for a stack entry");
+            // SAFETY: `at` is below the capacity (checked), and the entry is written
+            // before the length counts it.
+            unsafe {
+                self.spill.as_mut_ptr().add(at).write(item);
+                self.spill.set_len(at + 1);
+            }
         }
     }
 

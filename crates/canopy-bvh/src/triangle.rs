@@ -473,6 +473,48 @@ pub trait PackKernel {
         t_max: f32,
         hits: &mut PackHits,
     ) -> u32;
+
+    /// [`PackKernel::test`] with no call in it: the lanes that the watertight mode would
+    /// refine in the scalar core (an exactly-zero edge function) are left out of the hits
+    /// and returned second, for the caller to test again with [`PackKernel::test`]. A
+    /// walk whose loop holds no call keeps its values in registers (see
+    /// `wide::traverse`). Kernels without SIMD test fully (and may call).
+    ///
+    /// # Safety
+    /// As [`PackKernel::test`].
+    #[inline(always)]
+    unsafe fn test_unrefined<const HITS: bool>(
+        pack: &TrianglePack,
+        ray: &PackRay,
+        t_min: f32,
+        t_max: f32,
+        hits: &mut PackHits,
+    ) -> (u32, u32) {
+        // SAFETY: the caller's guarantee.
+        (
+            unsafe { Self::test::<HITS>(pack, ray, t_min, t_max, hits) },
+            0,
+        )
+    }
+
+    /// [`PackKernel::test_unrefined`] of two packs, as [`PackKernel::test_pair`].
+    ///
+    /// # Safety
+    /// As [`PackKernel::test`].
+    #[inline(always)]
+    unsafe fn test_pair_unrefined<const HITS: bool>(
+        packs: &[TrianglePack; 2],
+        ray: &PackRay,
+        t_min: f32,
+        t_max: f32,
+        hits: &mut PackHits,
+    ) -> (u32, u32) {
+        // SAFETY: the caller's guarantee.
+        (
+            unsafe { Self::test_pair::<HITS>(packs, ray, t_min, t_max, hits) },
+            0,
+        )
+    }
 }
 
 /// The mode a kernel's `REFINES` parameter stands for.
@@ -642,17 +684,18 @@ mod simd {
         }
     }
 
-    /// The pack test on `V::PACKS` packs: the scalar core's operations in every lane.
-    /// In the watertight mode, lanes whose edge functions come out exactly zero go to the
-    /// scalar core, which redoes them in double precision.
+    /// The pack test on `V::PACKS` packs: the scalar core's operations in every lane;
+    /// the lanes hit, and those left to refine. In the watertight mode, lanes whose edge
+    /// functions come out exactly zero go to the scalar core, which redoes them in double
+    /// precision; with `DEFERS`, they are returned instead (and the test holds no call).
     #[inline(always)]
-    unsafe fn test_lanes<V: Lanes, const HITS: bool, const REFINES: bool>(
+    unsafe fn test_lanes<V: Lanes, const HITS: bool, const REFINES: bool, const DEFERS: bool>(
         packs: &[TrianglePack],
         ray: &PackRay,
         t_min: f32,
         t_max: f32,
         hits: &mut PackHits,
-    ) -> u32 {
+    ) -> (u32, u32) {
         // SAFETY (whole block): the caller guarantees `V`'s instruction set.
         unsafe {
             // No closures here: a closure is not inlined for sure, and one compiled
@@ -709,6 +752,9 @@ mod simd {
                     w.div(det).store(&mut hits.v);
                 }
             }
+            if DEFERS {
+                return (mask, redo);
+            }
             // Lanes with an exactly-zero edge function go to the scalar core's f64
             // fallback (rare: one branch skips it).
             if redo != 0 {
@@ -722,13 +768,53 @@ mod simd {
                     }
                 }
             }
-            mask
+            (mask, 0)
         }
     }
 
     /// The SSE2 kernel (baseline x86-64): four lanes, one pack at a time; `REFINES`: the
     /// watertight mode.
     pub(crate) struct Sse2Pack<const REFINES: bool = true>;
+
+    /// One pack in SSE2 lanes ([`test_lanes`]).
+    #[inline(always)]
+    fn sse2_one<const HITS: bool, const REFINES: bool, const DEFERS: bool>(
+        pack: &TrianglePack,
+        ray: &PackRay,
+        t_min: f32,
+        t_max: f32,
+        hits: &mut PackHits,
+    ) -> (u32, u32) {
+        let pack = std::slice::from_ref(pack);
+        // SAFETY: SSE2 is baseline x86-64.
+        unsafe { test_lanes::<__m128, HITS, REFINES, DEFERS>(pack, ray, t_min, t_max, hits) }
+    }
+
+    /// Two packs in SSE2 lanes, one after the other: the second pack's hits land in
+    /// lanes 0..4 of a second record, then move up.
+    #[inline(always)]
+    fn sse2_pair<const HITS: bool, const REFINES: bool, const DEFERS: bool>(
+        packs: &[TrianglePack; 2],
+        ray: &PackRay,
+        t_min: f32,
+        t_max: f32,
+        hits: &mut PackHits,
+    ) -> (u32, u32) {
+        let [low, high] = packs;
+        let (low_hit, low_redo) = sse2_one::<HITS, REFINES, DEFERS>(low, ray, t_min, t_max, hits);
+        let mut upper = PackHits::default();
+        let (high_hit, high_redo) =
+            sse2_one::<HITS, REFINES, DEFERS>(high, ray, t_min, t_max, &mut upper);
+        for lane in 0..PACK_LANES {
+            hits.t[PACK_LANES + lane] = upper.t[lane];
+            hits.u[PACK_LANES + lane] = upper.u[lane];
+            hits.v[PACK_LANES + lane] = upper.v[lane];
+        }
+        (
+            low_hit | high_hit << PACK_LANES,
+            low_redo | high_redo << PACK_LANES,
+        )
+    }
 
     impl<const REFINES: bool> PackKernel for Sse2Pack<REFINES> {
         const PAIRS: bool = false;
@@ -743,11 +829,7 @@ mod simd {
             t_max: f32,
             hits: &mut PackHits,
         ) -> u32 {
-            // SAFETY: SSE2 is baseline x86-64.
-            unsafe {
-                let pack = std::slice::from_ref(pack);
-                test_lanes::<__m128, HITS, REFINES>(pack, ray, t_min, t_max, hits)
-            }
+            sse2_one::<HITS, REFINES, false>(pack, ray, t_min, t_max, hits).0
         }
 
         #[inline(always)]
@@ -758,20 +840,29 @@ mod simd {
             t_max: f32,
             hits: &mut PackHits,
         ) -> u32 {
-            // SAFETY: SSE2 is baseline x86-64. The second pack's hits land in lanes 0..4
-            // of a second record, then move up.
-            unsafe {
-                let low = test_lanes::<__m128, HITS, REFINES>(&packs[..1], ray, t_min, t_max, hits);
-                let mut upper = PackHits::default();
-                let high =
-                    test_lanes::<__m128, HITS, REFINES>(&packs[1..], ray, t_min, t_max, &mut upper);
-                for lane in 0..PACK_LANES {
-                    hits.t[PACK_LANES + lane] = upper.t[lane];
-                    hits.u[PACK_LANES + lane] = upper.u[lane];
-                    hits.v[PACK_LANES + lane] = upper.v[lane];
-                }
-                low | high << PACK_LANES
-            }
+            sse2_pair::<HITS, REFINES, false>(packs, ray, t_min, t_max, hits).0
+        }
+
+        #[inline(always)]
+        unsafe fn test_unrefined<const HITS: bool>(
+            pack: &TrianglePack,
+            ray: &PackRay,
+            t_min: f32,
+            t_max: f32,
+            hits: &mut PackHits,
+        ) -> (u32, u32) {
+            sse2_one::<HITS, REFINES, true>(pack, ray, t_min, t_max, hits)
+        }
+
+        #[inline(always)]
+        unsafe fn test_pair_unrefined<const HITS: bool>(
+            packs: &[TrianglePack; 2],
+            ray: &PackRay,
+            t_min: f32,
+            t_max: f32,
+            hits: &mut PackHits,
+        ) -> (u32, u32) {
+            sse2_pair::<HITS, REFINES, true>(packs, ray, t_min, t_max, hits)
         }
     }
 
@@ -792,8 +883,7 @@ mod simd {
             t_max: f32,
             hits: &mut PackHits,
         ) -> u32 {
-            // SAFETY: SSE2 is baseline x86-64.
-            unsafe { Sse2Pack::<REFINES>::test::<HITS>(pack, ray, t_min, t_max, hits) }
+            sse2_one::<HITS, REFINES, false>(pack, ray, t_min, t_max, hits).0
         }
 
         #[inline(always)]
@@ -805,7 +895,30 @@ mod simd {
             hits: &mut PackHits,
         ) -> u32 {
             // SAFETY: the caller guarantees AVX2.
-            unsafe { test_lanes::<__m256, HITS, REFINES>(packs, ray, t_min, t_max, hits) }
+            unsafe { test_lanes::<__m256, HITS, REFINES, false>(packs, ray, t_min, t_max, hits).0 }
+        }
+
+        #[inline(always)]
+        unsafe fn test_unrefined<const HITS: bool>(
+            pack: &TrianglePack,
+            ray: &PackRay,
+            t_min: f32,
+            t_max: f32,
+            hits: &mut PackHits,
+        ) -> (u32, u32) {
+            sse2_one::<HITS, REFINES, true>(pack, ray, t_min, t_max, hits)
+        }
+
+        #[inline(always)]
+        unsafe fn test_pair_unrefined<const HITS: bool>(
+            packs: &[TrianglePack; 2],
+            ray: &PackRay,
+            t_min: f32,
+            t_max: f32,
+            hits: &mut PackHits,
+        ) -> (u32, u32) {
+            // SAFETY: the caller guarantees AVX2.
+            unsafe { test_lanes::<__m256, HITS, REFINES, true>(packs, ray, t_min, t_max, hits) }
         }
     }
 }

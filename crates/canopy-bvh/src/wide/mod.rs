@@ -123,8 +123,30 @@ pub struct BvhN<const N: usize> {
     isa: Isa,
     /// The mode the packs' triangles are tested in.
     triangle_test: TriangleTest,
+    /// Entries a walk's stack can hold at once ([`BvhN::stack_room`]).
+    stack_room: usize,
     /// Taken from the binary tree (see [`Bvh2::has_spatial_splits`]).
     spatial_splits: bool,
+}
+
+/// [`BvhN::stack_room`] of `nodes`, whose children lie after their parents (as
+/// [`BvhN::from_bvh2`] numbers them).
+fn stack_room<const N: usize>(nodes: &[WideNode<N>]) -> usize {
+    // Interior levels from the root down to each node, itself included.
+    let mut levels = vec![0u32; nodes.len()];
+    let mut deepest = 0;
+    for (i, node) in nodes.iter().enumerate() {
+        let level = levels[i] + 1;
+        deepest = deepest.max(level);
+        for slot in 0..N {
+            if node.count[slot] == 0 {
+                let child = node.child[slot] as usize;
+                assert!(child > i, "a child before its parent");
+                levels[child] = level;
+            }
+        }
+    }
+    (N - 1) * deepest as usize
 }
 
 pub type Bvh4 = BvhN<4>;
@@ -140,6 +162,7 @@ impl<const N: usize> Default for BvhN<N> {
             isa: Isa::best(),
             triangle_test: TriangleTest::Watertight,
             spatial_splits: false,
+            stack_room: 0,
         }
     }
 }
@@ -267,7 +290,16 @@ impl<const N: usize> BvhN<N> {
             }
             wide.nodes[slot_node] = node;
         }
+        wide.stack_room = stack_room(&wide.nodes);
         wide
+    }
+
+    /// Entries a walk's stack can hold at once: a node pushes at most `N - 1` of its
+    /// slots, so `N - 1` for each interior level of the deepest path. Walks make this
+    /// much room before they start ([`TraversalStack::make_room`]).
+    #[inline(always)]
+    fn stack_room(&self) -> usize {
+        self.stack_room
     }
 
     /// Stores the leaves' triangles in packs of four, tested together by SIMD kernels.
@@ -390,7 +422,7 @@ impl<const N: usize> BvhN<N> {
         if self.nodes.is_empty() {
             return ([None; PACKET], 0);
         }
-        let (nodes, prefetch) = (&self.nodes, self.prefetches());
+        let (nodes, prefetch, room) = (&self.nodes, self.prefetches(), self.stack_room());
         // SAFETY (both): the caller guarantees the instruction sets.
         if self.packs.is_empty() {
             let mut leaves = SphereLeaves {
@@ -398,7 +430,7 @@ impl<const N: usize> BvhN<N> {
                 spheres: &self.spheres,
                 test,
             };
-            unsafe { walk_packet::<N, K, _, ANY>(nodes, rays, &mut leaves, prefetch) }
+            unsafe { walk_packet::<N, K, _, ANY>(nodes, rays, &mut leaves, prefetch, room) }
         } else {
             let mut leaves = PackedPacketLeaves::<T, _>::new(
                 &self.packs,
@@ -406,7 +438,7 @@ impl<const N: usize> BvhN<N> {
                 self.triangle_test,
                 test,
             );
-            unsafe { walk_packet::<N, K, _, ANY>(nodes, rays, &mut leaves, prefetch) }
+            unsafe { walk_packet::<N, K, _, ANY>(nodes, rays, &mut leaves, prefetch, room) }
         }
     }
 
@@ -782,10 +814,10 @@ where
         if bvh.nodes.is_empty() {
             return (0..count).for_each(|i| answer(i, None));
         }
-        let (nodes, prefetch) = (&bvh.nodes, bvh.prefetches());
+        let (nodes, prefetch, room) = (&bvh.nodes, bvh.prefetches(), bvh.stack_room());
         // SAFETY: the caller guarantees the instruction sets.
         with_leaves!(bvh, test, T, |leaves| unsafe {
-            closest_each::<N, K, _, _>(nodes, count, ray, answer, leaves, counter, prefetch)
+            closest_each::<N, K, _, _>(nodes, count, ray, answer, leaves, counter, prefetch, room)
         })
     }
 }
@@ -838,10 +870,10 @@ where
         if bvh.nodes.is_empty() {
             return (0..count).for_each(|i| answer(i, false));
         }
-        let (nodes, prefetch) = (&bvh.nodes, bvh.prefetches());
+        let (nodes, prefetch, room) = (&bvh.nodes, bvh.prefetches(), bvh.stack_room());
         // SAFETY: the caller guarantees the instruction sets.
         with_leaves!(bvh, test, T, |leaves| unsafe {
-            any_each::<N, K, _>(nodes, count, ray, answer, leaves, prefetch)
+            any_each::<N, K, _>(nodes, count, ray, answer, leaves, prefetch, room)
         })
     }
 }
@@ -900,6 +932,7 @@ where
             found,
         } = self;
         let (prefetch, stack) = (bvh.prefetches(), &mut AnyStack::new());
+        stack.make_room(bvh.stack_room());
         with_leaves!(bvh, test, T, |leaves| {
             let mut every = EveryHit { leaves, found };
             // SAFETY: the caller guarantees the instruction sets.

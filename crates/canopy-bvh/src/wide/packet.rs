@@ -200,13 +200,15 @@ const ALONE_AT: u32 = 4;
 /// alone from there ([`PacketLeaves::closest_alone`]).
 ///
 /// # Safety
-/// `K`'s instruction set must be available.
+/// `K`'s instruction set must be available. `room` must be the tree's
+/// [`super::BvhN::stack_room`], or the walk may panic.
 #[inline(always)]
 pub(crate) unsafe fn walk_packet<const N: usize, K, L, const ANY: bool>(
     nodes: &[WideNode<N>],
     rays: &[Ray],
     leaves: &mut L,
     prefetch: bool,
+    room: usize,
 ) -> ([Option<Hit>; PACKET], u32)
 where
     K: NodeKernel<N>,
@@ -227,7 +229,7 @@ where
     // The lanes that stopped (any-hit only): they take no further part.
     let mut stopped = 0u32;
     let mut stack = TraversalStack::<Entry>::new();
-    let mut alone = AloneWalk::new(prefetch);
+    let mut alone = AloneWalk::new(prefetch, room);
     let (mut child, mut count, mut active) = (0u32, 0u32, traceable);
     while active != 0 {
         if count > 0 {

@@ -9,8 +9,8 @@ use common::uniform;
 use canopy_bvh::{
     build, build_with_clipper, intersect_triangle, split_box, split_triangle, Aabb, Blas,
     BlasParams, BuildParams, Builder, Bvh2, Bvh4, Bvh8, BvhN, BvhWidth, Coherence, Geometry,
-    GpuBvh, Hit, Isa, PrimHit, Ray, RayBatch, RayQuery, ShearedRay, Tree, TreeView, TriangleTest,
-    ALL_MASKS, PACKET, PREFETCH_ABOVE_BYTES,
+    GpuBvh, Hit, Isa, PrimHit, Ray, RayBatch, RayQuery, SahCosts, ShearedRay, Tree, TreeView,
+    TriangleTest, ALL_MASKS, PACKET, PREFETCH_ABOVE_BYTES,
 };
 use glam::Vec3;
 use proptest::prelude::*;
@@ -486,6 +486,48 @@ fn clipped_slivers_match_brute_force_in_every_kernel() {
         rays.push(Ray::new(*o, d, 0.0, f32::INFINITY));
     }
     check(&prims, &rays, &params);
+}
+
+/// A tree deeper than the walk's stack holds inline (128 entries): triangles along a
+/// line, spaced ever wider, so that the splits peel them off one or two at a time, with
+/// a box among them now and then (a leaf the walk tests apart). Rays along the line
+/// meet them all, stacking the far side of every level they pass.
+#[test]
+fn deep_trees_match_brute_force() {
+    let prims: Vec<Prim> = (0..300)
+        .map(|i| {
+            let x = 1.25f32.powi(i);
+            match i % 11 {
+                5 => Prim::Box(Aabb::new(Vec3::new(x, -0.5, -0.5), Vec3::new(x, 0.5, 0.5))),
+                _ => Prim::Triangle([
+                    Vec3::new(x, -1.0, -1.0),
+                    Vec3::new(x, 2.0, -1.0),
+                    Vec3::new(x, -1.0, 2.0),
+                ]),
+            }
+        })
+        .collect();
+    let along = |o: Vec3, d: Vec3, t_max: f32| Ray::new(o, d.normalize(), 0.0, t_max);
+    let rays = [
+        along(Vec3::new(-1.0, 0.1, 0.2), Vec3::X, f32::INFINITY),
+        along(
+            Vec3::new(-1.0, 0.7, -0.3),
+            Vec3::new(1.0, 1e-9, 0.0),
+            f32::INFINITY,
+        ),
+        along(Vec3::new(1e30, 0.2, 0.1), -Vec3::X, f32::INFINITY),
+        along(Vec3::new(1e6, 0.0, 0.0), -Vec3::X, 1e3),
+        along(Vec3::new(30.0, 0.3, 0.3), Vec3::X, 1e9),
+    ];
+    let boxes: Vec<Aabb> = prims.iter().map(Prim::bounds).collect();
+    let bvh = build(Builder::BinnedSah, &boxes, &BuildParams::default());
+    let depth = Bvh8::from_bvh2(&bvh).stats(&SahCosts::default()).max_depth;
+    // `N - 1` entries for each interior level (`max_depth` counts the leaves' too).
+    assert!(
+        7 * (depth - 1) > 128,
+        "an 8-wide tree of depth {depth} fits the inline stack"
+    );
+    check(&prims, &rays, &BuildParams::default());
 }
 
 /// Parallel subtree building happens above a few thousand primitives, parallel binning
