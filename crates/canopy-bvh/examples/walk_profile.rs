@@ -3,8 +3,9 @@
 //! of a file in order, as `bench/kernel_profile.py` writes them. It needs only canopy-bvh,
 //! so a change to the kernel rebuilds in a fraction of the renderer's time.
 //!
-//! `walk_profile MESH RAYS closest|occluded|count RUNS [--no-stats] [--fast] [--made]
-//! [--isa NAME]` prints the best pass's nanoseconds per ray and, unless `--no-stats`, node
+//! `walk_profile MESH RAYS closest|occluded|count|build RUNS [--no-stats] [--fast] [--made]
+//! [--isa NAME]` prints the best pass's nanoseconds per ray (`build`: the best build's
+//! milliseconds, the rays left alone) and, unless `--no-stats`, node
 //! visits and primitive tests per ray (of the closest-hit walk). `--isa` picks the
 //! kernels' instruction set (`avx2` times the AVX2 kernels on an AVX-512 CPU). `count` counts each ray's crossings
 //! of the surface, one ray at a time, as `canopy.RayScene.count_intersections` does.
@@ -69,7 +70,7 @@ fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     if args.len() < 4 {
         eprintln!(
-            "usage: walk_profile MESH RAYS closest|occluded|count RUNS [--no-stats] [--fast]"
+            "usage: walk_profile MESH RAYS closest|occluded|count|build RUNS [--no-stats] [--fast]"
         );
         std::process::exit(2);
     }
@@ -85,6 +86,18 @@ fn main() {
         },
         ..BlasParams::new(Some(Builder::BinnedSah), BvhWidth::Eight)
     };
+    if args[2] == "build" {
+        // The rays are not traced: the best build's time, with the threads rayon is given.
+        let best = (0..runs.max(1))
+            .map(|_| {
+                let (mesh, start) = (mesh.clone(), Instant::now());
+                std::hint::black_box(Blas::build(mesh, &params));
+                start.elapsed().as_secs_f64()
+            })
+            .fold(f64::MAX, f64::min);
+        println!("ms_per_build {:.3}", best * 1e3);
+        return;
+    }
     let mut blas = Blas::build(mesh, &params);
     if let Some(at) = args.iter().position(|a| a == "--isa") {
         let isa = args.get(at + 1).expect("--isa NAME");
