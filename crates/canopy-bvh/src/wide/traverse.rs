@@ -777,46 +777,38 @@ impl<T: PackKernel, F: FnMut(u32, &Ray) -> bool> AnyLeaves for PackedLeaves<'_, 
         // A lane hit is a blocker whether or not others are left to refine.
         let mut refine = 0;
         for pair in pairs {
-            if pair.iter().any(|pack| pack.others != 0) {
-                return None;
+            match any_triangle_packs::<T, 2>(pair, &pack_ray, ray, &mut scratch)? {
+                (0, left) => refine |= left,
+                _ => return Some(true),
             }
-            // SAFETY: `dispatch` runs this only where `T`'s instruction set exists.
-            let (hit, left) = unsafe {
-                test_packs_unrefined::<T, false, 2>(
-                    pair,
-                    &pack_ray,
-                    ray.t_min,
-                    ray.t_max,
-                    &mut scratch,
-                )
-            };
-            if hit != 0 {
-                return Some(true);
-            }
-            refine |= left;
         }
         for pack in rest {
-            if pack.others != 0 {
-                return None;
-            }
             let pack = std::array::from_ref(pack);
-            // SAFETY: as above.
-            let (hit, left) = unsafe {
-                test_packs_unrefined::<T, false, 1>(
-                    pack,
-                    &pack_ray,
-                    ray.t_min,
-                    ray.t_max,
-                    &mut scratch,
-                )
-            };
-            if hit != 0 {
-                return Some(true);
+            match any_triangle_packs::<T, 1>(pack, &pack_ray, ray, &mut scratch)? {
+                (0, left) => refine |= left,
+                _ => return Some(true),
             }
-            refine |= left;
         }
         (refine == 0).then_some(false)
     }
+}
+
+/// The lanes of one pack or a pair tested together that block `ray`, and those left to
+/// refine, without a call; `None` where a lane is not a triangle.
+#[inline(always)]
+fn any_triangle_packs<T: PackKernel, const PACKS: usize>(
+    packs: &[TrianglePack; PACKS],
+    pack_ray: &PackRay,
+    ray: &Ray,
+    scratch: &mut PackHits,
+) -> Option<(u32, u32)> {
+    if packs.iter().any(|pack| pack.others != 0) {
+        return None;
+    }
+    // SAFETY: `dispatch` runs this only where `T`'s instruction set exists.
+    Some(unsafe {
+        test_packs_unrefined::<T, false, PACKS>(packs, pack_ray, ray.t_min, ray.t_max, scratch)
+    })
 }
 
 /// Leaves of an every-hit walk: [`any`] over leaves that never report a blocker, so
