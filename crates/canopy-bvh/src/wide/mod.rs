@@ -27,7 +27,7 @@ use packet_packs::PackedPacketLeaves;
 use rayon::prelude::*;
 use std::marker::PhantomData;
 use traverse::{
-    any_each, closest_each, AnyStack, ClosureLeaves, EveryHit, PackedLeaves, Query, SphereLeaves,
+    any_each, closest_each, ClosureLeaves, EveryHit, PackedLeaves, Query, SphereLeaves, WalkNodes,
 };
 
 pub use packet::PACKET;
@@ -296,10 +296,16 @@ impl<const N: usize> BvhN<N> {
 
     /// Entries a walk's stack can hold at once: a node pushes at most `N - 1` of its
     /// slots, so `N - 1` for each interior level of the deepest path. Walks make this
-    /// much room before they start ([`TraversalStack::make_room`]).
+    /// much room before they start ([`WalkNodes::stack`]).
     #[inline(always)]
     fn stack_room(&self) -> usize {
         self.stack_room
+    }
+
+    /// The nodes as walks go through them, with whether to prefetch and the stack room.
+    #[inline(always)]
+    fn walk_nodes(&self) -> WalkNodes<'_, N> {
+        WalkNodes::new(&self.nodes, self.prefetches(), self.stack_room())
     }
 
     /// Stores the leaves' triangles in packs of four, tested together by SIMD kernels.
@@ -422,7 +428,7 @@ impl<const N: usize> BvhN<N> {
         if self.nodes.is_empty() {
             return ([None; PACKET], 0);
         }
-        let (nodes, prefetch, room) = (&self.nodes, self.prefetches(), self.stack_room());
+        let nodes = self.walk_nodes();
         // SAFETY (both): the caller guarantees the instruction sets.
         if self.packs.is_empty() {
             let mut leaves = SphereLeaves {
@@ -430,7 +436,7 @@ impl<const N: usize> BvhN<N> {
                 spheres: &self.spheres,
                 test,
             };
-            unsafe { walk_packet::<N, K, _, ANY>(nodes, rays, &mut leaves, prefetch, room) }
+            unsafe { walk_packet::<N, K, _, ANY>(nodes, rays, &mut leaves) }
         } else {
             let mut leaves = PackedPacketLeaves::<T, _>::new(
                 &self.packs,
@@ -438,7 +444,7 @@ impl<const N: usize> BvhN<N> {
                 self.triangle_test,
                 test,
             );
-            unsafe { walk_packet::<N, K, _, ANY>(nodes, rays, &mut leaves, prefetch, room) }
+            unsafe { walk_packet::<N, K, _, ANY>(nodes, rays, &mut leaves) }
         }
     }
 
@@ -814,10 +820,10 @@ where
         if bvh.nodes.is_empty() {
             return (0..count).for_each(|i| answer(i, None));
         }
-        let (nodes, prefetch, room) = (&bvh.nodes, bvh.prefetches(), bvh.stack_room());
+        let nodes = bvh.walk_nodes();
         // SAFETY: the caller guarantees the instruction sets.
         with_leaves!(bvh, test, T, |leaves| unsafe {
-            closest_each::<N, K, _, _>(nodes, count, ray, answer, leaves, counter, prefetch, room)
+            closest_each::<N, K, _, _>(nodes, count, ray, answer, leaves, counter)
         })
     }
 }
@@ -870,10 +876,10 @@ where
         if bvh.nodes.is_empty() {
             return (0..count).for_each(|i| answer(i, false));
         }
-        let (nodes, prefetch, room) = (&bvh.nodes, bvh.prefetches(), bvh.stack_room());
+        let nodes = bvh.walk_nodes();
         // SAFETY: the caller guarantees the instruction sets.
         with_leaves!(bvh, test, T, |leaves| unsafe {
-            any_each::<N, K, _>(nodes, count, ray, answer, leaves, prefetch, room)
+            any_each::<N, K, _>(nodes, count, ray, answer, leaves)
         })
     }
 }
@@ -931,12 +937,12 @@ where
             test,
             found,
         } = self;
-        let (prefetch, stack) = (bvh.prefetches(), &mut AnyStack::new());
-        stack.make_room(bvh.stack_room());
+        let nodes = bvh.walk_nodes();
+        let stack = &mut nodes.stack();
         with_leaves!(bvh, test, T, |leaves| {
             let mut every = EveryHit { leaves, found };
             // SAFETY: the caller guarantees the instruction sets.
-            unsafe { traverse::any::<N, K, _>(&bvh.nodes, ray, &mut every, prefetch, stack) };
+            unsafe { traverse::any::<N, K, _>(nodes, ray, &mut every, stack) };
         })
     }
 }

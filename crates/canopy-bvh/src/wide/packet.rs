@@ -21,10 +21,9 @@
 //! function they become vector instructions, and elsewhere they are the scalar twin.
 
 use super::kernels::NodeKernel;
-use super::traverse::{lanes, AloneWalk, Closest, ClosestLeaves, PacketLeaves};
+use super::traverse::{lanes, AloneWalk, Closest, ClosestLeaves, PacketLeaves, WalkNodes};
 use super::{WideNode, EMPTY_SLOT};
 use crate::aabb::{fast_max, fast_min, FAR_SLACK};
-use crate::traverse::TraversalStack;
 use crate::{Hit, Ray};
 
 /// Rays in a packet.
@@ -200,15 +199,12 @@ const ALONE_AT: u32 = 4;
 /// alone from there ([`PacketLeaves::closest_alone`]).
 ///
 /// # Safety
-/// `K`'s instruction set must be available. `room` must be the tree's
-/// [`super::BvhN::stack_room`], or the walk may panic.
+/// `K`'s instruction set must be available.
 #[inline(always)]
 pub(crate) unsafe fn walk_packet<const N: usize, K, L, const ANY: bool>(
-    nodes: &[WideNode<N>],
+    nodes: WalkNodes<'_, N>,
     rays: &[Ray],
     leaves: &mut L,
-    prefetch: bool,
-    room: usize,
 ) -> ([Option<Hit>; PACKET], u32)
 where
     K: NodeKernel<N>,
@@ -228,8 +224,8 @@ where
     let mut best = [None; PACKET];
     // The lanes that stopped (any-hit only): they take no further part.
     let mut stopped = 0u32;
-    let mut stack = TraversalStack::<Entry>::new();
-    let mut alone = AloneWalk::new(prefetch, room);
+    let mut stack = nodes.stack::<Entry>();
+    let mut alone = AloneWalk::new(nodes);
     let (mut child, mut count, mut active) = (0u32, 0u32, traceable);
     while active != 0 {
         if count > 0 {
@@ -277,7 +273,8 @@ where
                 break;
             }
         } else {
-            let node = &nodes[child as usize];
+            // SAFETY: `child` is the root or an interior slot's child.
+            let node = unsafe { nodes.node(child) };
             // Entered slots, by the nearest entry of their rays.
             let mut entered = [(0usize, 0u32, 0f32); N];
             let mut entries = [[0f32; PACKET]; N];
@@ -308,7 +305,7 @@ where
                 }
                 for &k in &order[..n - 1] {
                     let (slot, mask, _) = entered[k];
-                    stack.push(Entry {
+                    stack.push_in_room(Entry {
                         child: node.child[slot],
                         count: node.count[slot],
                         lanes: mask,

@@ -13,9 +13,8 @@ use super::kernels::NodeKernel;
 use super::packet::{lane_mask, Lanes, PACKET};
 use super::traverse::{
     any_from, closest_from, lanes, leaf_packs, offer_lane, sphere_packet, AloneWalk, Closest,
-    PackedLeaves, PacketLeaves,
+    PackedLeaves, PacketLeaves, WalkNodes,
 };
-use super::WideNode;
 use crate::sphere::SphereRecord;
 use crate::triangle::{PackKernel, ShearedRay, TrianglePack, TriangleTest, PACK_LANES};
 use crate::{Hit, IntoHit, PrimHit, Ray};
@@ -242,40 +241,24 @@ where
     #[inline(always)]
     unsafe fn closest_alone<const N: usize, K: NodeKernel<N>>(
         &mut self,
-        nodes: &[WideNode<N>],
+        nodes: WalkNodes<'_, N>,
         start: (u32, u32),
         search: Closest,
         walk: &mut AloneWalk,
     ) -> Closest {
         let (packs, spheres, test) = (self.packs, self.spheres, &mut self.test);
-        let (prefetch, stack, counter) = (walk.prefetch, &mut walk.closest, &mut ());
+        let (stack, counter) = (&mut walk.closest, &mut ());
         // SAFETY: the caller's guarantee; the pack kernels share the node kernel's
         // instruction set.
         unsafe {
             match self.triangle_test {
                 TriangleTest::Watertight => {
                     let mut single = PackedLeaves::<T, _>::new(packs, spheres, test);
-                    closest_from::<N, K, _, _>(
-                        nodes,
-                        start,
-                        search,
-                        &mut single,
-                        counter,
-                        prefetch,
-                        stack,
-                    )
+                    closest_from::<N, K, _, _>(nodes, start, search, &mut single, counter, stack)
                 }
                 TriangleTest::Fast => {
                     let mut single = PackedLeaves::<T::Fast, _>::new(packs, spheres, test);
-                    closest_from::<N, K, _, _>(
-                        nodes,
-                        start,
-                        search,
-                        &mut single,
-                        counter,
-                        prefetch,
-                        stack,
-                    )
+                    closest_from::<N, K, _, _>(nodes, start, search, &mut single, counter, stack)
                 }
             }
         }
@@ -284,24 +267,24 @@ where
     #[inline(always)]
     unsafe fn any_alone<const N: usize, K: NodeKernel<N>>(
         &mut self,
-        nodes: &[WideNode<N>],
+        nodes: WalkNodes<'_, N>,
         start: (u32, u32),
         ray: &Ray,
         walk: &mut AloneWalk,
     ) -> bool {
         let (packs, spheres, test) = (self.packs, self.spheres, &mut self.test);
         let blocks = |prim: u32, ray: &Ray| test(prim, ray).is_some();
-        let (prefetch, stack) = (walk.prefetch, &mut walk.any);
+        let stack = &mut walk.any;
         // SAFETY: as in `closest_alone`.
         unsafe {
             match self.triangle_test {
                 TriangleTest::Watertight => {
                     let mut single = PackedLeaves::<T, _>::new(packs, spheres, blocks);
-                    any_from::<N, K, _>(nodes, start, ray, &mut single, prefetch, stack)
+                    any_from::<N, K, _>(nodes, start, ray, &mut single, stack)
                 }
                 TriangleTest::Fast => {
                     let mut single = PackedLeaves::<T::Fast, _>::new(packs, spheres, blocks);
-                    any_from::<N, K, _>(nodes, start, ray, &mut single, prefetch, stack)
+                    any_from::<N, K, _>(nodes, start, ray, &mut single, stack)
                 }
             }
         }

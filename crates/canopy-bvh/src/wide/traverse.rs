@@ -88,7 +88,7 @@ pub(crate) trait PacketLeaves {
     /// As [`closest_from`].
     unsafe fn closest_alone<const N: usize, K: NodeKernel<N>>(
         &mut self,
-        nodes: &[WideNode<N>],
+        nodes: WalkNodes<'_, N>,
         start: (u32, u32),
         search: Closest,
         walk: &mut AloneWalk,
@@ -101,33 +101,27 @@ pub(crate) trait PacketLeaves {
     /// As [`closest_from`].
     unsafe fn any_alone<const N: usize, K: NodeKernel<N>>(
         &mut self,
-        nodes: &[WideNode<N>],
+        nodes: WalkNodes<'_, N>,
         start: (u32, u32),
         ray: &Ray,
         walk: &mut AloneWalk,
     ) -> bool;
 }
 
-/// What a packet's rays walking on alone share: the stacks and whether to prefetch.
+/// What a packet's rays walking on alone share: their stacks.
 pub(crate) struct AloneWalk {
-    pub prefetch: bool,
     pub closest: ClosestStack,
     pub any: AnyStack,
 }
 
 impl AloneWalk {
-    /// With room on both stacks for a walk of a tree whose [`super::BvhN::stack_room`] is
-    /// `room`.
+    /// With room on both stacks for a walk of `nodes`.
     #[inline(always)]
-    pub fn new(prefetch: bool, room: usize) -> Self {
-        let mut walk = Self {
-            prefetch,
-            closest: ClosestStack::new(),
-            any: AnyStack::new(),
-        };
-        walk.closest.make_room(room);
-        walk.any.make_room(room);
-        walk
+    pub fn new<const N: usize>(nodes: WalkNodes<'_, N>) -> Self {
+        Self {
+            closest: nodes.stack(),
+            any: nodes.stack(),
+        }
     }
 }
 
@@ -289,7 +283,7 @@ where
     #[inline(always)]
     unsafe fn closest_alone<const N: usize, K: NodeKernel<N>>(
         &mut self,
-        nodes: &[WideNode<N>],
+        nodes: WalkNodes<'_, N>,
         start: (u32, u32),
         search: Closest,
         walk: &mut AloneWalk,
@@ -299,17 +293,23 @@ where
             spheres: self.spheres,
             test: &mut self.test,
         };
-        let (prefetch, stack) = (walk.prefetch, &mut walk.closest);
         // SAFETY: the caller's guarantee.
         unsafe {
-            closest_from::<N, K, _, _>(nodes, start, search, &mut single, &mut (), prefetch, stack)
+            closest_from::<N, K, _, _>(
+                nodes,
+                start,
+                search,
+                &mut single,
+                &mut (),
+                &mut walk.closest,
+            )
         }
     }
 
     #[inline(always)]
     unsafe fn any_alone<const N: usize, K: NodeKernel<N>>(
         &mut self,
-        nodes: &[WideNode<N>],
+        nodes: WalkNodes<'_, N>,
         start: (u32, u32),
         ray: &Ray,
         walk: &mut AloneWalk,
@@ -321,7 +321,7 @@ where
             test: |prim: u32, ray: &Ray| test(prim, ray).is_some(),
         };
         // SAFETY: the caller's guarantee.
-        unsafe { any_from::<N, K, _>(nodes, start, ray, &mut single, walk.prefetch, &mut walk.any) }
+        unsafe { any_from::<N, K, _>(nodes, start, ray, &mut single, &mut walk.any) }
     }
 }
 
@@ -969,46 +969,76 @@ where
     }
 }
 
-/// Starts loading a slot's node or leaf: it goes on the stack, and memory latency, not
-/// arithmetic, bounds incoherent rays in a large tree, so its loads overlap the work
-/// until it is popped. Trees that stay in the cache skip it (`on` false, see
-/// `BvhN::prefetches`).
-#[inline(always)]
-fn prefetch_child<const N: usize, L: PrefetchLeaves>(
-    on: bool,
-    nodes: &[WideNode<N>],
-    leaves: &L,
-    child: u32,
-    count: u32,
-) {
-    if !on {
-        return;
-    }
-    // A select, not a branch: whether an entered slot holds a node or a leaf is as hard
-    // to predict as which slots a ray enters (a branch here mispredicted 0.8 times an
-    // incoherent ray). Four lines: a whole 8-wide node, or a leaf's first pack and most
-    // of its second.
-    let node = nodes.as_ptr().wrapping_add(child as usize).cast::<u8>();
-    let start = if count == 0 {
-        node
-    } else {
-        leaves.leaf_start(child)
-    };
-    prefetch_lines::<4>(start);
+/// A tree's nodes as a walk goes through them, with what every walk of them needs to
+/// know: whether it prefetches stacked children and how many entries its stack must have
+/// room for. Made by [`super::BvhN::walk_nodes`].
+#[derive(Clone, Copy)]
+pub(crate) struct WalkNodes<'a, const N: usize> {
+    nodes: &'a [WideNode<N>],
+    /// Whether to prefetch stacked children (`BvhN::prefetches`).
+    prefetch: bool,
+    /// The tree's [`super::BvhN::stack_room`].
+    stack_room: usize,
 }
 
-/// The node at index `child`, without a bounds check (a check and its branch on every
-/// node visit were about 5% of an incoherent ray's instructions).
-///
-/// # Safety
-/// `child` must be 0 in a non-empty tree or an interior slot's child (`count == 0`):
-/// [`super::BvhN::from_bvh2`] writes every such index in range, and nothing else writes
-/// them (a refit changes boxes only).
-#[inline(always)]
-unsafe fn node_at<const N: usize>(nodes: &[WideNode<N>], child: u32) -> &WideNode<N> {
-    debug_assert!((child as usize) < nodes.len());
-    // SAFETY: the caller's guarantee.
-    unsafe { nodes.get_unchecked(child as usize) }
+impl<'a, const N: usize> WalkNodes<'a, N> {
+    /// `stack_room` is [`super::BvhN::stack_room`] of the tree of `nodes`: walks make
+    /// that much room before they start, and a push past it panics.
+    pub fn new(nodes: &'a [WideNode<N>], prefetch: bool, stack_room: usize) -> Self {
+        Self {
+            nodes,
+            prefetch,
+            stack_room,
+        }
+    }
+
+    /// A walk's stack with room for a walk of these nodes (so that its pushes never
+    /// allocate: [`TraversalStack::push_in_room`]).
+    #[inline(always)]
+    pub fn stack<T: Copy>(self) -> TraversalStack<T> {
+        let mut stack = TraversalStack::new();
+        stack.make_room(self.stack_room);
+        stack
+    }
+
+    /// The node at index `child`, without a bounds check (a check and its branch on every
+    /// node visit were about 5% of an incoherent ray's instructions).
+    ///
+    /// # Safety
+    /// `child` must be 0 in a non-empty tree or an interior slot's child (`count == 0`):
+    /// [`super::BvhN::from_bvh2`] writes every such index in range, and nothing else
+    /// writes them (a refit changes boxes only).
+    #[inline(always)]
+    pub unsafe fn node(self, child: u32) -> &'a WideNode<N> {
+        debug_assert!((child as usize) < self.nodes.len());
+        // SAFETY: the caller's guarantee.
+        unsafe { self.nodes.get_unchecked(child as usize) }
+    }
+
+    /// Starts loading a slot's node or leaf: it goes on the stack, and memory latency,
+    /// not arithmetic, bounds incoherent rays in a large tree, so its loads overlap the
+    /// work until it is popped. Trees that stay in the cache skip it (`prefetch` false).
+    #[inline(always)]
+    fn prefetch_child<L: PrefetchLeaves>(self, leaves: &L, child: u32, count: u32) {
+        if !self.prefetch {
+            return;
+        }
+        // A select, not a branch: whether an entered slot holds a node or a leaf is as
+        // hard to predict as which slots a ray enters (a branch here mispredicted 0.8
+        // times an incoherent ray). Four lines: a whole 8-wide node, or a leaf's first
+        // pack and most of its second.
+        let node = self
+            .nodes
+            .as_ptr()
+            .wrapping_add(child as usize)
+            .cast::<u8>();
+        let start = if count == 0 {
+            node
+        } else {
+            leaves.leaf_start(child)
+        };
+        prefetch_lines::<4>(start);
+    }
 }
 
 /// A stack entry: a slot's `child` and `count` (see [`WideNode`]) and its entry distance.
@@ -1028,16 +1058,14 @@ pub(crate) const ROOT: (u32, u32) = (0, 0);
 /// Closest hit, nearest child first. `nodes` is non-empty; `stack` is empty and left so.
 ///
 /// # Safety
-/// `K`'s instruction set must be available. `stack` must have room for a walk of the
-/// tree ([`TraversalStack::make_room`] with its [`super::BvhN::stack_room`]), or the walk
-/// may panic.
+/// `K`'s instruction set must be available. `stack` must have room for a walk of
+/// `nodes` (made by [`WalkNodes::stack`]), or the walk may panic.
 #[inline(always)]
 pub(crate) unsafe fn closest<const N: usize, K, L, C>(
-    nodes: &[WideNode<N>],
+    nodes: WalkNodes<'_, N>,
     ray: &Ray,
     leaves: &mut L,
     counter: &mut C,
-    prefetch: bool,
     stack: &mut ClosestStack,
 ) -> Option<Hit>
 where
@@ -1054,8 +1082,7 @@ where
         best: None,
     };
     // SAFETY: the caller's guarantee.
-    unsafe { closest_from::<N, K, L, C>(nodes, ROOT, search, leaves, counter, prefetch, stack) }
-        .best
+    unsafe { closest_from::<N, K, L, C>(nodes, ROOT, search, leaves, counter, stack) }.best
 }
 
 /// The closest-hit walk of `search`'s ray (traceable) through the subtree `start` (a
@@ -1068,12 +1095,11 @@ where
 /// a slot of one of its nodes. `stack` must have room, as [`closest`] says.
 #[inline(always)]
 pub(crate) unsafe fn closest_from<const N: usize, K, L, C>(
-    nodes: &[WideNode<N>],
+    nodes: WalkNodes<'_, N>,
     start: (u32, u32),
     mut search: Closest,
     leaves: &mut L,
     counter: &mut C,
-    prefetch: bool,
     stack: &mut ClosestStack,
 ) -> Closest
 where
@@ -1099,7 +1125,7 @@ where
             } else {
                 // SAFETY: `child` is the root or an interior slot's child; the kernel's
                 // instruction set is the caller's guarantee.
-                let node = unsafe { node_at(nodes, child) };
+                let node = unsafe { nodes.node(child) };
                 let (mask, t) = unsafe { K::hit_mask(node, &kray, search.ray.t_max) };
                 if mask != 0 {
                     let first = mask.trailing_zeros() as usize;
@@ -1117,7 +1143,7 @@ where
                         } else {
                             (first, second)
                         };
-                        prefetch_child(prefetch, nodes, leaves, node.child[far], node.count[far]);
+                        nodes.prefetch_child(leaves, node.child[far], node.count[far]);
                         stack.push_in_room((node.child[far], node.count[far], t[far]));
                         (child, count) = (node.child[near], node.count[near]);
                         continue;
@@ -1131,7 +1157,7 @@ where
                     for &slot in &slots[..n - 1] {
                         let slot = slot as usize;
                         let entry = (node.child[slot], node.count[slot], t[slot]);
-                        prefetch_child(prefetch, nodes, leaves, entry.0, entry.1);
+                        nodes.prefetch_child(leaves, entry.0, entry.1);
                         stack.push_in_room(entry);
                     }
                     let nearest = slots[n - 1] as usize;
@@ -1186,10 +1212,9 @@ fn next_closest(stack: &mut ClosestStack, t_max: f32) -> Option<(u32, u32)> {
 /// As [`closest`].
 #[inline(always)]
 pub(crate) unsafe fn any<const N: usize, K, L>(
-    nodes: &[WideNode<N>],
+    nodes: WalkNodes<'_, N>,
     ray: &Ray,
     leaves: &mut L,
-    prefetch: bool,
     stack: &mut AnyStack,
 ) -> bool
 where
@@ -1200,7 +1225,7 @@ where
         return false;
     }
     // SAFETY: the caller's guarantee.
-    unsafe { any_from::<N, K, L>(nodes, ROOT, ray, leaves, prefetch, stack) }
+    unsafe { any_from::<N, K, L>(nodes, ROOT, ray, leaves, stack) }
 }
 
 /// Whether anything in the subtree `start` (as [`closest_from`] takes it) blocks `ray`
@@ -1210,11 +1235,10 @@ where
 /// As [`closest_from`].
 #[inline(always)]
 pub(crate) unsafe fn any_from<const N: usize, K, L>(
-    nodes: &[WideNode<N>],
+    nodes: WalkNodes<'_, N>,
     start: (u32, u32),
     ray: &Ray,
     leaves: &mut L,
-    prefetch: bool,
     stack: &mut AnyStack,
 ) -> bool
 where
@@ -1239,7 +1263,7 @@ where
                 }
             } else {
                 // SAFETY: as in `closest_from`.
-                let node = unsafe { node_at(nodes, child) };
+                let node = unsafe { nodes.node(child) };
                 let (mask, t) = unsafe { K::hit_mask(node, &kray, ray.t_max) };
                 if mask != 0 {
                     // Descend into the nearest entered slot (where a blocker is likeliest),
@@ -1254,13 +1278,7 @@ where
                         let closer = t[i] < t[nearest];
                         let farther = std::hint::select_unpredictable(closer, nearest, i);
                         nearest = std::hint::select_unpredictable(closer, i, nearest);
-                        prefetch_child(
-                            prefetch,
-                            nodes,
-                            leaves,
-                            node.child[farther],
-                            node.count[farther],
-                        );
+                        nodes.prefetch_child(leaves, node.child[farther], node.count[farther]);
                         stack.push_in_room((node.child[farther], node.count[farther]));
                     }
                     (child, count) = (node.child[nearest], node.count[nearest]);
@@ -1288,34 +1306,27 @@ where
 /// hit), one by one through the same leaves and stack: what a batch shares is made once.
 ///
 /// # Safety
-/// `K`'s instruction set must be available. `room` must be the tree's
-/// [`super::BvhN::stack_room`], or the walk may panic.
+/// `K`'s instruction set must be available.
 #[inline(always)]
-#[allow(clippy::too_many_arguments)]
 pub(crate) unsafe fn closest_each<const N: usize, K, L, C>(
-    nodes: &[WideNode<N>],
+    nodes: WalkNodes<'_, N>,
     count: usize,
     ray: impl FnMut(usize) -> Ray,
     mut answer: impl FnMut(usize, Option<Hit>),
     mut leaves: L,
     counter: &mut C,
-    prefetch: bool,
-    room: usize,
 ) where
     K: NodeKernel<N>,
     L: ClosestLeaves + PrefetchLeaves,
     C: TraversalCounter,
 {
-    let mut stack = ClosestStack::new();
-    stack.make_room(room);
+    let mut stack: ClosestStack = nodes.stack();
     let mut rays = Upcoming::new(count, ray);
     for i in 0..count {
         let ray = rays.take(i);
         leaves.new_ray();
         // SAFETY: the caller guarantees the instruction set.
-        let hit = unsafe {
-            closest::<N, K, L, C>(nodes, &ray, &mut leaves, counter, prefetch, &mut stack)
-        };
+        let hit = unsafe { closest::<N, K, L, C>(nodes, &ray, &mut leaves, counter, &mut stack) };
         answer(i, hit);
     }
 }
@@ -1359,25 +1370,22 @@ impl<R: FnMut(usize) -> Ray> Upcoming<R> {
 /// As [`closest_each`].
 #[inline(always)]
 pub(crate) unsafe fn any_each<const N: usize, K, L>(
-    nodes: &[WideNode<N>],
+    nodes: WalkNodes<'_, N>,
     count: usize,
     ray: impl FnMut(usize) -> Ray,
     mut answer: impl FnMut(usize, bool),
     mut leaves: L,
-    prefetch: bool,
-    room: usize,
 ) where
     K: NodeKernel<N>,
     L: AnyLeaves + PrefetchLeaves,
 {
-    let mut stack = AnyStack::new();
-    stack.make_room(room);
+    let mut stack: AnyStack = nodes.stack();
     let mut rays = Upcoming::new(count, ray);
     for i in 0..count {
         let ray = rays.take(i);
         leaves.new_ray();
         // SAFETY: the caller guarantees the instruction set.
-        let blocked = unsafe { any::<N, K, L>(nodes, &ray, &mut leaves, prefetch, &mut stack) };
+        let blocked = unsafe { any::<N, K, L>(nodes, &ray, &mut leaves, &mut stack) };
         answer(i, blocked);
     }
 }
