@@ -188,6 +188,7 @@ impl Cuboid {
 
     /// A point uniform over the surface's area: an axis by the area across it, a face,
     /// then a point on it. A flat box's rectangle faces the reference.
+    #[inline(always)]
     pub fn sample_toward(&self, reference: Vec3, u: Vec2) -> Option<SurfaceSample> {
         self.sample_toward_in(self.unturned, reference, u)
     }
@@ -233,6 +234,7 @@ impl Cuboid {
         area_to_solid_angle(1.0 / self.area(), reference, p, normal).unwrap_or(0.0)
     }
 
+    #[inline(always)]
     pub fn surface(&self, ray: &Ray, t: f32) -> Surface {
         self.surface_in(self.unturned, ray, t)
     }

@@ -130,6 +130,7 @@ impl Shape {
     /// The surface where `ray` hits this shape (`hit` from a query of `ray`; triangles use
     /// its barycentrics, other shapes its distance). `vertex_normals` holds the per-vertex
     /// normals of smooth triangles.
+    #[inline(always)]
     pub fn surface(&self, ray: &Ray, hit: &Hit, vertex_normals: &[[Vec3; 3]]) -> Surface {
         match self {
             Shape::Sphere(s) => s.surface(ray, hit.t),
@@ -150,6 +151,7 @@ impl Shape {
     /// A point of the surface drawn from `u` in `[0, 1)²` for light arriving at
     /// `reference`: spheres by the cone of directions they subtend, triangles and cuboids
     /// uniformly by area. `None` when the point cannot carry light there (seen edge-on).
+    #[inline(always)]
     pub fn sample_toward(&self, reference: Vec3, u: Vec2) -> Option<SurfaceSample> {
         match self {
             Shape::Sphere(s) => s.sample_toward(reference, u),

@@ -38,6 +38,7 @@ impl Sphere {
     /// From outside, a direction uniform in the cone the sphere subtends and the point
     /// where it meets the sphere first (pbrt-v4's construction, precise for small and far
     /// spheres); from inside, a point uniform over the area.
+    #[inline]
     pub fn sample_toward(&self, reference: Vec3, u: Vec2) -> Option<SurfaceSample> {
         let Some(cone) = Cone::of(self, reference) else {
             let normal = uniform_sphere(u);
@@ -75,6 +76,7 @@ impl Sphere {
         }
     }
 
+    #[inline]
     pub fn surface(&self, ray: &Ray, t: f32) -> Surface {
         // Re-project onto the sphere: removes most of the error of o + t d.
         let offset = ray.at(t) - self.center;

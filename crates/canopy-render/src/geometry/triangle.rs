@@ -48,6 +48,7 @@ impl Triangle {
     }
 
     /// A point uniform over the area (see [`crate::geometry::Shape::sample_toward`]).
+    #[inline]
     pub fn sample_toward(&self, reference: Vec3, u: Vec2) -> Option<SurfaceSample> {
         let b = uniform_triangle(u);
         let p = b[0] * self.v[0] + b[1] * self.v[1] + b[2] * self.v[2];
@@ -74,11 +75,13 @@ impl Triangle {
     }
 
     /// The surface at the hit with barycentrics `(u, v)` (weights of vertices 1 and 2).
+    #[inline]
     pub fn surface(&self, u: f32, v: f32, vertex_normals: &[[Vec3; 3]]) -> Surface {
         self.surface_with_normals(u, v, vertex_normals.get(self.normals as usize))
     }
 
     /// [`Triangle::surface`] with the vertex normals given (`None`: flat).
+    #[inline]
     pub fn surface_with_normals(&self, u: f32, v: f32, normals: Option<&[Vec3; 3]>) -> Surface {
         // The point from the weights is far more precise than o + t d.
         let weights = [1.0 - u - v, u, v];
