@@ -160,7 +160,7 @@ impl<G: Geometry> Blas<G> {
             }
             let mut tree = Tree::new(bvh, params.width);
             tree.pack_triangles(|p| geometry.triangle(p));
-            tree.store_spheres(|p| geometry.sphere(p));
+            tree.store_shapes(|p| geometry.known_shape(p));
             tree.set_triangle_test(params.triangle_test);
             tree
         });
@@ -232,7 +232,7 @@ impl<G: Geometry> Blas<G> {
         if let Some(tree) = &mut self.tree {
             let geometry = &self.geometry;
             tree.refit(&boxes, |p| geometry.triangle(p))?;
-            tree.store_spheres(|p| geometry.sphere(p));
+            tree.store_shapes(|p| geometry.known_shape(p));
         }
         Ok(())
     }

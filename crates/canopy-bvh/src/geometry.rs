@@ -2,7 +2,9 @@
 //! the caller's closure plays for a bare tree) and [`TriangleMesh`], an indexed mesh
 //! whose triangles a wide [`crate::Blas`] packs into its leaves.
 
-use crate::{intersect_triangle, split_box, split_triangle, Aabb, PrimHit, Ray, ShearedRay};
+use crate::{
+    intersect_triangle, split_box, split_triangle, Aabb, KnownShape, PrimHit, Ray, ShearedRay,
+};
 use glam::Vec3;
 use thiserror::Error;
 
@@ -28,11 +30,11 @@ pub trait Geometry: Sync {
         None
     }
 
-    /// The centre and radius of primitive `prim` if it is a sphere whose hit is
-    /// [`crate::intersect_sphere`]'s: a wide tree then keeps it beside its leaves and
-    /// tests it itself ([`crate::BvhN::store_spheres`]).
+    /// Primitive `prim` as a shape whose test canopy knows (a sphere, an axis-aligned
+    /// box), if its hit is that shape's: a wide tree then keeps it beside its leaves and
+    /// tests it itself ([`crate::BvhN::store_shapes`]).
     #[inline]
-    fn sphere(&self, _prim: u32) -> Option<(Vec3, f32)> {
+    fn known_shape(&self, _prim: u32) -> Option<KnownShape> {
         None
     }
 

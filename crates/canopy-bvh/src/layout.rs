@@ -6,8 +6,8 @@ use crate::query::RayBatch;
 use crate::traverse::TraversalCounter;
 use crate::view::{self, TreeView};
 use crate::{
-    Aabb, Bvh2, Bvh4, Bvh8, BvhError, GpuBvh, Hit, IntoHit, Isa, IsaError, Ray, RefitError,
-    TriangleTest,
+    Aabb, Bvh2, Bvh4, Bvh8, BvhError, GpuBvh, Hit, IntoHit, Isa, IsaError, KnownShape, Ray,
+    RefitError, TriangleTest,
 };
 use crate::{SahCosts, TreeStats};
 use glam::Vec3;
@@ -98,13 +98,23 @@ impl Tree {
         }
     }
 
-    /// Keeps the leaves' spheres beside them for the wide kernels to test (wide layouts;
-    /// see [`BvhN::store_spheres`]).
-    pub fn store_spheres(&mut self, sphere: impl Fn(u32) -> Option<(Vec3, f32)> + Sync) {
+    /// Keeps the leaves' spheres and boxes beside them for the wide kernels to test (wide
+    /// layouts; see [`BvhN::store_shapes`]).
+    pub fn store_shapes(&mut self, shape: impl Fn(u32) -> Option<KnownShape> + Sync) {
         match self {
             Tree::Binary(_) | Tree::Gpu(_) => {}
-            Tree::Four(t) => t.store_spheres(sphere),
-            Tree::Eight(t) => t.store_spheres(sphere),
+            Tree::Four(t) => t.store_shapes(shape),
+            Tree::Eight(t) => t.store_shapes(shape),
+        }
+    }
+
+    /// Whether traversal tests some primitives itself as known shapes
+    /// ([`Tree::store_shapes`]).
+    pub fn has_kept_shapes(&self) -> bool {
+        match self {
+            Tree::Binary(_) | Tree::Gpu(_) => false,
+            Tree::Four(t) => t.has_kept_shapes(),
+            Tree::Eight(t) => t.has_kept_shapes(),
         }
     }
 

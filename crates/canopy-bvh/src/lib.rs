@@ -35,7 +35,7 @@ mod proximity;
 mod query;
 mod ray;
 mod ray_order;
-mod sphere;
+mod shapes;
 mod stats;
 mod tlas;
 mod traverse;
@@ -64,7 +64,7 @@ pub use proximity::{
 pub use query::{trace_batch, Coherence, Forward, RayBatch, RayQuery, ALL_MASKS, BATCH_CHUNK};
 pub use ray::{Hit, IntoHit, PrimHit, Ray};
 pub use ray_order::{RayOrder, RAY_ORDER_MIN};
-pub use sphere::intersect_sphere;
+pub use shapes::{intersect_box, intersect_sphere, KnownShape};
 pub use stats::TreeStats;
 pub use tlas::Tlas;
 pub use traverse::{TraversalCounter, TraversalStats};

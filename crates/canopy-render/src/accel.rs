@@ -7,8 +7,8 @@ use crate::geometry::{Shape, ShearedRay};
 use crate::scene::{Primitive, Scene};
 use canopy_bvh::{
     split_box, split_triangle, Aabb, Blas, BlasParams, BuildParams, Builder, BvhWidth, Clipper,
-    Forward, Geometry, Hit, Instance, OptimizeBudget, PrimHit, Ray, RayBatch, RayQuery, RefitError,
-    Tlas, TraversalCounter, Tree, TriangleMesh, TriangleTest,
+    Forward, Geometry, Hit, Instance, KnownShape, OptimizeBudget, PrimHit, Ray, RayBatch, RayQuery,
+    RefitError, Tlas, TraversalCounter, Tree, TriangleMesh, TriangleTest,
 };
 use glam::{Affine3A, Vec3};
 use std::fmt;
@@ -76,10 +76,14 @@ impl Geometry for ShapeList {
     }
 
     #[inline]
-    fn sphere(&self, prim: u32) -> Option<(Vec3, f32)> {
-        match self.0[prim as usize].shape {
-            Shape::Sphere(s) => Some((s.center, s.radius)),
-            _ => None,
+    fn known_shape(&self, prim: u32) -> Option<KnownShape> {
+        match &self.0[prim as usize].shape {
+            Shape::Sphere(s) => Some(KnownShape::Sphere {
+                center: s.center,
+                radius: s.radius,
+            }),
+            Shape::Cuboid(c) => c.as_known_shape(),
+            Shape::Triangle(_) => None,
         }
     }
 

@@ -33,7 +33,7 @@ pub const PACKET: usize = 16;
 pub(crate) struct PacketRays {
     pub origin: [[f32; PACKET]; 3],
     pub dir: [[f32; PACKET]; 3],
-    inv: [[f32; PACKET]; 3],
+    pub inv: [[f32; PACKET]; 3],
     /// Whether the ray runs down each axis (it meets the max plane first).
     down: [[bool; PACKET]; 3],
     pub t_min: [f32; PACKET],

@@ -12,10 +12,10 @@
 use super::kernels::NodeKernel;
 use super::packet::{lane_mask, Lanes, PACKET};
 use super::traverse::{
-    any_from, closest_from, lanes, leaf_packs, offer_lane, sphere_packet, AloneWalk, Closest,
+    any_from, closest_from, lanes, leaf_packs, offer_lane, shape_packet, AloneWalk, Closest,
     PackedLeaves, PacketLeaves, WalkNodes,
 };
-use crate::sphere::SphereRecord;
+use crate::shapes::ShapeRecord;
 use crate::triangle::{PackKernel, ShearedRay, TrianglePack, TriangleTest, PACK_LANES};
 use crate::{Hit, IntoHit, PrimHit, Ray};
 use std::marker::PhantomData;
@@ -138,8 +138,8 @@ struct LaneHits {
 /// Leaves stored as triangle packs ([`PackedLeaves`]), tested for a packet's rays.
 pub(crate) struct PackedPacketLeaves<'a, T, F> {
     pub packs: &'a [TrianglePack],
-    /// Empty, or the sphere at each lane of `packs` (four a pack).
-    pub spheres: &'a [SphereRecord],
+    /// Empty, or the kept shape (or none) at each lane of `packs` (four a pack).
+    pub shapes: &'a [ShapeRecord],
     pub triangle_test: TriangleTest,
     pub test: F,
     /// The packet's shears, made at its first leaf: `Some(None)` where they differ.
@@ -150,13 +150,13 @@ pub(crate) struct PackedPacketLeaves<'a, T, F> {
 impl<'a, T, F> PackedPacketLeaves<'a, T, F> {
     pub fn new(
         packs: &'a [TrianglePack],
-        spheres: &'a [SphereRecord],
+        shapes: &'a [ShapeRecord],
         triangle_test: TriangleTest,
         test: F,
     ) -> Self {
         Self {
             packs,
-            spheres,
+            shapes,
             triangle_test,
             test,
             shear: None,
@@ -185,14 +185,14 @@ where
             .get_or_insert_with(|| PacketShear::new(group.rays, self.triangle_test))
         else {
             // Rays sheared differently: the single-ray pack test, one lane at a time.
-            let (packs, spheres, test) = (self.packs, self.spheres, &mut self.test);
+            let (packs, shapes, test) = (self.packs, self.shapes, &mut self.test);
             match self.triangle_test {
                 TriangleTest::Watertight => {
-                    let mut single = PackedLeaves::<T, _>::new(packs, spheres, test);
+                    let mut single = PackedLeaves::<T, _>::new(packs, shapes, test);
                     group.each(&mut single, first, count, t_max, best);
                 }
                 TriangleTest::Fast => {
-                    let mut single = PackedLeaves::<T::Fast, _>::new(packs, spheres, test);
+                    let mut single = PackedLeaves::<T::Fast, _>::new(packs, shapes, test);
                     group.each(&mut single, first, count, t_max, best);
                 }
             }
@@ -219,9 +219,9 @@ where
             }
             for lane in lanes(pack.others) {
                 let prim = pack.prim[lane];
-                match self.spheres.get((first_pack + k) * PACK_LANES + lane) {
-                    Some(sphere) if sphere.is_sphere() => {
-                        sphere_packet(sphere, prim, &group, t_max, best);
+                match self.shapes.get((first_pack + k) * PACK_LANES + lane) {
+                    Some(shape) if shape.is_kept() => {
+                        shape_packet(shape, prim, &group, t_max, best);
                     }
                     _ => {
                         for ray in lanes(group.active) {
@@ -246,18 +246,18 @@ where
         search: Closest,
         walk: &mut AloneWalk,
     ) -> Closest {
-        let (packs, spheres, test) = (self.packs, self.spheres, &mut self.test);
+        let (packs, shapes, test) = (self.packs, self.shapes, &mut self.test);
         let (stack, counter) = (&mut walk.closest, &mut ());
         // SAFETY: the caller's guarantee; the pack kernels share the node kernel's
         // instruction set.
         unsafe {
             match self.triangle_test {
                 TriangleTest::Watertight => {
-                    let mut single = PackedLeaves::<T, _>::new(packs, spheres, test);
+                    let mut single = PackedLeaves::<T, _>::new(packs, shapes, test);
                     closest_from::<N, K, _, _>(nodes, start, search, &mut single, counter, stack)
                 }
                 TriangleTest::Fast => {
-                    let mut single = PackedLeaves::<T::Fast, _>::new(packs, spheres, test);
+                    let mut single = PackedLeaves::<T::Fast, _>::new(packs, shapes, test);
                     closest_from::<N, K, _, _>(nodes, start, search, &mut single, counter, stack)
                 }
             }
@@ -272,18 +272,18 @@ where
         ray: &Ray,
         walk: &mut AloneWalk,
     ) -> bool {
-        let (packs, spheres, test) = (self.packs, self.spheres, &mut self.test);
+        let (packs, shapes, test) = (self.packs, self.shapes, &mut self.test);
         let blocks = |prim: u32, ray: &Ray| test(prim, ray).is_some();
         let stack = &mut walk.any;
         // SAFETY: as in `closest_alone`.
         unsafe {
             match self.triangle_test {
                 TriangleTest::Watertight => {
-                    let mut single = PackedLeaves::<T, _>::new(packs, spheres, blocks);
+                    let mut single = PackedLeaves::<T, _>::new(packs, shapes, blocks);
                     any_from::<N, K, _>(nodes, start, ray, &mut single, stack)
                 }
                 TriangleTest::Fast => {
-                    let mut single = PackedLeaves::<T::Fast, _>::new(packs, spheres, blocks);
+                    let mut single = PackedLeaves::<T::Fast, _>::new(packs, shapes, blocks);
                     any_from::<N, K, _>(nodes, start, ray, &mut single, stack)
                 }
             }

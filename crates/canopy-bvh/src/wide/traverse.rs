@@ -6,12 +6,12 @@
 use super::kernels::{NodeKernel, OctRay, ScalarNode};
 use super::packet::{lane_mask, Lanes, PacketRays, PACKET};
 use super::WideNode;
-use crate::sphere::SphereRecord;
+use crate::shapes::{intersect_box, ShapeRecord};
 use crate::traverse::{TraversalCounter, TraversalStack};
 use crate::triangle::{
     triangle_lanes, PackHits, PackKernel, PackRay, ScalarPack, TrianglePack, PACK_LANES,
 };
-use crate::{Hit, IntoHit, Isa, Ray};
+use crate::{Aabb, Hit, IntoHit, Isa, KnownShape, Ray};
 use glam::Vec3;
 use std::marker::PhantomData;
 
@@ -213,23 +213,23 @@ impl<F: FnMut(u32, &Ray) -> bool> AnyLeaves for ClosureLeaves<'_, F> {
     }
 }
 
-/// Leaves whose spheres are stored beside them ([`super::BvhN::store_spheres`]) and
+/// Leaves whose shapes are stored beside them ([`super::BvhN::store_shapes`]) and
 /// tested here; any other primitive goes to the caller's closure.
-pub(crate) struct SphereLeaves<'a, F> {
+pub(crate) struct ShapeLeaves<'a, F> {
     pub prims: &'a [u32],
-    /// The sphere at each position of `prims`.
-    pub spheres: &'a [SphereRecord],
+    /// The kept shape (or none) at each position of `prims`.
+    pub shapes: &'a [ShapeRecord],
     pub test: F,
 }
 
-impl<F> PrefetchLeaves for SphereLeaves<'_, F> {
+impl<F> PrefetchLeaves for ShapeLeaves<'_, F> {
     #[inline(always)]
     fn leaf_start(&self, first: u32) -> *const u8 {
-        self.spheres.as_ptr().wrapping_add(first as usize).cast()
+        self.shapes.as_ptr().wrapping_add(first as usize).cast()
     }
 }
 
-impl<F, P> ClosestLeaves for SphereLeaves<'_, F>
+impl<F, P> ClosestLeaves for ShapeLeaves<'_, F>
 where
     F: FnMut(u32, &Ray) -> Option<P>,
     P: IntoHit,
@@ -237,10 +237,10 @@ where
     #[inline(always)]
     fn closest<C: TraversalCounter>(&mut self, first: u32, count: u32, s: &mut Closest, c: &mut C) {
         let range = first as usize..(first + count) as usize;
-        for (&prim, sphere) in self.prims[range.clone()].iter().zip(&self.spheres[range]) {
+        for (&prim, shape) in self.prims[range.clone()].iter().zip(&self.shapes[range]) {
             c.test_primitive();
-            if sphere.is_sphere() {
-                if let Some(t) = sphere.intersect(&s.ray) {
+            if shape.is_kept() {
+                if let Some(t) = shape.intersect(&s.ray) {
                     s.offer(t.into_hit(prim));
                 }
             } else if let Some(hit) = (self.test)(prim, &s.ray) {
@@ -250,12 +250,13 @@ where
     }
 }
 
-impl<F, P> PacketLeaves for SphereLeaves<'_, F>
+impl<F, P> PacketLeaves for ShapeLeaves<'_, F>
 where
     F: FnMut(u32, &Ray) -> Option<P>,
     P: IntoHit,
 {
-    /// Each sphere against all the packet's rays at once; anything else one ray at a time.
+    /// Each kept shape against all the packet's rays at once; anything else one ray at a
+    /// time.
     #[inline(always)]
     fn closest_lanes(
         &mut self,
@@ -266,9 +267,9 @@ where
         best: &mut [Option<Hit>; PACKET],
     ) {
         for position in first as usize..(first + count) as usize {
-            let sphere = &self.spheres[position];
+            let shape = &self.shapes[position];
             let prim = self.prims[position];
-            if !sphere.is_sphere() {
+            if !shape.is_kept() {
                 let mut single = ClosureLeaves {
                     prims: self.prims,
                     test: &mut self.test,
@@ -276,7 +277,7 @@ where
                 lanes.each(&mut single, position as u32, 1, t_max, best);
                 continue;
             }
-            sphere_packet(sphere, prim, &lanes, t_max, best);
+            shape_packet(shape, prim, &lanes, t_max, best);
         }
     }
 
@@ -288,9 +289,9 @@ where
         search: Closest,
         walk: &mut AloneWalk,
     ) -> Closest {
-        let mut single = SphereLeaves {
+        let mut single = ShapeLeaves {
             prims: self.prims,
-            spheres: self.spheres,
+            shapes: self.shapes,
             test: &mut self.test,
         };
         // SAFETY: the caller's guarantee.
@@ -315,9 +316,9 @@ where
         walk: &mut AloneWalk,
     ) -> bool {
         let test = &mut self.test;
-        let mut single = SphereLeaves {
+        let mut single = ShapeLeaves {
             prims: self.prims,
-            spheres: self.spheres,
+            shapes: self.shapes,
             test: |prim: u32, ray: &Ray| test(prim, ray).is_some(),
         };
         // SAFETY: the caller's guarantee.
@@ -339,17 +340,23 @@ pub(crate) fn offer_lane(
     }
 }
 
-/// Tests the sphere of leaf entry `prim` against the rays in `lanes` at once, keeping
+/// Tests the kept shape of leaf entry `prim` against the rays in `lanes` at once, keeping
 /// each ray's closest hit.
 #[inline(always)]
-pub(crate) fn sphere_packet(
-    sphere: &SphereRecord,
+pub(crate) fn shape_packet(
+    shape: &ShapeRecord,
     prim: u32,
     lanes: &Lanes,
     t_max: &mut [f32; PACKET],
     best: &mut [Option<Hit>; PACKET],
 ) {
-    let t = sphere_lanes(sphere, lanes.packet, t_max);
+    let t = match shape.0 {
+        Some(KnownShape::Sphere { center, radius }) => {
+            sphere_lanes(center, radius, lanes.packet, t_max)
+        }
+        Some(KnownShape::Box(b)) => box_lanes(b, lanes.packet, t_max),
+        None => return,
+    };
     let mut hit = [false; PACKET];
     for (hit, t) in hit.iter_mut().zip(&t) {
         *hit = !t.is_nan();
@@ -359,17 +366,34 @@ pub(crate) fn sphere_packet(
     }
 }
 
-/// Distance to `sphere` of every ray of `packet` (NaN where it misses or falls outside the
+/// Distance to box `b` of every ray of `packet` (NaN where it misses or falls outside the
+/// ray's range): [`crate::intersect_box`] lane by lane, so the same distances.
+#[inline(always)]
+fn box_lanes(b: Aabb, packet: &PacketRays, t_max: &[f32; PACKET]) -> [f32; PACKET] {
+    let mut distance = [f32::NAN; PACKET];
+    for (lane, distance) in distance.iter_mut().enumerate() {
+        let origin = Vec3::from_array([0, 1, 2].map(|axis| packet.origin[axis][lane]));
+        let inv_dir = Vec3::from_array([0, 1, 2].map(|axis| packet.inv[axis][lane]));
+        let (t_min, t_max) = (packet.t_min[lane], t_max[lane]);
+        if let Some(t) = intersect_box(b.min, b.max, origin, inv_dir, t_min, t_max) {
+            *distance = t;
+        }
+    }
+    distance
+}
+
+/// Distance to the sphere of every ray of `packet` (NaN where it misses or falls outside the
 /// ray's range): [`crate::intersect_sphere`] lane by lane, the same operations in the same
 /// order, so the same distances.
 #[inline(always)]
 fn sphere_lanes(
-    sphere: &SphereRecord,
+    center: Vec3,
+    radius: f32,
     packet: &PacketRays,
     t_max: &[f32; PACKET],
 ) -> [f32; PACKET] {
-    let [cx, cy, cz] = sphere.center;
-    let r2 = sphere.radius * sphere.radius;
+    let [cx, cy, cz] = center.to_array();
+    let r2 = radius * radius;
     // A loop, not `array::from_fn`: its closure would be compiled apart, without the
     // dispatch's vector instructions.
     let mut distance = [f32::NAN; PACKET];
@@ -402,13 +426,13 @@ fn sphere_lanes(
     distance
 }
 
-impl<F: FnMut(u32, &Ray) -> bool> AnyLeaves for SphereLeaves<'_, F> {
+impl<F: FnMut(u32, &Ray) -> bool> AnyLeaves for ShapeLeaves<'_, F> {
     #[inline(always)]
     fn any(&mut self, first: u32, count: u32, ray: &Ray) -> bool {
         let range = first as usize..(first + count) as usize;
-        for (&prim, sphere) in self.prims[range.clone()].iter().zip(&self.spheres[range]) {
-            let blocked = match sphere.is_sphere() {
-                true => sphere.intersect(ray).is_some(),
+        for (&prim, shape) in self.prims[range.clone()].iter().zip(&self.shapes[range]) {
+            let blocked = match shape.is_kept() {
+                true => shape.intersect(ray).is_some(),
                 false => (self.test)(prim, ray),
             };
             if blocked {
@@ -423,8 +447,9 @@ impl<F: FnMut(u32, &Ray) -> bool> AnyLeaves for SphereLeaves<'_, F> {
 /// by the caller's closure.
 pub(crate) struct PackedLeaves<'a, T, F> {
     pub packs: &'a [TrianglePack],
-    /// Empty, or the sphere at each lane of `packs` (four a pack), tested here.
-    pub spheres: &'a [SphereRecord],
+    /// Empty, or the kept shape (or none) at each lane of `packs` (four a pack), tested
+    /// here.
+    pub shapes: &'a [ShapeRecord],
     /// The ray prepared for pack tests, made at the first leaf: a ray that misses every
     /// leaf (most rays past a mesh's silhouette) never pays for it.
     pub ray: Option<PackRay>,
@@ -436,12 +461,12 @@ pub(crate) struct PackedLeaves<'a, T, F> {
 }
 
 impl<'a, T, F> PackedLeaves<'a, T, F> {
-    /// Leaves of `packs` (and `spheres` beside them, or none), nothing prepared yet.
+    /// Leaves of `packs` (and `shapes` beside them, or none), nothing prepared yet.
     #[inline(always)]
-    pub fn new(packs: &'a [TrianglePack], spheres: &'a [SphereRecord], test: F) -> Self {
+    pub fn new(packs: &'a [TrianglePack], shapes: &'a [ShapeRecord], test: F) -> Self {
         Self {
             packs,
-            spheres,
+            shapes,
             ray: None,
             hits: PackHits::default(),
             test,
@@ -590,11 +615,11 @@ where
         }
         for (k, pack) in packs.iter().enumerate() {
             if pack.others != 0 {
-                let spheres = self.spheres;
+                let shapes = self.shapes;
                 closest_others(
                     pack,
                     (first_pack + k) * PACK_LANES,
-                    spheres,
+                    shapes,
                     &mut self.test,
                     s,
                     c,
@@ -604,7 +629,7 @@ where
     }
 }
 
-/// Offers the hits of a pack's lanes that are not triangles: spheres stored beside the
+/// Offers the hits of a pack's lanes that are not triangles: shapes stored beside the
 /// packs, the rest by the caller's closure. Out of line and cold: packed trees are built
 /// over meshes of (nearly) only triangles, and inlined, its loop-invariant work (a
 /// sphere test's `|d|²`) was hoisted into every ray's set-up.
@@ -613,7 +638,7 @@ where
 fn closest_others<F, P, C>(
     pack: &TrianglePack,
     first_lane: usize,
-    spheres: &[SphereRecord],
+    shapes: &[ShapeRecord],
     test: &mut F,
     s: &mut Closest,
     c: &mut C,
@@ -625,10 +650,8 @@ fn closest_others<F, P, C>(
     for lane in lanes(pack.others) {
         c.test_primitive();
         let prim = pack.prim[lane];
-        let hit = match spheres.get(first_lane + lane) {
-            Some(sphere) if sphere.is_sphere() => {
-                sphere.intersect(&s.ray).map(|t| t.into_hit(prim))
-            }
+        let hit = match shapes.get(first_lane + lane) {
+            Some(shape) if shape.is_kept() => shape.intersect(&s.ray).map(|t| t.into_hit(prim)),
             _ => test(prim, &s.ray).map(|hit| hit.into_hit(prim)),
         };
         if let Some(hit) = hit {
@@ -715,7 +738,7 @@ impl<T: PackKernel, F: FnMut(u32, &Ray) -> bool> PackedLeaves<'_, T, F> {
                 && any_other(
                     pack,
                     (first_pack + k) * PACK_LANES,
-                    self.spheres,
+                    self.shapes,
                     &mut self.test,
                     ray,
                 )
@@ -729,12 +752,12 @@ impl<T: PackKernel, F: FnMut(u32, &Ray) -> bool> PackedLeaves<'_, T, F> {
 fn any_other<F: FnMut(u32, &Ray) -> bool>(
     pack: &TrianglePack,
     first_lane: usize,
-    spheres: &[SphereRecord],
+    shapes: &[ShapeRecord],
     test: &mut F,
     ray: &Ray,
 ) -> bool {
-    lanes(pack.others).any(|lane| match spheres.get(first_lane + lane) {
-        Some(sphere) if sphere.is_sphere() => sphere.intersect(ray).is_some(),
+    lanes(pack.others).any(|lane| match shapes.get(first_lane + lane) {
+        Some(shape) if shape.is_kept() => shape.intersect(ray).is_some(),
         _ => test(pack.prim[lane], ray),
     })
 }
@@ -846,7 +869,7 @@ where
     }
 }
 
-impl<F, P, H> AnyLeaves for EveryHit<SphereLeaves<'_, F>, H>
+impl<F, P, H> AnyLeaves for EveryHit<ShapeLeaves<'_, F>, H>
 where
     F: FnMut(u32, &Ray) -> Option<P>,
     P: IntoHit,
@@ -856,12 +879,12 @@ where
     fn any(&mut self, first: u32, count: u32, ray: &Ray) -> bool {
         let leaves = &mut self.leaves;
         let range = first as usize..(first + count) as usize;
-        for (&prim, sphere) in leaves.prims[range.clone()]
+        for (&prim, shape) in leaves.prims[range.clone()]
             .iter()
-            .zip(&leaves.spheres[range])
+            .zip(&leaves.shapes[range])
         {
-            let hit = match sphere.is_sphere() {
-                true => sphere.intersect(ray).map(|t| t.into_hit(prim)),
+            let hit = match shape.is_kept() {
+                true => shape.intersect(ray).map(|t| t.into_hit(prim)),
                 false => (leaves.test)(prim, ray).map(|hit| hit.into_hit(prim)),
             };
             if let Some(hit) = hit {
@@ -904,8 +927,8 @@ where
         for (k, pack) in packs.iter().enumerate() {
             if pack.others != 0 {
                 let first_lane = (first_pack + k) * PACK_LANES;
-                let (spheres, test) = (leaves.spheres, &mut leaves.test);
-                every_other(pack, first_lane, spheres, test, ray, &mut self.found);
+                let (shapes, test) = (leaves.shapes, &mut leaves.test);
+                every_other(pack, first_lane, shapes, test, ray, &mut self.found);
             }
         }
     }
@@ -917,7 +940,7 @@ where
 fn every_other<F, P, H>(
     pack: &TrianglePack,
     first_lane: usize,
-    spheres: &[SphereRecord],
+    shapes: &[ShapeRecord],
     test: &mut F,
     ray: &Ray,
     found: &mut H,
@@ -928,8 +951,8 @@ fn every_other<F, P, H>(
 {
     for lane in lanes(pack.others) {
         let prim = pack.prim[lane];
-        let hit = match spheres.get(first_lane + lane) {
-            Some(sphere) if sphere.is_sphere() => sphere.intersect(ray).map(|t| t.into_hit(prim)),
+        let hit = match shapes.get(first_lane + lane) {
+            Some(shape) if shape.is_kept() => shape.intersect(ray).map(|t| t.into_hit(prim)),
             _ => test(prim, ray).map(|hit| hit.into_hit(prim)),
         };
         if let Some(hit) = hit {

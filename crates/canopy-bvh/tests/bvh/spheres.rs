@@ -1,19 +1,19 @@
-//! Spheres a wide tree keeps beside its leaves and tests itself, one ray at a time or in
-//! packets of coherent rays: the same closest hits (primitive and distance, bit for
-//! bit) and the same occlusion as a loop over every primitive, in every layout and
-//! instruction set, before and after the spheres move.
+//! Spheres and boxes a wide tree keeps beside its leaves and tests itself, one ray at a
+//! time or in packets of coherent rays: the same closest hits (primitive and distance,
+//! bit for bit), the same occlusion and the same every-hit lists as a loop over every
+//! primitive, in every layout and instruction set, before and after the spheres move.
 
 use crate::common;
 
 use canopy_bvh::{
-    intersect_sphere, intersect_triangle, Aabb, Blas, BlasParams, Builder, BvhWidth, Geometry, Hit,
-    Isa, PrimHit, Ray, RayQuery, ShearedRay, ALL_MASKS, PACKET,
+    intersect_box, intersect_sphere, intersect_triangle, Aabb, Blas, BlasParams, Builder, BvhWidth,
+    Geometry, Hit, Isa, KnownShape, PrimHit, Ray, RayQuery, ShearedRay, ALL_MASKS, PACKET,
 };
 use common::uniform;
 use glam::Vec3;
 
-/// Spheres, and some boxes (primitives the tree leaves to the closure) and triangles
-/// (which wide trees pack) among them.
+/// Spheres, and some boxes (half of them offered to the tree as known shapes, half left
+/// to the closure) and triangles (which wide trees pack) among them.
 #[derive(Clone)]
 struct Balls {
     spheres: Vec<(Vec3, f32)>,
@@ -64,9 +64,15 @@ impl Geometry for Balls {
         self.triangle_of(prim)
     }
 
-    fn sphere(&self, prim: u32) -> Option<(Vec3, f32)> {
-        let other = self.is_box(prim) || self.triangle_of(prim).is_some();
-        (!other).then(|| self.spheres[prim as usize])
+    fn known_shape(&self, prim: u32) -> Option<KnownShape> {
+        if self.triangle_of(prim).is_some() {
+            return None;
+        }
+        if self.is_box(prim) {
+            return (prim % 2 == 0).then(|| KnownShape::Box(self.sphere_box(prim)));
+        }
+        let (center, radius) = self.spheres[prim as usize];
+        Some(KnownShape::Sphere { center, radius })
     }
 
     fn has_triangles(&self) -> bool {
@@ -78,7 +84,10 @@ impl Geometry for Balls {
             return intersect_triangle(&v, ray, sheared);
         }
         let t = match self.is_box(prim) {
-            true => self.sphere_box(prim).ray_entry(ray),
+            true => {
+                let b = self.sphere_box(prim);
+                intersect_box(b.min, b.max, ray.origin, ray.inv_dir, ray.t_min, ray.t_max)
+            }
             false => {
                 let (c, r) = self.spheres[prim as usize];
                 intersect_sphere(c, r, ray)
@@ -177,6 +186,26 @@ fn occluded_in_packets(blas: &impl RayQuery, rays: &[Ray]) -> Vec<bool> {
     blocked
 }
 
+/// Every hit of `ray` in `blas`'s tree, as (primitive, distance bits) in order.
+fn every_hit(blas: &Blas<Balls>, ray: &Ray) -> Vec<(u32, u32)> {
+    let geometry = blas.geometry();
+    let mut hits = Vec::new();
+    let test = |p: u32, r: &Ray| geometry.intersect(p, r, &ShearedRay::new(r));
+    let tree = blas.tree().unwrap();
+    tree.for_each_hit(ray, test, |hit: Hit, _| {
+        hits.push((hit.prim, hit.t.to_bits()))
+    });
+    hits.sort_unstable();
+    hits
+}
+
+fn every_hit_by_brute_force(geometry: &Balls, ray: &Ray) -> Vec<(u32, u32)> {
+    let sheared = ShearedRay::new(ray);
+    (0..geometry.len() as u32)
+        .filter_map(|p| Some((p, geometry.intersect(p, ray, &sheared)?.t.to_bits())))
+        .collect()
+}
+
 /// Every layout, leaf size and instruction set against brute force, for `geometry`.
 fn check_against_brute_force(geometry: &Balls, rays: &[Ray], what: &str) {
     let brute = Blas::build(geometry.clone(), &BlasParams::new(None, BvhWidth::Eight));
@@ -195,15 +224,11 @@ fn check_against_brute_force(geometry: &Balls, rays: &[Ray], what: &str) {
             let mut params = BlasParams::new(Some(Builder::BinnedSah), width);
             params.build.max_leaf_size = leaf;
             let mut blas = Blas::build(geometry.clone(), &params);
-            let keeps = blas.tree().is_some_and(|t| match t {
-                canopy_bvh::Tree::Four(t) => t.has_spheres(),
-                canopy_bvh::Tree::Eight(t) => t.has_spheres(),
-                _ => false,
-            });
+            let keeps = blas.tree().is_some_and(|t| t.has_kept_shapes());
             assert_eq!(
                 keeps,
                 width != BvhWidth::Two,
-                "{what}: {width} wide keeps its spheres"
+                "{what}: {width} wide keeps its shapes"
             );
             for isa in Isa::supported() {
                 blas.tree_mut().unwrap().set_isa(isa).unwrap();
@@ -225,6 +250,13 @@ fn check_against_brute_force(geometry: &Balls, rays: &[Ray], what: &str) {
                     expected_blocked,
                     "{context}: in packets"
                 );
+                for (i, ray) in rays.iter().enumerate().step_by(7) {
+                    assert_eq!(
+                        every_hit(&blas, ray),
+                        every_hit_by_brute_force(geometry, ray),
+                        "{context}: every hit of ray {i}"
+                    );
+                }
             }
         }
     }
@@ -239,9 +271,19 @@ fn kept_spheres_give_brute_force_answers_alone_and_in_packets() {
 }
 
 #[test]
-fn boxes_among_the_spheres_go_to_the_closure() {
+fn boxes_among_the_spheres_are_kept_or_go_to_the_closure() {
     let geometry = balls(200, 4, 0, 13);
     check_against_brute_force(&geometry, &rays(17), "spheres and boxes");
+}
+
+/// Boxes alone, as a Cornell box's walls are (some nested, some rays starting inside):
+/// half kept, half tested by the closure.
+#[test]
+fn kept_boxes_give_brute_force_answers_alone_and_in_packets() {
+    for (count, seed) in [(2, 37), (PACKET + 3, 41), (120, 43)] {
+        let geometry = balls(count, 1, 0, seed);
+        check_against_brute_force(&geometry, &rays(seed + 1), &format!("{count} boxes"));
+    }
 }
 
 #[test]

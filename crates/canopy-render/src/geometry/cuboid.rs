@@ -1,5 +1,5 @@
 use super::{area_to_solid_angle, max_abs, Surface, SurfaceSample, POINT_ERROR_ULPS};
-use canopy_bvh::{Aabb, Ray};
+use canopy_bvh::{intersect_box, Aabb, KnownShape, Ray};
 use glam::{Mat3, Vec2, Vec3};
 
 /// A box given by its corners in its own frame, then rotated and translated into the
@@ -149,21 +149,18 @@ impl Cuboid {
             true => ray.inv_dir,
             false => self.direction_in_box_frame(false, ray.dir).recip(),
         };
-        let t0 = (self.local.min - origin) * inv_dir;
-        let t1 = (self.local.max - origin) * inv_dir;
-        let enter = t0.min(t1).max_element();
-        let exit = t0.max(t1).min_element();
-        if enter > exit {
-            return None;
-        }
-        let in_range = |t: f32| t >= ray.t_min && t <= ray.t_max;
-        if in_range(enter) {
-            Some(enter)
-        } else if in_range(exit) {
-            Some(exit)
-        } else {
-            None
-        }
+        let (min, max) = (self.local.min, self.local.max);
+        intersect_box(min, max, origin, inv_dir, ray.t_min, ray.t_max)
+    }
+
+    /// The box as one a tree tests itself ([`KnownShape::Box`]) where that gives this
+    /// box's own hits bit for bit: unturned and not moved (a translation of `+0.0`
+    /// exactly, which leaves the ray's origin as it is), as scene files' walls, floors and
+    /// lights are.
+    #[inline]
+    pub fn as_known_shape(&self) -> Option<KnownShape> {
+        let unmoved = self.translation.to_array().map(f32::to_bits) == [0; 3];
+        (self.unturned && unmoved).then_some(KnownShape::Box(self.local))
     }
 
     /// Area of the surface across each axis (x, y, z): two faces, or one where the box is
@@ -400,6 +397,11 @@ mod tests {
                 let r = ray(origin, center + 0.75 * point(1.0) * extent - origin);
                 let t = c.intersect_in(true, &r);
                 assert_eq!(t, c.intersect_in(false, &r), "{r:?}");
+                // Where a tree may keep the box, its test gives the same bits.
+                if let Some(known) = c.as_known_shape() {
+                    let bits = |t: Option<f32>| t.map(f32::to_bits);
+                    assert_eq!(bits(known.intersect(&r)), bits(t), "{r:?}");
+                }
                 if let Some(t) = t {
                     hits += 1;
                     assert_eq!(c.surface_in(true, &r, t), c.surface_in(false, &r, t));
@@ -415,5 +417,9 @@ mod tests {
         }
         let turned = Cuboid::new(boxes[0].local, Mat3::from_rotation_x(0.5), Vec3::ONE);
         assert!(!turned.unturned);
+        // Only boxes neither turned nor moved are offered to trees.
+        let kept = boxes.map(|c| c.as_known_shape().is_some());
+        assert_eq!(kept, [true, true, false]);
+        assert_eq!(turned.as_known_shape(), None);
     }
 }
