@@ -6,7 +6,7 @@
 //! at once) perform the same IEEE operations in the same order (no fused multiply-add), so
 //! every kernel returns bit-identical hits, in either [`TriangleTest`] mode.
 
-use crate::{PrimHit, Ray};
+use crate::{Aabb, KnownShape, PrimHit, Ray};
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
 
@@ -266,11 +266,12 @@ pub const PACK_LANES: usize = 4;
 pub const NO_PRIM: u32 = u32::MAX;
 
 /// Four primitives of a leaf, stored by lanes so that one SIMD test covers the triangles
-/// among them. Lanes that are not triangles (other primitives, tested by the caller's
-/// closure, or padding) hold NaN vertices, which no ray hits.
+/// among them. Lanes that are not triangles hold NaN vertices (padding, and primitives
+/// tested by the caller's closure) or a kept shape in the vertex slots (see
+/// [`TrianglePack::set_kept`]); the triangle tests look at `triangles`' lanes only.
 ///
 /// Byte layout (176 bytes, 16-aligned): `v[vertex][axis][lane]` (0..144), `prim` (144..160),
-/// `triangles` (160..164), `others` (164..168), padding (168..176).
+/// `triangles` (160..164), `others` (164..168), `spheres` (168..172), `boxes` (172..176).
 #[repr(C, align(16))]
 #[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
 pub struct TrianglePack {
@@ -279,9 +280,14 @@ pub struct TrianglePack {
     pub prim: [u32; PACK_LANES],
     /// Bit `i` set: lane `i` is a triangle.
     pub triangles: u32,
-    /// Bit `i` set: lane `i` is another primitive, tested by the caller.
+    /// Bit `i` set: lane `i` is another primitive: a kept sphere or box, else tested by
+    /// the caller.
     pub others: u32,
-    _pad: [u32; 2],
+    /// Bit `i` set: lane `i` is a kept sphere, its centre in `v[0]` and radius in
+    /// `v[1][0]`.
+    pub spheres: u32,
+    /// Bit `i` set: lane `i` is a kept axis-aligned box, its corners in `v[0]` and `v[1]`.
+    pub boxes: u32,
 }
 
 const _: () = assert!(std::mem::size_of::<TrianglePack>() == 176);
@@ -293,7 +299,8 @@ impl TrianglePack {
         prim: [NO_PRIM; PACK_LANES],
         triangles: 0,
         others: 0,
-        _pad: [0; 2],
+        spheres: 0,
+        boxes: 0,
     };
 
     pub fn set_triangle(&mut self, lane: usize, prim: u32, v: [Vec3; 3]) {
@@ -316,6 +323,61 @@ impl TrianglePack {
     pub fn set_other(&mut self, lane: usize, prim: u32) {
         self.prim[lane] = prim;
         self.others |= 1 << lane;
+    }
+
+    /// Keeps `shape` in other-primitive lane `lane`'s vertex slots (or, given `None`,
+    /// leaves the lane to the caller's closure again), so that traversal tests it from the
+    /// pack it has loaded anyway: no array beside the packs, no call.
+    pub fn set_kept(&mut self, lane: usize, shape: Option<KnownShape>) {
+        debug_assert!(
+            self.others & 1 << lane != 0,
+            "lane {lane} is not another primitive"
+        );
+        let bit = 1 << lane;
+        (self.spheres, self.boxes) = (self.spheres & !bit, self.boxes & !bit);
+        let mut put = |vertex: usize, p: Vec3| {
+            for axis in 0..3 {
+                self.v[vertex][axis][lane] = p[axis];
+            }
+        };
+        match shape {
+            Some(KnownShape::Sphere { center, radius }) => {
+                put(0, center);
+                put(1, Vec3::new(radius, f32::NAN, f32::NAN));
+                self.spheres |= bit;
+            }
+            Some(KnownShape::Box(b)) => {
+                put(0, b.min);
+                put(1, b.max);
+                self.boxes |= bit;
+            }
+            None => {
+                put(0, Vec3::NAN);
+                put(1, Vec3::NAN);
+            }
+        }
+    }
+
+    /// The shape kept in lane `lane` ([`TrianglePack::set_kept`]), if any.
+    #[inline(always)]
+    pub fn kept(&self, lane: usize) -> Option<KnownShape> {
+        let at = |vertex: usize| {
+            let p = &self.v[vertex];
+            Vec3::new(p[0][lane], p[1][lane], p[2][lane])
+        };
+        if self.spheres & 1 << lane != 0 {
+            let (center, radius) = (at(0), self.v[1][0][lane]);
+            Some(KnownShape::Sphere { center, radius })
+        } else if self.boxes & 1 << lane != 0 {
+            Some(KnownShape::Box(Aabb::new(at(0), at(1))))
+        } else {
+            None
+        }
+    }
+
+    /// Whether some lane keeps a shape.
+    pub fn keeps_shapes(&self) -> bool {
+        self.spheres | self.boxes != 0
     }
 
     fn lane_edges(&self, lane: usize, ray: &PackRay) -> EdgeInput {

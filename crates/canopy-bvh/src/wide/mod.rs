@@ -119,8 +119,8 @@ pub struct BvhN<const N: usize> {
     prim_indices: Vec<u32>,
     /// Empty, or `packs[k]` holds positions `4k..4k + 4` of `prim_indices`.
     packs: Vec<TrianglePack>,
-    /// Empty, or the kept shape (or none) at each position of `prim_indices` (see
-    /// [`BvhN::store_shapes`]).
+    /// Empty, or the kept shape (or none) at each position of `prim_indices`, in trees
+    /// without triangle packs (whose lanes keep their shapes; see [`BvhN::store_shapes`]).
     shapes: Vec<ShapeRecord>,
     /// Whether `shapes` holds every leaf entry: no entry is left to the closure.
     every_shape_kept: bool,
@@ -371,14 +371,26 @@ impl<const N: usize> BvhN<N> {
         self.prim_indices = order;
     }
 
-    /// Keeps the leaves' spheres and boxes beside them, in leaf order (beside the triangle
-    /// packs' lanes where there are packs), so that traversal tests them itself: testing
-    /// one is then a load of its record, not a call of the caller's closure and a lookup
-    /// of the primitive. `shape(prim)` gives a primitive as a [`KnownShape`] where its hit
+    /// Keeps the leaves' spheres and boxes beside them, in leaf order (in their lanes of
+    /// the triangle packs where there are packs), so that traversal tests them itself:
+    /// testing one is then a load of its record, not a call of the caller's closure and a
+    /// lookup of the primitive. `shape(prim)` gives a primitive as a [`KnownShape`] where its hit
     /// is that shape's; other primitives stay with the closure. A tree with none is left
     /// as it is. Call it after [`BvhN::pack_triangles`], and again after the shapes move.
     pub fn store_shapes(&mut self, shape: impl Fn(u32) -> Option<KnownShape> + Sync) {
         self.shapes = Vec::new();
+        self.every_shape_kept = false;
+        if !self.packs.is_empty() {
+            // Beside triangles, a shape sits in its lane's unused vertex slots: a mesh
+            // with a floor keeps one box, not a record for each of its triangles.
+            self.packs.par_iter_mut().for_each(|pack| {
+                let others = pack.others;
+                for lane in (0..PACK_LANES).filter(|&lane| others & 1 << lane != 0) {
+                    pack.set_kept(lane, shape(pack.prim[lane]));
+                }
+            });
+            return;
+        }
         let records: Vec<ShapeRecord> = self
             .prim_indices
             .par_iter()
@@ -394,7 +406,7 @@ impl<const N: usize> BvhN<N> {
     /// Whether traversal tests some primitives itself as known shapes
     /// ([`BvhN::store_shapes`]).
     pub fn has_kept_shapes(&self) -> bool {
-        !self.shapes.is_empty()
+        !self.shapes.is_empty() || self.packs.iter().any(TrianglePack::keeps_shapes)
     }
 
     /// Whether the leaves are tested as [`ShapeLeaves`]: shapes kept, no triangle packs.
@@ -445,12 +457,7 @@ impl<const N: usize> BvhN<N> {
             };
             unsafe { walk_packet::<N, K, _, ANY>(nodes, rays, &mut leaves) }
         } else {
-            let mut leaves = PackedPacketLeaves::<T, _>::new(
-                &self.packs,
-                &self.shapes,
-                self.triangle_test,
-                test,
-            );
+            let mut leaves = PackedPacketLeaves::<T, _>::new(&self.packs, self.triangle_test, test);
             unsafe { walk_packet::<N, K, _, ANY>(nodes, rays, &mut leaves) }
         }
     }
@@ -782,13 +789,11 @@ macro_rules! with_leaves {
             $body
         } else if bvh.triangle_test == TriangleTest::Fast {
             let $leaves = PackedLeaves::<<$kernel as crate::triangle::PackKernel>::Fast, _>::new(
-                &bvh.packs,
-                &bvh.shapes,
-                test,
+                &bvh.packs, test,
             );
             $body
         } else {
-            let $leaves = PackedLeaves::<$kernel, _>::new(&bvh.packs, &bvh.shapes, test);
+            let $leaves = PackedLeaves::<$kernel, _>::new(&bvh.packs, test);
             $body
         }
     }};

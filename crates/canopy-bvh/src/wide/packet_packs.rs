@@ -15,8 +15,7 @@ use super::traverse::{
     any_from, closest_from, lanes, leaf_packs, offer_lane, shape_packet, AloneWalk, Closest,
     PackedLeaves, PacketLeaves, WalkNodes,
 };
-use crate::shapes::ShapeRecord;
-use crate::triangle::{PackKernel, ShearedRay, TrianglePack, TriangleTest, PACK_LANES};
+use crate::triangle::{PackKernel, ShearedRay, TrianglePack, TriangleTest};
 use crate::{Hit, IntoHit, PrimHit, Ray};
 use std::marker::PhantomData;
 
@@ -138,8 +137,6 @@ struct LaneHits {
 /// Leaves stored as triangle packs ([`PackedLeaves`]), tested for a packet's rays.
 pub(crate) struct PackedPacketLeaves<'a, T, F> {
     pub packs: &'a [TrianglePack],
-    /// Empty, or the kept shape (or none) at each lane of `packs` (four a pack).
-    pub shapes: &'a [ShapeRecord],
     pub triangle_test: TriangleTest,
     pub test: F,
     /// The packet's shears, made at its first leaf: `Some(None)` where they differ.
@@ -148,15 +145,9 @@ pub(crate) struct PackedPacketLeaves<'a, T, F> {
 }
 
 impl<'a, T, F> PackedPacketLeaves<'a, T, F> {
-    pub fn new(
-        packs: &'a [TrianglePack],
-        shapes: &'a [ShapeRecord],
-        triangle_test: TriangleTest,
-        test: F,
-    ) -> Self {
+    pub fn new(packs: &'a [TrianglePack], triangle_test: TriangleTest, test: F) -> Self {
         Self {
             packs,
-            shapes,
             triangle_test,
             test,
             shear: None,
@@ -185,26 +176,25 @@ where
             .get_or_insert_with(|| PacketShear::new(group.rays, self.triangle_test))
         else {
             // Rays sheared differently: the single-ray pack test, one lane at a time.
-            let (packs, shapes, test) = (self.packs, self.shapes, &mut self.test);
+            let (packs, test) = (self.packs, &mut self.test);
             match self.triangle_test {
                 TriangleTest::Watertight => {
-                    let mut single = PackedLeaves::<T, _>::new(packs, shapes, test);
+                    let mut single = PackedLeaves::<T, _>::new(packs, test);
                     group.each(&mut single, first, count, t_max, best);
                 }
                 TriangleTest::Fast => {
-                    let mut single = PackedLeaves::<T::Fast, _>::new(packs, shapes, test);
+                    let mut single = PackedLeaves::<T::Fast, _>::new(packs, test);
                     group.each(&mut single, first, count, t_max, best);
                 }
             }
             return;
         };
-        let first_pack = first as usize / PACK_LANES;
         let mut hits = LaneHits {
             t: [0.0; PACKET],
             u: [0.0; PACKET],
             v: [0.0; PACKET],
         };
-        for (k, pack) in leaf_packs(self.packs, first, count).iter().enumerate() {
+        for pack in leaf_packs(self.packs, first, count) {
             for lane in lanes(pack.triangles) {
                 let v = [0, 1, 2].map(|vertex| pack.v[vertex].map(|axis| axis[lane]));
                 let hit = shear.hit_lanes(v, group.active, &group.packet.t_min, t_max, &mut hits);
@@ -219,11 +209,9 @@ where
             }
             for lane in lanes(pack.others) {
                 let prim = pack.prim[lane];
-                match self.shapes.get((first_pack + k) * PACK_LANES + lane) {
-                    Some(shape) if shape.is_kept() => {
-                        shape_packet(shape, prim, &group, t_max, best);
-                    }
-                    _ => {
+                match pack.kept(lane) {
+                    Some(shape) => shape_packet(shape, prim, &group, t_max, best),
+                    None => {
                         for ray in lanes(group.active) {
                             let single = Ray {
                                 t_max: t_max[ray],
@@ -246,18 +234,18 @@ where
         search: Closest,
         walk: &mut AloneWalk,
     ) -> Closest {
-        let (packs, shapes, test) = (self.packs, self.shapes, &mut self.test);
+        let (packs, test) = (self.packs, &mut self.test);
         let (stack, counter) = (&mut walk.closest, &mut ());
         // SAFETY: the caller's guarantee; the pack kernels share the node kernel's
         // instruction set.
         unsafe {
             match self.triangle_test {
                 TriangleTest::Watertight => {
-                    let mut single = PackedLeaves::<T, _>::new(packs, shapes, test);
+                    let mut single = PackedLeaves::<T, _>::new(packs, test);
                     closest_from::<N, K, _, _>(nodes, start, search, &mut single, counter, stack)
                 }
                 TriangleTest::Fast => {
-                    let mut single = PackedLeaves::<T::Fast, _>::new(packs, shapes, test);
+                    let mut single = PackedLeaves::<T::Fast, _>::new(packs, test);
                     closest_from::<N, K, _, _>(nodes, start, search, &mut single, counter, stack)
                 }
             }
@@ -272,18 +260,18 @@ where
         ray: &Ray,
         walk: &mut AloneWalk,
     ) -> bool {
-        let (packs, shapes, test) = (self.packs, self.shapes, &mut self.test);
+        let (packs, test) = (self.packs, &mut self.test);
         let blocks = |prim: u32, ray: &Ray| test(prim, ray).is_some();
         let stack = &mut walk.any;
         // SAFETY: as in `closest_alone`.
         unsafe {
             match self.triangle_test {
                 TriangleTest::Watertight => {
-                    let mut single = PackedLeaves::<T, _>::new(packs, shapes, blocks);
+                    let mut single = PackedLeaves::<T, _>::new(packs, blocks);
                     any_from::<N, K, _>(nodes, start, ray, &mut single, stack)
                 }
                 TriangleTest::Fast => {
-                    let mut single = PackedLeaves::<T::Fast, _>::new(packs, shapes, blocks);
+                    let mut single = PackedLeaves::<T::Fast, _>::new(packs, blocks);
                     any_from::<N, K, _>(nodes, start, ray, &mut single, stack)
                 }
             }

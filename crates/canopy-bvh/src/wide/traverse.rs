@@ -267,16 +267,15 @@ where
         best: &mut [Option<Hit>; PACKET],
     ) {
         for position in first as usize..(first + count) as usize {
-            let shape = &self.shapes[position];
             let prim = self.prims[position];
-            if !shape.is_kept() {
+            let Some(shape) = self.shapes[position].0 else {
                 let mut single = ClosureLeaves {
                     prims: self.prims,
                     test: &mut self.test,
                 };
                 lanes.each(&mut single, position as u32, 1, t_max, best);
                 continue;
-            }
+            };
             shape_packet(shape, prim, &lanes, t_max, best);
         }
     }
@@ -344,18 +343,15 @@ pub(crate) fn offer_lane(
 /// each ray's closest hit.
 #[inline(always)]
 pub(crate) fn shape_packet(
-    shape: &ShapeRecord,
+    shape: KnownShape,
     prim: u32,
     lanes: &Lanes,
     t_max: &mut [f32; PACKET],
     best: &mut [Option<Hit>; PACKET],
 ) {
-    let t = match shape.0 {
-        Some(KnownShape::Sphere { center, radius }) => {
-            sphere_lanes(center, radius, lanes.packet, t_max)
-        }
-        Some(KnownShape::Box(b)) => box_lanes(b, lanes.packet, t_max),
-        None => return,
+    let t = match shape {
+        KnownShape::Sphere { center, radius } => sphere_lanes(center, radius, lanes.packet, t_max),
+        KnownShape::Box(b) => box_lanes(b, lanes.packet, t_max),
     };
     let mut hit = [false; PACKET];
     for (hit, t) in hit.iter_mut().zip(&t) {
@@ -447,9 +443,6 @@ impl<F: FnMut(u32, &Ray) -> bool> AnyLeaves for ShapeLeaves<'_, F> {
 /// by the caller's closure.
 pub(crate) struct PackedLeaves<'a, T, F> {
     pub packs: &'a [TrianglePack],
-    /// Empty, or the kept shape (or none) at each lane of `packs` (four a pack), tested
-    /// here.
-    pub shapes: &'a [ShapeRecord],
     /// The ray prepared for pack tests, made at the first leaf: a ray that misses every
     /// leaf (most rays past a mesh's silhouette) never pays for it.
     pub ray: Option<PackRay>,
@@ -461,12 +454,11 @@ pub(crate) struct PackedLeaves<'a, T, F> {
 }
 
 impl<'a, T, F> PackedLeaves<'a, T, F> {
-    /// Leaves of `packs` (and `shapes` beside them, or none), nothing prepared yet.
+    /// Leaves of `packs`, nothing prepared yet.
     #[inline(always)]
-    pub fn new(packs: &'a [TrianglePack], shapes: &'a [ShapeRecord], test: F) -> Self {
+    pub fn new(packs: &'a [TrianglePack], test: F) -> Self {
         Self {
             packs,
-            shapes,
             ray: None,
             hits: PackHits::default(),
             test,
@@ -593,7 +585,6 @@ where
     fn closest_packs<C: TraversalCounter, const PACKS: usize>(
         &mut self,
         packs: &[TrianglePack; PACKS],
-        first_pack: usize,
         pack_ray: &PackRay,
         s: &mut Closest,
         c: &mut C,
@@ -613,36 +604,22 @@ where
                 s.offer(Hit::new(prim, hits.lane(lane)));
             }
         }
-        for (k, pack) in packs.iter().enumerate() {
+        for pack in packs {
             if pack.others != 0 {
-                let shapes = self.shapes;
-                closest_others(
-                    pack,
-                    (first_pack + k) * PACK_LANES,
-                    shapes,
-                    &mut self.test,
-                    s,
-                    c,
-                );
+                closest_others(pack, &mut self.test, s, c);
             }
         }
     }
 }
 
-/// Offers the hits of a pack's lanes that are not triangles: shapes stored beside the
-/// packs, the rest by the caller's closure. Out of line and cold: packed trees are built
+/// Offers the hits of a pack's lanes that are not triangles: the shapes kept in their
+/// lanes, the rest by the caller's closure. Out of line and cold: packed trees are built
 /// over meshes of (nearly) only triangles, and inlined, its loop-invariant work (a
 /// sphere test's `|d|²`) was hoisted into every ray's set-up.
 #[cold]
 #[inline(never)]
-fn closest_others<F, P, C>(
-    pack: &TrianglePack,
-    first_lane: usize,
-    shapes: &[ShapeRecord],
-    test: &mut F,
-    s: &mut Closest,
-    c: &mut C,
-) where
+fn closest_others<F, P, C>(pack: &TrianglePack, test: &mut F, s: &mut Closest, c: &mut C)
+where
     F: FnMut(u32, &Ray) -> Option<P>,
     P: IntoHit,
     C: TraversalCounter,
@@ -650,9 +627,9 @@ fn closest_others<F, P, C>(
     for lane in lanes(pack.others) {
         c.test_primitive();
         let prim = pack.prim[lane];
-        let hit = match shapes.get(first_lane + lane) {
-            Some(shape) if shape.is_kept() => shape.intersect(&s.ray).map(|t| t.into_hit(prim)),
-            _ => test(prim, &s.ray).map(|hit| hit.into_hit(prim)),
+        let hit = match pack.kept(lane) {
+            Some(shape) => shape.intersect(&s.ray).map(|t| t.into_hit(prim)),
+            None => test(prim, &s.ray).map(|hit| hit.into_hit(prim)),
         };
         if let Some(hit) = hit {
             s.offer(hit);
@@ -675,14 +652,11 @@ where
     fn closest<C: TraversalCounter>(&mut self, first: u32, count: u32, s: &mut Closest, c: &mut C) {
         let pack_ray = self.pack_ray(&s.ray);
         let (pairs, rest) = pairs_and_rest::<T>(leaf_packs(self.packs, first, count));
-        let mut at = first as usize / PACK_LANES;
         for pair in pairs {
-            self.closest_packs(pair, at, &pack_ray, s, c);
-            at += 2;
+            self.closest_packs(pair, &pack_ray, s, c);
         }
         for pack in rest {
-            self.closest_packs(std::array::from_ref(pack), at, &pack_ray, s, c);
-            at += 1;
+            self.closest_packs(std::array::from_ref(pack), &pack_ray, s, c);
         }
     }
 
@@ -720,7 +694,6 @@ impl<T: PackKernel, F: FnMut(u32, &Ray) -> bool> PackedLeaves<'_, T, F> {
     fn any_packs<const PACKS: usize>(
         &mut self,
         packs: &[TrianglePack; PACKS],
-        first_pack: usize,
         pack_ray: &PackRay,
         ray: &Ray,
         scratch: &mut PackHits,
@@ -733,32 +706,19 @@ impl<T: PackKernel, F: FnMut(u32, &Ray) -> bool> PackedLeaves<'_, T, F> {
         {
             return true;
         }
-        packs.iter().enumerate().any(|(k, pack)| {
-            pack.others != 0
-                && any_other(
-                    pack,
-                    (first_pack + k) * PACK_LANES,
-                    self.shapes,
-                    &mut self.test,
-                    ray,
-                )
-        })
+        packs
+            .iter()
+            .any(|pack| pack.others != 0 && any_other(pack, &mut self.test, ray))
     }
 }
 
 /// Whether a pack's lanes that are not triangles block `ray` (see [`closest_others`]).
 #[cold]
 #[inline(never)]
-fn any_other<F: FnMut(u32, &Ray) -> bool>(
-    pack: &TrianglePack,
-    first_lane: usize,
-    shapes: &[ShapeRecord],
-    test: &mut F,
-    ray: &Ray,
-) -> bool {
-    lanes(pack.others).any(|lane| match shapes.get(first_lane + lane) {
-        Some(shape) if shape.is_kept() => shape.intersect(ray).is_some(),
-        _ => test(pack.prim[lane], ray),
+fn any_other<F: FnMut(u32, &Ray) -> bool>(pack: &TrianglePack, test: &mut F, ray: &Ray) -> bool {
+    lanes(pack.others).any(|lane| match pack.kept(lane) {
+        Some(shape) => shape.intersect(ray).is_some(),
+        None => test(pack.prim[lane], ray),
     })
 }
 
@@ -775,18 +735,15 @@ impl<T: PackKernel, F: FnMut(u32, &Ray) -> bool> AnyLeaves for PackedLeaves<'_, 
         let (pairs, rest) = pairs_and_rest::<T>(leaf_packs(self.packs, first, count));
         // Loops, not closures: a closure that holds an 8-lane test and is not inlined
         // would be compiled without AVX and call every intrinsic.
-        let mut at = first as usize / PACK_LANES;
         for pair in pairs {
-            if self.any_packs(pair, at, &pack_ray, ray, &mut scratch) {
+            if self.any_packs(pair, &pack_ray, ray, &mut scratch) {
                 return true;
             }
-            at += 2;
         }
         for pack in rest {
-            if self.any_packs(std::array::from_ref(pack), at, &pack_ray, ray, &mut scratch) {
+            if self.any_packs(std::array::from_ref(pack), &pack_ray, ray, &mut scratch) {
                 return true;
             }
-            at += 1;
         }
         false
     }
@@ -907,7 +864,6 @@ where
     fn every_in_packs<const PACKS: usize>(
         &mut self,
         packs: &[TrianglePack; PACKS],
-        first_pack: usize,
         pack_ray: &PackRay,
         ray: &Ray,
     ) {
@@ -924,11 +880,9 @@ where
                 (self.found)(hit, Some(pack.vertices(in_pack)));
             }
         }
-        for (k, pack) in packs.iter().enumerate() {
+        for pack in packs {
             if pack.others != 0 {
-                let first_lane = (first_pack + k) * PACK_LANES;
-                let (shapes, test) = (leaves.shapes, &mut leaves.test);
-                every_other(pack, first_lane, shapes, test, ray, &mut self.found);
+                every_other(pack, &mut leaves.test, ray, &mut self.found);
             }
         }
     }
@@ -937,23 +891,17 @@ where
 /// Reports the hits on a pack's lanes that are not triangles (see [`closest_others`]).
 #[cold]
 #[inline(never)]
-fn every_other<F, P, H>(
-    pack: &TrianglePack,
-    first_lane: usize,
-    shapes: &[ShapeRecord],
-    test: &mut F,
-    ray: &Ray,
-    found: &mut H,
-) where
+fn every_other<F, P, H>(pack: &TrianglePack, test: &mut F, ray: &Ray, found: &mut H)
+where
     F: FnMut(u32, &Ray) -> Option<P>,
     P: IntoHit,
     H: FnMut(Hit, Option<[Vec3; 3]>),
 {
     for lane in lanes(pack.others) {
         let prim = pack.prim[lane];
-        let hit = match shapes.get(first_lane + lane) {
-            Some(shape) if shape.is_kept() => shape.intersect(ray).map(|t| t.into_hit(prim)),
-            _ => test(prim, ray).map(|hit| hit.into_hit(prim)),
+        let hit = match pack.kept(lane) {
+            Some(shape) => shape.intersect(ray).map(|t| t.into_hit(prim)),
+            None => test(prim, ray).map(|hit| hit.into_hit(prim)),
         };
         if let Some(hit) = hit {
             found(hit, None);
@@ -979,14 +927,11 @@ where
         let packs = self.leaves.packs;
         let (pairs, rest) = pairs_and_rest::<T>(leaf_packs(packs, first, count));
         // Loops, not closures, as in the any-hit test above.
-        let mut at = first as usize / PACK_LANES;
         for pair in pairs {
-            self.every_in_packs(pair, at, &pack_ray, ray);
-            at += 2;
+            self.every_in_packs(pair, &pack_ray, ray);
         }
         for pack in rest {
-            self.every_in_packs(std::array::from_ref(pack), at, &pack_ray, ray);
-            at += 1;
+            self.every_in_packs(std::array::from_ref(pack), &pack_ray, ray);
         }
         false
     }

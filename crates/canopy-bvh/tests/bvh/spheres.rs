@@ -292,23 +292,29 @@ fn spheres_beside_triangle_packs_are_tested_there() {
     check_against_brute_force(&geometry, &rays(31), "spheres, boxes and triangles");
 }
 
+/// Spheres and boxes kept beside the leaves, or in the triangle packs' lanes (the second
+/// geometry), move with the geometry.
 #[test]
-fn moved_spheres_are_tested_where_they_are_now() {
-    let params = BlasParams::new(Some(Builder::BinnedSah), BvhWidth::Eight);
-    let mut blas = Blas::build(balls(150, 0, 0, 19), &params);
-    let rays = rays(23);
-    let before = closest_in_packets(&blas, &rays);
-    blas.update(|g| {
-        for (c, r) in &mut g.spheres[1..] {
-            *c += Vec3::new(0.3, 0.1, -0.2);
-            *r *= 1.1;
-        }
-    })
-    .unwrap();
-    let moved = blas.geometry().clone();
-    let brute = Blas::build(moved, &BlasParams::new(None, BvhWidth::Eight));
-    let expected = closest_each(&brute, &rays);
-    assert_ne!(before, expected, "the move changes some hits");
-    assert_eq!(closest_in_packets(&blas, &rays), expected);
-    assert_eq!(closest_each(&blas, &rays), expected);
+fn moved_spheres_and_boxes_are_tested_where_they_are_now() {
+    for (box_every, triangle_every) in [(0, 0), (5, 3)] {
+        let params = BlasParams::new(Some(Builder::BinnedSah), BvhWidth::Eight);
+        let mut blas = Blas::build(balls(150, box_every, triangle_every, 19), &params);
+        let rays = rays(23);
+        let before = closest_in_packets(&blas, &rays);
+        blas.update(|g| {
+            for (c, r) in &mut g.spheres[1..] {
+                *c += Vec3::new(0.3, 0.1, -0.2);
+                *r *= 1.1;
+            }
+        })
+        .unwrap();
+        let moved = blas.geometry().clone();
+        let brute = Blas::build(moved, &BlasParams::new(None, BvhWidth::Eight));
+        let expected = closest_each(&brute, &rays);
+        let blocked: Vec<bool> = rays.iter().map(|r| brute.occluded(r)).collect();
+        assert_ne!(before, expected, "the move changes some hits");
+        assert_eq!(closest_in_packets(&blas, &rays), expected);
+        assert_eq!(closest_each(&blas, &rays), expected);
+        assert_eq!(occluded_each(&blas, &rays), blocked);
+    }
 }
