@@ -269,6 +269,8 @@ where
         for position in first as usize..(first + count) as usize {
             let prim = self.prims[position];
             let Some(shape) = self.shapes[position].0 else {
+                // Kept for completeness: the tree sends packets here only where every
+                // entry is kept (`BvhN::traces_packets`).
                 let mut single = ClosureLeaves {
                     prims: self.prims,
                     test: &mut self.test,
