@@ -69,7 +69,9 @@ impl Geometry for Balls {
             return None;
         }
         if self.is_box(prim) {
-            return (prim % 2 == 0).then(|| KnownShape::Box(self.sphere_box(prim)));
+            return prim
+                .is_multiple_of(2)
+                .then(|| KnownShape::Box(self.sphere_box(prim)));
         }
         let (center, radius) = self.spheres[prim as usize];
         Some(KnownShape::Sphere { center, radius })
