@@ -27,14 +27,7 @@ pub fn intersect_sphere(center: Vec3, radius: f32, ray: &Ray) -> Option<f32> {
     let q = b + b.signum() * (a * discriminant).sqrt();
     let (t0, t1) = if q == 0.0 { (0.0, 0.0) } else { (c / q, q / a) };
     let (near, far) = if t0 <= t1 { (t0, t1) } else { (t1, t0) };
-    let in_range = |t: f32| t >= ray.t_min && t <= ray.t_max;
-    if in_range(near) {
-        Some(near)
-    } else if in_range(far) {
-        Some(far)
-    } else {
-        None
-    }
+    first_in_range(near, far, ray.t_min, ray.t_max)
 }
 
 /// Ray/box slab test, the box given by its corners `min` and `max` and the ray by an
@@ -58,11 +51,18 @@ pub fn intersect_box(
     if enter > exit {
         return None;
     }
+    first_in_range(enter, exit, t_min, t_max)
+}
+
+/// `near` if it lies in `[t_min, t_max]`, else `far` if it does, else `None`: a solid's
+/// entry, or its exit for a ray that starts inside.
+#[inline(always)]
+fn first_in_range(near: f32, far: f32, t_min: f32, t_max: f32) -> Option<f32> {
     let in_range = |t: f32| t >= t_min && t <= t_max;
-    if in_range(enter) {
-        Some(enter)
-    } else if in_range(exit) {
-        Some(exit)
+    if in_range(near) {
+        Some(near)
+    } else if in_range(far) {
+        Some(far)
     } else {
         None
     }
