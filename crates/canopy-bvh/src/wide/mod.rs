@@ -8,6 +8,7 @@
 //! lane per slot, so that one SIMD box test covers a node ([`kernels`]). Leaves may hold
 //! their triangles in packs of four ([`BvhN::pack_triangles`]) tested together.
 
+mod frustum;
 mod kernels;
 mod packet;
 mod packet_packs;

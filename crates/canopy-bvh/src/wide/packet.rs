@@ -20,6 +20,7 @@
 //! The lane loops are plain arrays: compiled inside the dispatch's AVX2 or AVX-512
 //! function they become vector instructions, and elsewhere they are the scalar twin.
 
+use super::frustum::{walk_frustum, Frustum};
 use super::kernels::NodeKernel;
 use super::traverse::{lanes, AloneWalk, Closest, ClosestLeaves, PacketLeaves, WalkNodes};
 use super::{WideNode, EMPTY_SLOT};
@@ -42,7 +43,7 @@ pub(crate) struct PacketRays {
 impl PacketRays {
     /// Lanes past the end of `rays` copy its first ray.
     #[inline(always)]
-    fn new(rays: &[Ray]) -> Self {
+    pub(super) fn new(rays: &[Ray]) -> Self {
         let mut packet = Self {
             origin: [[0.0; PACKET]; 3],
             dir: [[0.0; PACKET]; 3],
@@ -66,7 +67,7 @@ impl PacketRays {
     /// The lanes whose rays enter `slot` of `node` within `[t_min, t_max]`, and each
     /// lane's entry distance: [`super::kernels::ScalarNode`]'s test, lane by lane.
     #[inline(always)]
-    fn enter<const N: usize>(
+    pub(super) fn enter<const N: usize>(
         &self,
         node: &WideNode<N>,
         slot: usize,
@@ -216,6 +217,16 @@ where
         mask | (r.is_traceable() as u32) << lane
     });
     let packet = PacketRays::new(rays);
+    if traceable == 0 {
+        return ([None; PACKET], 0);
+    }
+    // Nearly parallel rays walk as one.
+    if let Some(frustum) = Frustum::new(rays, traceable) {
+        // SAFETY: the caller's guarantee.
+        return unsafe {
+            walk_frustum::<N, K, L, ANY>(nodes, rays, &packet, &frustum, traceable, leaves)
+        };
+    }
     // Each ray's range, shrunk to its closest hit so far, and that hit.
     let mut t_max = [0.0; PACKET];
     for (t_max, ray) in t_max.iter_mut().zip(rays) {

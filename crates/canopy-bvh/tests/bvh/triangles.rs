@@ -403,10 +403,65 @@ fn packets_of_awkward_rays_match_brute_force_in_every_layout() {
     rays.insert(37, Ray::new(Vec3::NAN, -Vec3::Y, 0.0, f32::INFINITY));
     rays.insert(70, Ray::new(eye, Vec3::ZERO, 0.0, f32::INFINITY));
     rays.insert(90, Ray::new(eye, -Vec3::Y, 0.0, f32::NAN));
+    assert_packets_answer_as_brute_force(&prims, &rays);
+}
+
+/// Packets of nearly parallel rays, as a pixel's samples and the shadow rays from its
+/// points to a light are, which walk the tree as one (a frustum about the packet, not
+/// each ray): every ray's closest hit and occlusion are brute force's, in every layout and
+/// instruction set. The packets run the same way along every axis, and some pass by
+/// the edges of boxes and triangles with part of their rays.
+#[test]
+fn packets_of_nearly_parallel_rays_match_brute_force_in_every_layout() {
+    let n = 8;
+    let mut prims = unit_grid(n, 5);
+    for k in 0..12 {
+        let a = Vec3::new(0.1 * k as f32, 0.3, 0.5);
+        prims.push(Prim::Box(Aabb::new(a, a + 0.05)));
+        prims.push(Prim::Triangle([
+            a,
+            a + Vec3::X,
+            a + Vec3::new(0.0, 0.4, 0.9),
+        ]));
+    }
+    let mut next = uniform(31);
+    let mut rays = Vec::new();
+    let eye = Vec3::new(-0.4, 2.0, -0.3);
+    let light = Vec3::new(1.3, 1.5, 1.2);
+    let pixels = 12;
+    for y in 0..pixels {
+        for x in 0..pixels {
+            // A pixel's 16 samples (a pixel a hundredth of the grid wide) from one eye,
+            // then from points on a small lens, then the shadow rays from where the first
+            // ones land towards a small square light: all within a degree of each other.
+            let corner = Vec3::new(x as f32, 0.0, y as f32) / pixels as f32;
+            let samples: Vec<Vec3> = (0..PACKET)
+                .map(|_| corner + Vec3::new(next(), 0.0, next()) * 0.0104)
+                .collect();
+            for &p in &samples {
+                rays.push(Ray::new(eye, p - eye, 0.0, f32::INFINITY));
+            }
+            for &p in &samples {
+                let o = eye + Vec3::new(next(), 0.0, next()) * 0.003;
+                rays.push(Ray::new(o, p - o, 0.0, f32::INFINITY));
+            }
+            for &p in &samples {
+                let to = light + Vec3::new(next(), 0.0, next()) * 0.005 - p;
+                rays.push(Ray::new(p, to, 1e-4, 1.0));
+            }
+        }
+    }
+    assert_packets_answer_as_brute_force(&prims, &rays);
+}
+
+/// Traces `rays` as coherent batches (packets) in every layout and instruction set, with
+/// builds of several leaf sizes, and checks each ray's closest hit and occlusion against
+/// brute force.
+fn assert_packets_answer_as_brute_force(prims: &[Prim], rays: &[Ray]) {
     // Rays that cannot be traced miss everything (see `Ray`).
     let expected: Vec<Option<Hit>> = rays
         .iter()
-        .map(|r| brute_force(&prims, r).filter(|_| r.is_traceable()))
+        .map(|r| brute_force(prims, r).filter(|_| r.is_traceable()))
         .collect();
     assert!(expected.iter().filter(|h| h.is_some()).count() > rays.len() / 2);
     assert!(
@@ -424,7 +479,7 @@ fn packets_of_awkward_rays_match_brute_force_in_every_layout() {
             ..BuildParams::default()
         };
         let bvh = build(Builder::BinnedSah, &boxes, &params);
-        for (layout, mut tree) in every_layout(&bvh, &prims) {
+        for (layout, mut tree) in every_layout(&bvh, prims) {
             for isa in Isa::supported() {
                 if tree.set_isa(isa).is_err() {
                     continue;
