@@ -17,7 +17,7 @@
 //! other packets walk lane by lane.
 
 use super::kernels::NodeKernel;
-use super::packet::{lane_mask, Lanes, PacketRays, PACKET};
+use super::packet::{lane_mask, reduce_lanes, Lanes, PacketRays, PACKET};
 use super::traverse::{lanes, PacketLeaves, WalkNodes};
 use super::WideNode;
 use crate::aabb::{fast_max, fast_min, FAR_SLACK};
@@ -224,20 +224,7 @@ where
 /// The largest `t_max` of the lanes in `mask` (zero if none: nothing is entered then).
 #[inline(always)]
 fn farthest(t_max: &[f32; PACKET], mask: u32) -> f32 {
-    let mut m = [0.0f32; PACKET];
-    for lane in 0..PACKET {
-        if mask >> lane & 1 == 1 {
-            m[lane] = t_max[lane];
-        }
-    }
-    let mut half = PACKET / 2;
-    while half > 0 {
-        for lane in 0..half {
-            m[lane] = fast_max(m[lane], m[lane + half]);
-        }
-        half /= 2;
-    }
-    m[0]
+    reduce_lanes(t_max, mask, 0.0, fast_max)
 }
 
 /// Pops the next subtree entered no farther than `reach`.

@@ -116,11 +116,22 @@ pub(crate) fn lane_mask(set: &[bool; PACKET]) -> u32 {
     })
 }
 
-/// The least of `values` over the lanes in `mask` (infinity if none), reduced pairwise
-/// across halves so that it compiles to vector shuffles.
+/// The least of `values` over the lanes in `mask` (infinity if none).
 #[inline(always)]
 fn least(values: &[f32; PACKET], mask: u32) -> f32 {
-    let mut m = [f32::INFINITY; PACKET];
+    reduce_lanes(values, mask, f32::INFINITY, fast_min)
+}
+
+/// `pick` folded over the `values` of the lanes in `mask` (`none` if there are none),
+/// reduced pairwise across halves so that it compiles to vector shuffles.
+#[inline(always)]
+pub(super) fn reduce_lanes(
+    values: &[f32; PACKET],
+    mask: u32,
+    none: f32,
+    pick: impl Fn(f32, f32) -> f32,
+) -> f32 {
+    let mut m = [none; PACKET];
     for (lane, m) in m.iter_mut().enumerate() {
         if mask >> lane & 1 == 1 {
             *m = values[lane];
@@ -129,7 +140,7 @@ fn least(values: &[f32; PACKET], mask: u32) -> f32 {
     let mut half = PACKET / 2;
     while half > 0 {
         for lane in 0..half {
-            m[lane] = fast_min(m[lane], m[lane + half]);
+            m[lane] = pick(m[lane], m[lane + half]);
         }
         half /= 2;
     }

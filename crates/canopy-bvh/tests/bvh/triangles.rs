@@ -352,14 +352,9 @@ fn grid_rays_through_shared_vertices_hit_in_every_kernel() {
     check(&prims, &rays, &BuildParams::default());
 }
 
-/// Packets whose rays tie on duplicated triangles, pass exactly through shared vertices
-/// and edges, run most steeply along different axes within one packet (so the packet
-/// tests its leaves ray by ray), part ways (so the packet goes on ray by ray) or cannot
-/// be traced: every layout and instruction set
-/// answers each ray as brute force does, bit for bit.
-#[test]
-fn packets_of_awkward_rays_match_brute_force_in_every_layout() {
-    let n = 8;
+/// [`unit_grid`] of `n` (a repeat every 5), with 12 boxes above it and 12 sloping
+/// triangles through them.
+fn grid_with_boxes_and_slopes(n: usize) -> Vec<Prim> {
     let mut prims = unit_grid(n, 5);
     for k in 0..12 {
         let a = Vec3::new(0.1 * k as f32, 0.3, 0.5);
@@ -370,6 +365,18 @@ fn packets_of_awkward_rays_match_brute_force_in_every_layout() {
             a + Vec3::new(0.0, 0.4, 0.9),
         ]));
     }
+    prims
+}
+
+/// Packets whose rays tie on duplicated triangles, pass exactly through shared vertices
+/// and edges, run most steeply along different axes within one packet (so the packet
+/// tests its leaves ray by ray), part ways (so the packet goes on ray by ray) or cannot
+/// be traced: every layout and instruction set
+/// answers each ray as brute force does, bit for bit.
+#[test]
+fn packets_of_awkward_rays_match_brute_force_in_every_layout() {
+    let n = 8;
+    let prims = grid_with_boxes_and_slopes(n);
     let mut rays = Vec::new();
     let eye = Vec3::new(0.5, 2.0, 0.5);
     for i in 0..=2 * n {
@@ -414,16 +421,7 @@ fn packets_of_awkward_rays_match_brute_force_in_every_layout() {
 #[test]
 fn packets_of_nearly_parallel_rays_match_brute_force_in_every_layout() {
     let n = 8;
-    let mut prims = unit_grid(n, 5);
-    for k in 0..12 {
-        let a = Vec3::new(0.1 * k as f32, 0.3, 0.5);
-        prims.push(Prim::Box(Aabb::new(a, a + 0.05)));
-        prims.push(Prim::Triangle([
-            a,
-            a + Vec3::X,
-            a + Vec3::new(0.0, 0.4, 0.9),
-        ]));
-    }
+    let prims = grid_with_boxes_and_slopes(n);
     let mut next = uniform(31);
     let mut rays = Vec::new();
     let eye = Vec3::new(-0.4, 2.0, -0.3);
