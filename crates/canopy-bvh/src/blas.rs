@@ -3,7 +3,7 @@
 //! checked against).
 
 use crate::proximity::PointTree;
-use crate::query::{RayBatch, RayQuery};
+use crate::query::{Coherence, RayBatch, RayQuery};
 use crate::{
     build_with_clipper, Aabb, BuildParams, Builder, BvhWidth, Geometry, Hit, OptimizeBudget, Ray,
     RefitError, ShearedRay, TraversalCounter, Tree, TriangleTest, PACK_LANES,
@@ -336,30 +336,49 @@ impl<G: Geometry> RayQuery for Blas<G> {
         self.bounds
     }
 
-    fn closest_hits<R, A, C>(&self, batch: RayBatch, mut ray: R, mut answer: A, counter: &mut C)
-    where
-        R: FnMut(usize) -> Ray,
-        A: FnMut(usize, Option<Hit>),
-        C: TraversalCounter,
-    {
+    // Inlined where it may be: a top-level tree tests its instances through this, one
+    // ray at a time, from inside its own walk. Either way it is compiled once for each
+    // geometry and counter, not for each caller's closures (see `RayQuery`).
+    #[inline]
+    fn closest_hits_into<C: TraversalCounter>(
+        &self,
+        rays: &[Ray],
+        hits: &mut [Option<Hit>],
+        _mask: u32,
+        coherence: Coherence,
+        counter: &mut C,
+    ) {
+        assert_eq!(rays.len(), hits.len(), "one hit slot per ray");
         let g = &self.geometry;
         match self.tree_for_each() {
             Some(tree) => {
+                let batch = RayBatch::new(rays.len()).with(coherence);
+                let (ray, answer) = (|i: usize| rays[i], |i: usize, h| hits[i] = h);
                 tree.closest_hits(batch, ray, answer, |p, r| g.intersect_other(p, r), counter)
             }
-            None => (0..batch.count).for_each(|i| answer(i, self.closest(&ray(i), counter))),
+            None => {
+                for (ray, hit) in rays.iter().zip(hits) {
+                    *hit = self.closest(ray, counter);
+                }
+            }
         }
     }
 
-    fn any_hits<R, A>(&self, batch: RayBatch, mut ray: R, mut answer: A)
-    where
-        R: FnMut(usize) -> Ray,
-        A: FnMut(usize, bool),
-    {
+    #[inline]
+    fn any_hits_into(&self, rays: &[Ray], blocked: &mut [bool], _mask: u32, coherence: Coherence) {
+        assert_eq!(rays.len(), blocked.len(), "one answer per ray");
         let g = &self.geometry;
         match self.tree_for_each() {
-            Some(tree) => tree.any_hits(batch, ray, answer, |p, r| g.occludes_other(p, r)),
-            None => (0..batch.count).for_each(|i| answer(i, self.any(&ray(i)))),
+            Some(tree) => {
+                let batch = RayBatch::new(rays.len()).with(coherence);
+                let (ray, answer) = (|i: usize| rays[i], |i: usize, b| blocked[i] = b);
+                tree.any_hits(batch, ray, answer, |p, r| g.occludes_other(p, r))
+            }
+            None => {
+                for (ray, b) in rays.iter().zip(blocked) {
+                    *b = self.any(ray);
+                }
+            }
         }
     }
 

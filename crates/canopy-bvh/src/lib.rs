@@ -61,7 +61,9 @@ pub use proximity::{
     closest_point_on_triangle, solid_angle, HitsAlong, Nearest, Placement, SurfaceQuery,
     TriangleSurface, FAR_FIELD, INSIDE_FAR_FIELD,
 };
-pub use query::{trace_batch, Coherence, Forward, RayBatch, RayQuery, ALL_MASKS, BATCH_CHUNK};
+pub use query::{
+    trace_batch, Coherence, Forward, RayBatch, RayQuery, ALL_MASKS, BATCH_CHUNK, CLOSURE_CHUNK,
+};
 pub use ray::{Hit, IntoHit, PrimHit, Ray};
 pub use ray_order::{RayOrder, RAY_ORDER_MIN};
 pub use shapes::{intersect_box, intersect_sphere, KnownShape};

@@ -3,6 +3,7 @@
 //! masks — whatever the layout of its tree.
 
 use crate::{Aabb, Hit, Ray, RayOrder, TraversalCounter, TraversalStats};
+use glam::Vec3;
 use rayon::prelude::*;
 
 /// A ray mask that every instance accepts.
@@ -78,10 +79,15 @@ impl RayBatch {
 
 /// Ray queries of a structure that owns its geometry.
 ///
-/// A structure answers batches of rays ([`RayQuery::closest_hits`],
-/// [`RayQuery::any_hits`]): it chooses its layout and kernels once for the batch, and the
-/// callers' closures are compiled into its loop. Everything else — single rays, masks,
-/// counters, parallel batches — is provided on top of those two.
+/// A structure answers rays a slice at a time ([`RayQuery::closest_hits_into`],
+/// [`RayQuery::any_hits_into`]): it chooses its layout and kernels once for the slice.
+/// Everything else — single rays, rays made by a closure, masks, counters, parallel
+/// batches — is provided on top of those two.
+///
+/// Why slices, not the caller's closures: the kernels are then compiled once per
+/// structure (and counter) type, not once for every place that asks a query. Each call
+/// site with closures of its own made its own copy of every kernel for every instruction
+/// set and width, which was most of the build of every crate above this one.
 ///
 /// Closest-hit ties go to the lower instance, then the lower primitive
 /// ([`Hit::is_before`]), so every structure and layout gives brute force's answer. A ray
@@ -90,22 +96,84 @@ pub trait RayQuery: Sync {
     /// Box of everything the structure holds.
     fn bounds(&self) -> Aabb;
 
+    /// Closest hits of `rays` on this thread: `hits[i]` is the closest hit of `rays[i]`
+    /// within its `[t_min, t_max]` among the instances `mask` accepts; `coherence` says
+    /// how the rays relate (the answers never depend on it). The work (node visits,
+    /// primitive tests, at every level) goes to `counter`.
+    ///
+    /// # Panics
+    /// If `rays` and `hits` differ in length.
+    fn closest_hits_into<C: TraversalCounter>(
+        &self,
+        rays: &[Ray],
+        hits: &mut [Option<Hit>],
+        mask: u32,
+        coherence: Coherence,
+        counter: &mut C,
+    );
+
+    /// Occlusion of `rays` on this thread: `blocked[i]` says whether anything `mask`
+    /// accepts blocks `rays[i]` within its range (any hit), as
+    /// [`RayQuery::closest_hits_into`].
+    ///
+    /// # Panics
+    /// If `rays` and `blocked` differ in length.
+    fn any_hits_into(&self, rays: &[Ray], blocked: &mut [bool], mask: u32, coherence: Coherence);
+
     /// Closest hits of the batch's rays on this thread: `ray(i)` makes ray `i` (for `i`
-    /// in `0..batch.count`), `answer(i, hit)` takes its closest hit within `[t_min,
-    /// t_max]`, in order. The work (node visits, primitive tests, at every level) goes to
-    /// `counter`.
-    fn closest_hits<R, A, C>(&self, batch: RayBatch, ray: R, answer: A, counter: &mut C)
+    /// in `0..batch.count`), `answer(i, hit)` takes its closest hit, in order, as
+    /// [`RayQuery::closest_hits_into`] answers them. The rays are made and answered
+    /// [`CLOSURE_CHUNK`] at a time, so `ray` is called for a few rays ahead of the
+    /// answers.
+    #[inline]
+    fn closest_hits<R, A, C>(&self, batch: RayBatch, mut ray: R, mut answer: A, counter: &mut C)
     where
         R: FnMut(usize) -> Ray,
         A: FnMut(usize, Option<Hit>),
-        C: TraversalCounter;
+        C: TraversalCounter,
+    {
+        let (mask, coherence) = (batch.mask, batch.coherence);
+        if batch.count == 1 {
+            let mut hit = None;
+            let one = std::slice::from_mut(&mut hit);
+            self.closest_hits_into(&[ray(0)], one, mask, coherence, counter);
+            return answer(0, hit);
+        }
+        let mut hits = [None; CLOSURE_CHUNK];
+        in_chunks(batch.count, &mut ray, |rays, first| {
+            let hits = &mut hits[..rays.len()];
+            self.closest_hits_into(rays, hits, mask, coherence, counter);
+            hits.iter()
+                .enumerate()
+                .for_each(|(k, &h)| answer(first + k, h));
+        });
+    }
 
-    /// Occlusion of the batch's rays on this thread: `answer(i, blocked)` says whether
-    /// anything blocks ray `i` within its range (any hit), as [`RayQuery::closest_hits`].
-    fn any_hits<R, A>(&self, batch: RayBatch, ray: R, answer: A)
+    /// Occlusion of the batch's rays on this thread: `answer(i, blocked)` for ray `i`, as
+    /// [`RayQuery::closest_hits`].
+    #[inline]
+    fn any_hits<R, A>(&self, batch: RayBatch, mut ray: R, mut answer: A)
     where
         R: FnMut(usize) -> Ray,
-        A: FnMut(usize, bool);
+        A: FnMut(usize, bool),
+    {
+        let (mask, coherence) = (batch.mask, batch.coherence);
+        if batch.count == 1 {
+            let mut blocked = false;
+            let one = std::slice::from_mut(&mut blocked);
+            self.any_hits_into(&[ray(0)], one, mask, coherence);
+            return answer(0, blocked);
+        }
+        let mut blocked = [false; CLOSURE_CHUNK];
+        in_chunks(batch.count, &mut ray, |rays, first| {
+            let blocked = &mut blocked[..rays.len()];
+            self.any_hits_into(rays, blocked, mask, coherence);
+            blocked
+                .iter()
+                .enumerate()
+                .for_each(|(k, &b)| answer(first + k, b));
+        });
+    }
 
     /// Whether large batches are best traced in the order of their rays' origins
     /// ([`RayOrder`]): structures larger than a core's cache.
@@ -135,7 +203,8 @@ pub trait RayQuery: Sync {
     #[inline]
     fn occluded_masked(&self, ray: &Ray, mask: u32) -> bool {
         let mut blocked = false;
-        self.any_hits(RayBatch::one(mask), |_| *ray, |_, b| blocked = b);
+        let one = std::slice::from_mut(&mut blocked);
+        self.any_hits_into(std::slice::from_ref(ray), one, mask, Coherence::Incoherent);
         blocked
     }
 
@@ -148,7 +217,8 @@ pub trait RayQuery: Sync {
         counter: &mut C,
     ) -> Option<Hit> {
         let mut hit = None;
-        self.closest_hits(RayBatch::one(mask), |_| *ray, |_, h| hit = h, counter);
+        let (rays, one) = (std::slice::from_ref(ray), std::slice::from_mut(&mut hit));
+        self.closest_hits_into(rays, one, mask, Coherence::Incoherent, counter);
         hit
     }
 
@@ -213,7 +283,7 @@ pub trait RayQuery: Sync {
     fn intersect_batch(&self, rays: &[Ray], hits: &mut [Option<Hit>], mask: u32) {
         assert_eq!(rays.len(), hits.len(), "one hit slot per ray");
         trace_batch(self.orders_batches(), rays, hits, |rays, hits| {
-            self.intersect_each(rays.len(), mask, |i| rays[i], |i, h| hits[i] = h)
+            self.closest_hits_into(rays, hits, mask, Coherence::Incoherent, &mut ())
         });
     }
 
@@ -224,7 +294,7 @@ pub trait RayQuery: Sync {
     fn occluded_batch(&self, rays: &[Ray], occluded: &mut [bool], mask: u32) {
         assert_eq!(rays.len(), occluded.len(), "one answer per ray");
         trace_batch(self.orders_batches(), rays, occluded, |rays, out| {
-            self.occluded_each(rays.len(), mask, |i| rays[i], |i, o| out[i] = o)
+            self.any_hits_into(rays, out, mask, Coherence::Incoherent)
         });
     }
 }
@@ -244,22 +314,21 @@ impl<T: Forward> RayQuery for T {
     }
 
     #[inline]
-    fn closest_hits<R, A, C>(&self, batch: RayBatch, ray: R, answer: A, counter: &mut C)
-    where
-        R: FnMut(usize) -> Ray,
-        A: FnMut(usize, Option<Hit>),
-        C: TraversalCounter,
-    {
-        self.target().closest_hits(batch, ray, answer, counter)
+    fn closest_hits_into<C: TraversalCounter>(
+        &self,
+        rays: &[Ray],
+        hits: &mut [Option<Hit>],
+        mask: u32,
+        coherence: Coherence,
+        counter: &mut C,
+    ) {
+        self.target()
+            .closest_hits_into(rays, hits, mask, coherence, counter)
     }
 
     #[inline]
-    fn any_hits<R, A>(&self, batch: RayBatch, ray: R, answer: A)
-    where
-        R: FnMut(usize) -> Ray,
-        A: FnMut(usize, bool),
-    {
-        self.target().any_hits(batch, ray, answer)
+    fn any_hits_into(&self, rays: &[Ray], blocked: &mut [bool], mask: u32, coherence: Coherence) {
+        self.target().any_hits_into(rays, blocked, mask, coherence)
     }
 
     #[inline]
@@ -274,6 +343,32 @@ impl<B: RayQuery + Send> Forward for std::sync::Arc<B> {
     #[inline]
     fn target(&self) -> &B {
         self
+    }
+}
+
+/// Rays that [`RayQuery::closest_hits`] and [`RayQuery::any_hits`] make at a time, then
+/// answer as a slice: whole packets ([`crate::PACKET`]), so that coherent rays are grouped
+/// into packets as the caller numbers them, and enough of them that what a slice costs
+/// before its first ray (the calls, the kernels' choice and set-up) is spread thin (17 KB
+/// of stack).
+pub const CLOSURE_CHUNK: usize = 16 * crate::PACKET;
+
+/// Makes rays `0..count` with `ray`, [`CLOSURE_CHUNK`] at a time, and hands each chunk to
+/// `each` with the number of its first ray.
+#[inline(always)]
+fn in_chunks(
+    count: usize,
+    ray: &mut impl FnMut(usize) -> Ray,
+    mut each: impl FnMut(&[Ray], usize),
+) {
+    let mut rays = [Ray::new(Vec3::ZERO, Vec3::X, 0.0, 0.0); CLOSURE_CHUNK];
+    for first in (0..count).step_by(CLOSURE_CHUNK) {
+        let chunk = &mut rays[..CLOSURE_CHUNK.min(count - first)];
+        chunk
+            .iter_mut()
+            .enumerate()
+            .for_each(|(k, r)| *r = ray(first + k));
+        each(chunk, first);
     }
 }
 

@@ -9,7 +9,7 @@
 
 use crate::instance::InstanceError;
 use crate::proximity::Placement;
-use crate::query::{RayBatch, RayQuery};
+use crate::query::{Coherence, RayBatch, RayQuery};
 use crate::{
     build, Aabb, BlasParams, Hit, Instance, IntoHit, Ray, TraversalCounter, TraversalStats, Tree,
 };
@@ -273,18 +273,27 @@ impl<B: RayQuery> RayQuery for Tlas<B> {
         self.bounds
     }
 
-    fn closest_hits<R, A, C>(&self, batch: RayBatch, mut ray: R, mut answer: A, counter: &mut C)
-    where
-        R: FnMut(usize) -> Ray,
-        A: FnMut(usize, Option<Hit>),
-        C: TraversalCounter,
-    {
-        let mask = batch.mask;
+    // Out of line: the batch's entry, where the kernels of the top tree and of every
+    // structure it holds are compiled, once for each kind of structure and counter.
+    #[inline(never)]
+    fn closest_hits_into<C: TraversalCounter>(
+        &self,
+        rays: &[Ray],
+        hits: &mut [Option<Hit>],
+        mask: u32,
+        coherence: Coherence,
+        counter: &mut C,
+    ) {
+        assert_eq!(rays.len(), hits.len(), "one hit slot per ray");
         match (self.alone(), &self.tree) {
             // One structure placed as itself: the whole batch goes to it (packets too).
             (Some((blas, index, only)), _) if only & mask != 0 => {
-                let answer = |i, h: Option<Hit>| answer(i, h.map(|h| h.into_hit(index)));
-                blas.closest_hits(batch, ray, answer, counter)
+                blas.closest_hits_into(rays, hits, mask, coherence, counter);
+                if index != 0 {
+                    for hit in hits.iter_mut().flatten() {
+                        *hit = hit.into_hit(index);
+                    }
+                }
             }
             // Instances: each ray goes its own way through the top tree, which chooses
             // its kernels once for the batch.
@@ -292,27 +301,35 @@ impl<B: RayQuery> RayQuery for Tlas<B> {
                 let test = |i: u32, r: &Ray| {
                     self.closest_in(i, r, mask, |blas, r| blas.intersect_masked(r, mask))
                 };
-                let one_by_one = RayBatch::new(batch.count);
+                let one_by_one = RayBatch::new(rays.len());
+                let (ray, answer) = (|i: usize| rays[i], |i: usize, h| hits[i] = h);
                 tree.closest_hits(one_by_one, ray, answer, test, &mut ())
             }
-            _ => (0..batch.count)
-                .for_each(|i| answer(i, self.closest_counted(&ray(i), mask, counter))),
+            _ => {
+                for (ray, hit) in rays.iter().zip(hits) {
+                    *hit = self.closest_counted(ray, mask, counter);
+                }
+            }
         }
     }
 
-    fn any_hits<R, A>(&self, batch: RayBatch, mut ray: R, mut answer: A)
-    where
-        R: FnMut(usize) -> Ray,
-        A: FnMut(usize, bool),
-    {
-        let mask = batch.mask;
+    #[inline(never)]
+    fn any_hits_into(&self, rays: &[Ray], blocked: &mut [bool], mask: u32, coherence: Coherence) {
+        assert_eq!(rays.len(), blocked.len(), "one answer per ray");
         match (self.alone(), &self.tree) {
-            (Some((blas, _, only)), _) if only & mask != 0 => blas.any_hits(batch, ray, answer),
+            (Some((blas, _, only)), _) if only & mask != 0 => {
+                blas.any_hits_into(rays, blocked, mask, coherence)
+            }
             (None, Some(tree)) => {
                 let test = |i: u32, r: &Ray| self.occluded_in(i, r, mask);
-                tree.any_hits(RayBatch::new(batch.count), ray, answer, test)
+                let (ray, answer) = (|i: usize| rays[i], |i: usize, b| blocked[i] = b);
+                tree.any_hits(RayBatch::new(rays.len()), ray, answer, test)
             }
-            _ => (0..batch.count).for_each(|i| answer(i, self.any_one(&ray(i), mask))),
+            _ => {
+                for (ray, b) in rays.iter().zip(blocked) {
+                    *b = self.any_one(ray, mask);
+                }
+            }
         }
     }
 

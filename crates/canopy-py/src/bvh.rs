@@ -628,8 +628,13 @@ impl Bvh {
                     CHUNK,
                     |i| batch.ray(i),
                     |rays, out| {
-                        let answer = |i: usize, hit: Option<Hit>| out[i] = hit;
-                        accel.intersect_each(rays.len(), ALL_MASKS, |i| rays[i], answer)
+                        accel.closest_hits_into(
+                            rays,
+                            out,
+                            ALL_MASKS,
+                            Coherence::Incoherent,
+                            &mut (),
+                        )
                     },
                 );
                 let ranks = order.ranks();
@@ -688,10 +693,7 @@ impl Bvh {
                 let traced = order.trace(
                     CHUNK,
                     |i| batch.ray(i),
-                    |rays, out| {
-                        let answer = |i: usize, blocked: bool| out[i] = blocked;
-                        accel.occluded_each(rays.len(), ALL_MASKS, |i| rays[i], answer)
-                    },
+                    |rays, out| accel.any_hits_into(rays, out, ALL_MASKS, Coherence::Incoherent),
                 );
                 order.unsort_into(&traced, blocked);
             })

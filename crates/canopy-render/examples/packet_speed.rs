@@ -1,4 +1,5 @@
-//! Camera rays one by one against the same rays in packets ([`RayQuery::intersect_coherent`]),
+//! Camera rays one by one against the same rays in packets ([`RayQuery::closest_hits_into`]
+//! with [`Coherence::Coherent`]),
 //! single thread, in turns (this machine's speed drifts; turns expose both to the same
 //! drift), best of the turns. The rays are those a wavefront stream holds: row by row,
 //! each pixel's samples side by side. Checks that both give the same hits.
@@ -7,7 +8,7 @@
 //!
 //! With `--shadows`, the rays are instead shadow rays from where those camera rays hit
 //! towards random points on the scene's first light (occlusion: one by one against
-//! [`RayQuery::occluded_coherent`]; `bench/scenes/spheres-lit.toml`, and
+//! [`RayQuery::any_hits_into`] in packets; `bench/scenes/spheres-lit.toml`, and
 //! `dragon-lit.toml` run from `bench/scenes`).
 //!
 //! With `--bounces`, the rays are diffuse bounces: from where those camera rays hit, in
@@ -17,7 +18,7 @@
 //!
 //! `cargo run --release -p canopy-render --example packet_speed -- [scene ...]
 //!  [--size 480x480] [--samples 8] [--turns 5] [--shadows | --bounces]`
-use canopy_bvh::{Hit, Ray, RayQuery, ALL_MASKS};
+use canopy_bvh::{Coherence, Hit, Ray, RayQuery, ALL_MASKS};
 use canopy_render::accel::Accel;
 use canopy_render::camera::Camera;
 use canopy_render::lights::Lights;
@@ -81,11 +82,11 @@ fn main() {
         for _ in 0..turns {
             if std::env::var_os("PACKETS_ONLY").is_none() {
                 best_single = best_single.min(time(&rays, &mut single, |r, h| {
-                    accel.intersect_each(r.len(), ALL_MASKS, |i| r[i], |i, x| h[i] = x)
+                    accel.closest_hits_into(r, h, ALL_MASKS, Coherence::Incoherent, &mut ())
                 }));
             }
             best_packets = best_packets.min(time(&rays, &mut packets, |r, h| {
-                accel.intersect_coherent(r.len(), ALL_MASKS, |i| r[i], |i, x| h[i] = x)
+                accel.closest_hits_into(r, h, ALL_MASKS, Coherence::Coherent, &mut ())
             }));
         }
         let mut work = canopy_bvh::TraversalStats::default();
@@ -181,12 +182,12 @@ fn time_shadows(name: &str, scene: &Scene, accel: &Accel, camera_rays: &[Ray], t
     for _ in 0..turns {
         let start = Instant::now();
         for (r, b) in rays.chunks(4096).zip(single.chunks_mut(4096)) {
-            accel.occluded_each(r.len(), ALL_MASKS, |i| r[i], |i, x| b[i] = x);
+            accel.any_hits_into(r, b, ALL_MASKS, Coherence::Incoherent);
         }
         best_single = best_single.min(start.elapsed());
         let start = Instant::now();
         for (r, b) in rays.chunks(4096).zip(packets.chunks_mut(4096)) {
-            accel.occluded_coherent(r.len(), ALL_MASKS, |i| r[i], |i, x| b[i] = x);
+            accel.any_hits_into(r, b, ALL_MASKS, Coherence::Coherent);
         }
         best_packets = best_packets.min(start.elapsed());
     }

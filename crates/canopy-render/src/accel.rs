@@ -7,8 +7,8 @@ use crate::geometry::{Shape, ShearedRay};
 use crate::scene::{Primitive, Scene};
 use canopy_bvh::{
     split_box, split_triangle, Aabb, Blas, BlasParams, BuildParams, Builder, BvhWidth, Clipper,
-    Forward, Geometry, Hit, Instance, KnownShape, OptimizeBudget, PrimHit, Ray, RayBatch, RayQuery,
-    RefitError, Tlas, TraversalCounter, Tree, TriangleMesh, TriangleTest,
+    Coherence, Forward, Geometry, Hit, Instance, KnownShape, OptimizeBudget, PrimHit, Ray,
+    RayQuery, RefitError, Tlas, TraversalCounter, Tree, TriangleMesh, TriangleTest,
 };
 use glam::{Affine3A, Vec3};
 use std::fmt;
@@ -140,22 +140,20 @@ impl RayQuery for SceneBlas {
     }
 
     #[inline]
-    fn closest_hits<R, A, C>(&self, batch: RayBatch, ray: R, answer: A, counter: &mut C)
-    where
-        R: FnMut(usize) -> Ray,
-        A: FnMut(usize, Option<Hit>),
-        C: TraversalCounter,
-    {
-        each_blas!(self, b => b.closest_hits(batch, ray, answer, counter))
+    fn closest_hits_into<C: TraversalCounter>(
+        &self,
+        rays: &[Ray],
+        hits: &mut [Option<Hit>],
+        mask: u32,
+        coherence: Coherence,
+        counter: &mut C,
+    ) {
+        each_blas!(self, b => b.closest_hits_into(rays, hits, mask, coherence, counter))
     }
 
     #[inline]
-    fn any_hits<R, A>(&self, batch: RayBatch, ray: R, answer: A)
-    where
-        R: FnMut(usize) -> Ray,
-        A: FnMut(usize, bool),
-    {
-        each_blas!(self, b => b.any_hits(batch, ray, answer))
+    fn any_hits_into(&self, rays: &[Ray], blocked: &mut [bool], mask: u32, coherence: Coherence) {
+        each_blas!(self, b => b.any_hits_into(rays, blocked, mask, coherence))
     }
 
     fn orders_batches(&self) -> bool {

@@ -572,7 +572,13 @@ where
         let hits = &mut self.hits;
         // SAFETY: `dispatch` runs this only where `T`'s instruction set exists.
         let (mask, refine) = unsafe {
-            test_packs_unrefined::<T, true, PACKS>(packs, pack_ray, s.ray.t_min, s.ray.t_max, hits)
+            test_packs_unrefined::<T, true, PACKS>(
+                packs,
+                pack_ray,
+                pack_ray.t_min,
+                s.ray.t_max,
+                hits,
+            )
         };
         for lane in lanes(mask) {
             let prim = packs[lane / PACK_LANES].prim[lane % PACK_LANES];
@@ -599,7 +605,7 @@ where
             let hits = &mut self.hits;
             // SAFETY: `dispatch` runs this only where `T`'s instruction set exists.
             let mask = unsafe {
-                test_packs::<T, true, PACKS>(packs, pack_ray, s.ray.t_min, s.ray.t_max, hits)
+                test_packs::<T, true, PACKS>(packs, pack_ray, pack_ray.t_min, s.ray.t_max, hits)
             };
             for lane in lanes(mask) {
                 let prim = packs[lane / PACK_LANES].prim[lane % PACK_LANES];

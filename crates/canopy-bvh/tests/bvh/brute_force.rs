@@ -1,6 +1,7 @@
 //! Every builder must answer closest-hit and any-hit queries exactly as a loop over all
 //! primitives does. Primitives here are boxes, tested with the same slab test.
 
+use crate::common::{Blocks, Closest};
 use canopy_bvh::{
     build, optimize, Aabb, BuildParams, Builder, Bvh4, Bvh8, Hit, Isa, OptimizeBudget, Ray, Tree,
 };
@@ -33,8 +34,8 @@ fn check_against_brute_force(boxes: &[Aabb], rays: &[Ray], params: &BuildParams)
             .unwrap_or_else(|e| panic!("{builder} x4: {e}"));
         bvh8.validate(boxes)
             .unwrap_or_else(|e| panic!("{builder} x8: {e}"));
-        let closest = |p: u32, r: &Ray| boxes[p as usize].ray_entry(r);
-        let any = |p: u32, r: &Ray| boxes[p as usize].ray_entry(r).is_some();
+        let closest: Closest<f32> = &|p, r| boxes[p as usize].ray_entry(r);
+        let any: Blocks = &|p, r| boxes[p as usize].ray_entry(r).is_some();
         // Every node kernel this CPU has (the scalar twin included) on the same rays.
         for isa in Isa::supported() {
             bvh4.set_isa(isa).unwrap();
@@ -193,10 +194,8 @@ fn empty_input_gives_an_empty_tree_that_never_hits() {
         let ray = Ray::new(Vec3::ZERO, Vec3::X, 0.0, f32::INFINITY);
         assert_eq!(bvh.intersect(&ray, |_, _| Some(1.0)), None);
         assert!(!bvh.occluded(&ray, |_, _| true));
-        assert_eq!(
-            Bvh4::from_bvh2(&bvh).intersect(&ray, |_, _| Some(1.0)),
-            None
-        );
+        let always: Closest<f32> = &|_, _| Some(1.0);
+        assert_eq!(Bvh4::from_bvh2(&bvh).intersect(&ray, always), None);
     }
 }
 
@@ -208,7 +207,8 @@ fn one_primitive_gives_a_single_leaf() {
         assert_eq!(bvh.nodes().len(), 1, "{builder}");
         assert!(bvh.nodes()[0].is_leaf());
         let ray = Ray::new(Vec3::new(0.5, 0.5, -1.0), Vec3::Z, 0.0, f32::INFINITY);
-        let hit = Bvh8::from_bvh2(&bvh).intersect(&ray, |p, r| boxes[p as usize].ray_entry(r));
+        let entry: Closest<f32> = &|p, r| boxes[p as usize].ray_entry(r);
+        let hit = Bvh8::from_bvh2(&bvh).intersect(&ray, entry);
         assert_eq!(hit, Some(Hit::new(0, 1.0.into())));
     }
 }

@@ -1,7 +1,23 @@
 //! What several test modules share.
 
-use canopy_bvh::{Blas, BlasParams, Builder, BvhWidth, TriangleMesh};
+use canopy_bvh::{Blas, BlasParams, Builder, BvhWidth, Hit, PrimHit, Ray, TriangleMesh};
 use glam::Vec3;
+
+// The closures the tests give a tree's queries, as trait objects of a few types. A tree
+// query is compiled (every kernel, for every instruction set and width) once for each
+// type of closure it is given, and every closure has a type of its own: with a closure
+// per call, those copies were most of this crate's build.
+
+/// A test of the primitives a tree leaves to its caller, for closest hits.
+pub type Closest<'a, P = PrimHit> = &'a dyn Fn(u32, &Ray) -> Option<P>;
+/// A test of the primitives a tree leaves to its caller, for occlusion.
+pub type Blocks<'a> = &'a dyn Fn(u32, &Ray) -> bool;
+/// Makes ray `i` of a batch.
+pub type MakeRay<'a> = &'a dyn Fn(usize) -> Ray;
+/// Takes the closest hit of ray `i` of a batch.
+pub type TakeHit<'a> = &'a mut dyn FnMut(usize, Option<Hit>);
+/// Takes whether ray `i` of a batch is blocked.
+pub type TakeBlocked<'a> = &'a mut dyn FnMut(usize, bool);
 
 /// A xorshift stream of numbers in [0, 1] from `seed`.
 pub fn uniform(mut state: u32) -> impl FnMut() -> f32 {

@@ -412,3 +412,79 @@ fn counted_queries_through_instances_answer_alike_and_count_both_levels() {
     }
     assert!(hits > 50);
 }
+
+/// The closure forms (`closest_hits`, `any_hits`) make their rays a slice at a time
+/// (`CLOSURE_CHUNK`): across the slices' edges, coherent or not, through instances and
+/// through one structure alone, every ray is made once and answered once, in order, as
+/// the brute-force loop answers it.
+#[test]
+fn closure_batches_answer_every_ray_in_order_across_their_slices() {
+    use canopy_bvh::{Coherence, RayBatch, CLOSURE_CHUNK};
+    let (meshes, instances) = scene();
+    let rays = rays(2 * CLOSURE_CHUNK + 37, 23);
+    let instanced = tlas(&BlasParams::default(), Isa::best());
+    let alone = Blas::build(meshes[0].clone(), &BlasParams::default());
+    let alone_at = [Instance::new(0, Affine3A::IDENTITY)];
+    for coherence in [Coherence::Incoherent, Coherence::Coherent] {
+        for (name, structure, meshes, placed) in [
+            (
+                "instances",
+                &instanced as &dyn Answers,
+                &meshes[..],
+                &instances[..],
+            ),
+            (
+                "one structure",
+                &alone as &dyn Answers,
+                &meshes[..1],
+                &alone_at[..],
+            ),
+        ] {
+            let (made, hits, blocked) = structure.answers(&rays, coherence);
+            let context = format!("{name}, {coherence:?}");
+            assert_eq!(
+                made,
+                (0..rays.len()).collect::<Vec<_>>(),
+                "{context}: rays made"
+            );
+            for (i, ray) in rays.iter().enumerate() {
+                let want = brute_force(meshes, placed, ray, ALL_MASKS);
+                assert_eq!(hits[i].0, i, "{context}: hits in order");
+                assert_eq!(bits(hits[i].1), bits(want), "{context}: ray {i}");
+                assert_eq!(
+                    blocked[i],
+                    (i, want.is_some()),
+                    "{context}: ray {i} blocked"
+                );
+            }
+        }
+    }
+
+    /// Both closure forms over `rays`: the rays made (in the order asked for), and the
+    /// answers as given (ray number, answer).
+    trait Answers {
+        #[allow(clippy::type_complexity)]
+        fn answers(
+            &self,
+            rays: &[Ray],
+            coherence: Coherence,
+        ) -> (Vec<usize>, Vec<(usize, Option<Hit>)>, Vec<(usize, bool)>);
+    }
+    impl<Q: RayQuery> Answers for Q {
+        fn answers(
+            &self,
+            rays: &[Ray],
+            coherence: Coherence,
+        ) -> (Vec<usize>, Vec<(usize, Option<Hit>)>, Vec<(usize, bool)>) {
+            let batch = RayBatch::new(rays.len()).with(coherence);
+            let (mut made, mut hits, mut blocked) = (Vec::new(), Vec::new(), Vec::new());
+            let ray = |i: usize| {
+                made.push(i);
+                rays[i]
+            };
+            self.closest_hits(batch, ray, |i, h| hits.push((i, h)), &mut ());
+            self.any_hits(batch, |i| rays[i], |i, b| blocked.push((i, b)));
+            (made, hits, blocked)
+        }
+    }
+}

@@ -192,11 +192,10 @@ fn occluded_in_packets(blas: &impl RayQuery, rays: &[Ray]) -> Vec<bool> {
 fn every_hit(blas: &Blas<Balls>, ray: &Ray) -> Vec<(u32, u32)> {
     let geometry = blas.geometry();
     let mut hits = Vec::new();
-    let test = |p: u32, r: &Ray| geometry.intersect(p, r, &ShearedRay::new(r));
+    let test: common::Closest = &|p, r| geometry.intersect(p, r, &ShearedRay::new(r));
     let tree = blas.tree().unwrap();
-    tree.for_each_hit(ray, test, |hit: Hit, _| {
-        hits.push((hit.prim, hit.t.to_bits()))
-    });
+    let found: &mut dyn FnMut(Hit, _) = &mut |hit: Hit, _| hits.push((hit.prim, hit.t.to_bits()));
+    tree.for_each_hit(ray, test, found);
     hits.sort_unstable();
     hits
 }

@@ -4,7 +4,7 @@
 //! primitives (boxes, tested by the caller's closure), as a renderer's scenes do.
 
 use crate::common;
-use common::uniform;
+use common::{uniform, Blocks, Closest, MakeRay, TakeBlocked, TakeHit};
 
 use canopy_bvh::{
     build, build_with_clipper, intersect_triangle, split_box, split_triangle, Aabb, Blas,
@@ -172,33 +172,45 @@ macro_rules! queries {
     ($($t:ty),*) => {$(
         impl Queries for $t {
             fn closest(&self, prims: &[Prim], ray: &Ray) -> Option<Hit> {
-                self.intersect(ray, |p, r| {
-                    assert!(matches!(prims[p as usize], Prim::Box(_)), "triangle {p} sent to the closure");
-                    prims[p as usize].hit(r)
-                })
+                let test: Closest = &boxes_only(prims);
+                self.intersect(ray, test)
             }
             fn any(&self, prims: &[Prim], ray: &Ray) -> bool {
-                self.occluded(ray, |p, r| prims[p as usize].hit(r).is_some())
+                let blocks: Blocks = &|p, r| prims[p as usize].hit(r).is_some();
+                self.occluded(ray, blocks)
             }
             fn closest_coherent(&self, prims: &[Prim], rays: &[Ray]) -> Vec<Option<Hit>> {
                 let mut hits = vec![None; rays.len()];
-                self.intersect_coherent(rays.len(), |i| rays[i], |i, h| hits[i] = h, |p, r| {
-                    assert!(matches!(prims[p as usize], Prim::Box(_)), "triangle {p} sent to the closure");
-                    prims[p as usize].hit(r)
-                });
+                let (ray, answer): (MakeRay, TakeHit) = (&|i| rays[i], &mut |i, h| hits[i] = h);
+                let test: Closest = &boxes_only(prims);
+                self.intersect_coherent(rays.len(), ray, answer, test);
                 hits
             }
             fn any_coherent(&self, prims: &[Prim], rays: &[Ray]) -> Vec<bool> {
                 let mut blocked = vec![false; rays.len()];
-                self.occluded_coherent(rays.len(), |i| rays[i], |i, b| blocked[i] = b, |p, r| {
-                    assert!(matches!(prims[p as usize], Prim::Box(_)), "triangle {p} sent to the closure");
-                    prims[p as usize].hit(r).is_some()
-                });
+                let (ray, answer): (MakeRay, TakeBlocked) =
+                    (&|i| rays[i], &mut |i, b| blocked[i] = b);
+                let boxes = boxes_only(prims);
+                let blocks: Blocks = &|p, r| boxes(p, r).is_some();
+                self.occluded_coherent(rays.len(), ray, answer, blocks);
                 blocked
             }
         }
     )*};
 }
+
+/// The closest-hit test of the boxes among `prims`: the trees test their triangles.
+/// (One type for every caller, see `common::Closest`.)
+fn boxes_only(prims: &[Prim]) -> impl Fn(u32, &Ray) -> Option<PrimHit> + '_ {
+    |p, r| {
+        assert!(
+            matches!(prims[p as usize], Prim::Box(_)),
+            "triangle {p} sent to the closure"
+        );
+        prims[p as usize].hit(r)
+    }
+}
+
 queries!(Bvh4, Bvh8);
 
 /// Every builder's tree, 4 and 8 wide, against brute force, in both triangle modes.
@@ -470,7 +482,8 @@ fn assert_packets_answer_as_brute_force(prims: &[Prim], rays: &[Ray]) {
         "some rays stop on boxes"
     );
     let boxes: Vec<Aabb> = prims.iter().map(Prim::bounds).collect();
-    let test = |p: u32, r: &Ray| prims[p as usize].hit(r);
+    let test: Closest = &|p, r| prims[p as usize].hit(r);
+    let blocks: Blocks = &|p, r| test(p, r).is_some();
     for leaf in [1, 4, 8] {
         let params = BuildParams {
             max_leaf_size: leaf,
@@ -484,10 +497,11 @@ fn assert_packets_answer_as_brute_force(prims: &[Prim], rays: &[Ray]) {
                 }
                 let mut hits = vec![None; rays.len()];
                 let coherent = RayBatch::new(rays.len()).with(Coherence::Coherent);
-                tree.closest_hits(coherent, |i| rays[i], |i, h| hits[i] = h, test, &mut ());
+                let (ray, answer): (MakeRay, TakeHit) = (&|i| rays[i], &mut |i, h| hits[i] = h);
+                tree.closest_hits(coherent, ray, answer, test, &mut ());
                 let mut blocked = vec![false; rays.len()];
-                let blocks = |p: u32, r: &Ray| test(p, r).is_some();
-                tree.any_hits(coherent, |i| rays[i], |i, b| blocked[i] = b, blocks);
+                let answer: TakeBlocked = &mut |i, b| blocked[i] = b;
+                tree.any_hits(coherent, ray, answer, blocks);
                 for (i, ray) in rays.iter().enumerate() {
                     assert_eq!(
                         blocked[i],
@@ -703,28 +717,21 @@ fn each_calls_equal_single_ray_calls_in_every_layout() {
         .collect();
     let expected: Vec<Option<Hit>> = rays.iter().map(|r| brute_force(&prims, r)).collect();
     assert!(expected.iter().filter(|h| h.is_some()).count() > 500);
-    let test = |p: u32, r: &Ray| prims[p as usize].hit(r);
+    let test: Closest = &|p, r| prims[p as usize].hit(r);
+    let blocks: Blocks = &|p, r| test(p, r).is_some();
+    let ray: MakeRay = &|i| rays[i];
     for (layout, tree) in every_layout(&bvh, &prims) {
         let mut hits = vec![None; rays.len()];
         let mut order = Vec::new();
-        tree.closest_hits(
-            RayBatch::new(rays.len()),
-            |i| rays[i],
-            |i, h| {
-                order.push(i);
-                hits[i] = h;
-            },
-            test,
-            &mut (),
-        );
+        let answer: TakeHit = &mut |i, h| {
+            order.push(i);
+            hits[i] = h;
+        };
+        tree.closest_hits(RayBatch::new(rays.len()), ray, answer, test, &mut ());
         assert!(order.iter().copied().eq(0..rays.len()), "answers in order");
         let mut blocked = vec![false; rays.len()];
-        tree.any_hits(
-            RayBatch::new(rays.len()),
-            |i| rays[i],
-            |i, b| blocked[i] = b,
-            |p, r| test(p, r).is_some(),
-        );
+        let answer: TakeBlocked = &mut |i, b| blocked[i] = b;
+        tree.any_hits(RayBatch::new(rays.len()), ray, answer, blocks);
         for (i, ray) in rays.iter().enumerate() {
             let name = format!("{layout}, ray {i}");
             assert_eq!(bits(hits[i]), bits(expected[i]), "{name}");
@@ -771,7 +778,8 @@ fn reordered_batches_answer_each_ray_in_place() {
         })
         .collect();
     assert!(canopy_bvh::RayOrder::by_origin(rays.len(), |i| rays[i].origin).is_some());
-    let test = |p: u32, r: &Ray| prims[p as usize].hit(r);
+    let test: Closest = &|p, r| prims[p as usize].hit(r);
+    let blocks: Blocks = &|p, r| test(p, r).is_some();
     let mut hits = vec![None; rays.len()];
     let mut blocked = vec![false; rays.len()];
     blas.intersect_batch(&rays, &mut hits, ALL_MASKS);
@@ -785,11 +793,7 @@ fn reordered_batches_answer_each_ray_in_place() {
             bits(tree.intersect_counted(ray, test, &mut ())),
             "ray {i}"
         );
-        assert_eq!(
-            blocked[i],
-            tree.occluded(ray, |p, r| test(p, r).is_some()),
-            "ray {i}"
-        );
+        assert_eq!(blocked[i], tree.occluded(ray, blocks), "ray {i}");
     }
     let reversed: Vec<Ray> = rays.iter().rev().copied().collect();
     let mut hits_reversed = vec![None; rays.len()];
@@ -861,7 +865,8 @@ fn degenerate_rays_miss_everywhere_and_no_hit_is_at_infinity() {
     assert!(brute_force(&prims, &tiny[0]).is_some_and(|h| (h.t * 1e-20 - 2.0).abs() < 1e-5));
 
     let boxes: Vec<Aabb> = prims.iter().map(Prim::bounds).collect();
-    let test = |p: u32, r: &Ray| prims[p as usize].hit(r).filter(|_| r.is_traceable());
+    let test: Closest = &|p, r| prims[p as usize].hit(r).filter(|_| r.is_traceable());
+    let blocks: Blocks = &|p, r| test(p, r).is_some();
     for &builder in Builder::ALL {
         let bvh = build(builder, &boxes, &BuildParams::default());
         for (layout, mut tree) in every_layout(&bvh, &prims) {
@@ -876,10 +881,7 @@ fn degenerate_rays_miss_everywhere_and_no_hit_is_at_infinity() {
                         None,
                         "{name} {ray:?}"
                     );
-                    assert!(
-                        !tree.occluded(ray, |p, r| test(p, r).is_some()),
-                        "{name} {ray:?}"
-                    );
+                    assert!(!tree.occluded(ray, blocks), "{name} {ray:?}");
                 }
                 for ray in &tiny {
                     let hit = tree.intersect_counted(ray, test, &mut ());

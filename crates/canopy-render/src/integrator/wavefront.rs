@@ -17,7 +17,7 @@ use super::Probe;
 use crate::aov::AovRow;
 use crate::camera::Camera;
 use crate::rng::Rng;
-use canopy_bvh::{Coherence, Hit, Ray, RayBatch, RayQuery};
+use canopy_bvh::{Coherence, Hit, Ray, RayQuery, ALL_MASKS};
 use glam::Vec3;
 use std::cell::RefCell;
 use std::ops::Range;
@@ -134,6 +134,8 @@ fn render_passes<P: Probe>(
 #[derive(Default)]
 struct Stream {
     paths: Vec<StreamPath>,
+    /// The stage's path segments, gathered for one closest-hit batch, and their hits.
+    segments: Vec<Ray>,
     hits: Vec<Option<Hit>>,
     /// Whether each path goes on after the stage's vertex.
     goes_on: Vec<bool>,
@@ -247,11 +249,16 @@ impl Stream {
             return;
         }
         self.hits.resize(n, None);
-        let (paths, hits) = (&self.paths, &mut self.hits);
-        let ray = |i: usize| paths[i].path.ray;
-        let answer = |i: usize, hit| hits[i] = hit;
-        let batch = RayBatch::new(n).with(Coherence::hint(coherent));
-        tracer.accel.closest_hits(batch, ray, answer, &mut ())
+        self.segments.clear();
+        self.segments.extend(self.paths.iter().map(|p| p.path.ray));
+        let coherence = Coherence::hint(coherent);
+        tracer.accel.closest_hits_into(
+            &self.segments,
+            &mut self.hits,
+            ALL_MASKS,
+            coherence,
+            &mut (),
+        )
     }
 
     /// Answers the shadow rays of every vertex of the stage, in path order (in packets
@@ -277,16 +284,15 @@ impl Stream {
         work.rays += n as u64;
         work.shadow_rays += n as u64;
         self.blocked.resize(n, false);
-        let (shadows, blocked) = (&self.shadows, &mut self.blocked);
-        let ray = |i: usize| shadows[i];
-        let answer = |i: usize, b| blocked[i] = b;
         // The first vertices' shadow rays, a pixel's samples side by side towards one
         // light, are coherent: packets pay over trees that stay in the cache (1.9x on
         // spheres), not over larger ones, whose rays part ways between the leaves
         // (0.6-0.7x on the 202k-triangle dragon, `examples/packet_speed.rs --shadows`).
-        let coherent = coherent && !tracer.accel.orders_batches();
-        let batch = RayBatch::new(n).with(Coherence::hint(coherent));
-        tracer.accel.any_hits(batch, ray, answer)
+        let coherence = Coherence::hint(coherent && !tracer.accel.orders_batches());
+        let (shadows, blocked) = (&self.shadows, &mut self.blocked);
+        tracer
+            .accel
+            .any_hits_into(shadows, blocked, ALL_MASKS, coherence)
     }
 }
 
