@@ -407,7 +407,8 @@ pub struct PackRay {
     /// The ray's `t_min`, which no hit changes. Closest-hit walks read it here and only
     /// `t_max` from their search: the two side by side were read as one 8-byte load, which
     /// could not be forwarded from the 4-byte store of a hit just found in the pack before
-    /// (a stall that cost 14% of a walk on the lit dragon, AMD Zen 3).
+    /// (a stall on which a tenth of the walk's time was spent, the lit dragon's camera rays
+    /// on AMD Zen 3).
     pub t_min: f32,
 }
 
