@@ -8,7 +8,7 @@
 //! milliseconds, the rays left alone) and, unless `--no-stats`, node
 //! visits and primitive tests per ray (of the closest-hit walk). `--isa` picks the
 //! kernels' instruction set (`avx2` times the AVX2 kernels on an AVX-512 CPU). `count` counts each ray's crossings
-//! of the surface, one ray at a time, as `canopy.RayScene.count_intersections` does.
+//! of the surface, the rays in one batch, as `canopy.RayScene.count_intersections` does.
 //! With `--made` (closest and occluded only), each ray is made as the walk asks for it,
 //! from arrays of origins and directions, by a function out of line (as a caller's
 //! closure that the compiler does not inline makes it: `canopy.Bvh`'s batch calls),
@@ -167,9 +167,9 @@ fn profiled_closest(blas: &Blas<TriangleMesh>, n: usize, ray: impl FnMut(usize) 
 
 #[inline(never)]
 fn profiled_count(blas: &Blas<TriangleMesh>, rays: &[Ray]) -> usize {
-    rays.iter()
-        .map(|ray| blas.count_hits(ray, ALL_MASKS, HitsAlong::Crossings))
-        .sum()
+    let mut counts = vec![0; rays.len()];
+    blas.count_hits_each(rays, ALL_MASKS, HitsAlong::Crossings, &mut counts);
+    counts.iter().sum()
 }
 
 #[inline(never)]

@@ -234,6 +234,29 @@ impl Tree {
         }
     }
 
+    /// [`Tree::for_each_hit`] of each of `rays`, one after another, each hit given to
+    /// `found(i, hit, vertices)` with its ray's index; same contract as
+    /// [`BvhN::for_each_hit_of`].
+    pub fn for_each_hit_of<F, P, H>(&self, rays: &[Ray], mut hit_prim: F, mut found: H)
+    where
+        F: FnMut(u32, &Ray) -> Option<P>,
+        P: IntoHit,
+        H: FnMut(usize, Hit, Option<[Vec3; 3]>),
+    {
+        let mut one_by_one = |walk: &dyn Fn(&Ray, &mut PrimTest)| {
+            for (i, ray) in rays.iter().enumerate() {
+                let found = |hit: Hit, vertices: Option<[Vec3; 3]>| found(i, hit, vertices);
+                walk(ray, &mut reporting(&mut hit_prim, found));
+            }
+        };
+        match self {
+            Tree::Binary(t) => one_by_one(&|ray, test| _ = t.occluded(ray, test)),
+            Tree::Gpu(t) => one_by_one(&|ray, test| _ = t.occluded(ray, test)),
+            Tree::Four(t) => t.for_each_hit_of(rays, hit_prim, found),
+            Tree::Eight(t) => t.for_each_hit_of(rays, hit_prim, found),
+        }
+    }
+
     /// Whether batches over this tree are best traced in the order of their rays'
     /// origins ([`crate::BvhN::orders_batches`]; never for the binary and GPU layouts).
     pub fn orders_batches(&self) -> bool {
@@ -296,6 +319,9 @@ impl Tree {
         }
     }
 }
+
+/// A primitive test as the binary walks take it: whether primitive `prim` stops `ray`.
+type PrimTest<'a> = dyn FnMut(u32, &Ray) -> bool + 'a;
 
 /// An any-hit test that gives each hit to `found` and reports no blocker, so that an
 /// any-hit walk visits every primitive along the ray.

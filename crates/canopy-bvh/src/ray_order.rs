@@ -219,11 +219,31 @@ impl RayOrder {
     ///
     /// # Panics
     /// If `out` does not hold one answer per query.
-    pub fn answer_into<Q: Send, T: Copy + Default + Send + Sync>(
+    pub fn answer_into<Q: Copy + Send, T: Copy + Default + Send + Sync>(
         &self,
         chunk: usize,
         query: impl Fn(usize) -> Q + Sync,
         answer: impl Fn(Q) -> T + Sync,
+        out: &mut [T],
+    ) {
+        let each = |queries: &[Q], answers: &mut [T]| {
+            for (a, &q) in answers.iter_mut().zip(queries) {
+                *a = answer(q);
+            }
+        };
+        self.answer_batches_into(chunk, query, each, out);
+    }
+
+    /// [`RayOrder::answer_into`] where `answer(queries, answers)` answers a run of up to
+    /// `chunk` queries at once (a walk of a tree for a whole batch of rays).
+    ///
+    /// # Panics
+    /// If `out` does not hold one answer per query.
+    pub fn answer_batches_into<Q: Send, T: Copy + Default + Send + Sync>(
+        &self,
+        chunk: usize,
+        query: impl Fn(usize) -> Q + Sync,
+        answer: impl Fn(&[Q], &mut [T]) + Sync,
         out: &mut [T],
     ) {
         let mut traced = vec![T::default(); self.order.len()];
@@ -233,9 +253,7 @@ impl RayOrder {
             .for_each_init(Vec::new, |queries, (out, indices)| {
                 queries.clear();
                 queries.extend(indices.iter().map(|&i| query(i as usize)));
-                for (o, q) in out.iter_mut().zip(queries.drain(..)) {
-                    *o = answer(q);
-                }
+                answer(queries, out);
             });
         self.unsort_into(&traced, out);
     }

@@ -89,6 +89,29 @@ impl<T: Copy> TraversalStack<T> {
         }
     }
 
+    /// Pushes `entry(i)` for every set bit `i` of `mask` (below `N`), lowest first.
+    /// Where the array has room for `N` more, every entry is written and only the set
+    /// ones are counted: no branch per entry, whose outcome (which slots a ray enters)
+    /// is a coin toss.
+    #[inline(always)]
+    pub(crate) fn push_masked<const N: usize>(&mut self, mask: u32, entry: impl Fn(usize) -> T) {
+        if self.len + N <= STACK_INLINE {
+            let mut len = self.len;
+            for i in 0..N {
+                // SAFETY: `len` stays below `self.len + N`, within the array (checked).
+                unsafe { self.inline.get_unchecked_mut(len) }.write(entry(i));
+                len += (mask >> i & 1) as usize;
+            }
+            self.len = len;
+        } else {
+            let mut rest = mask;
+            while rest != 0 {
+                self.push_in_room(entry(rest.trailing_zeros() as usize));
+                rest &= rest - 1;
+            }
+        }
+    }
+
     #[inline(always)]
     pub(crate) fn pop(&mut self) -> Option<T> {
         if self.len == 0 {

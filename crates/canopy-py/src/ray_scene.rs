@@ -50,7 +50,7 @@ impl RayScene {
     /// order of `place(i)` (a ray's origin, a query point) where the scene is larger
     /// than the cache ([`RayQuery::orders_batches`]): queries that start near each other
     /// walk the same nodes while these are cached.
-    fn per_row<'py, Q: Send, T: numpy::Element + Copy + Default + Send + Sync>(
+    fn per_row<'py, Q: Copy + Send, T: numpy::Element + Copy + Default + Send + Sync>(
         &self,
         py: Python<'py>,
         n: usize,
@@ -59,20 +59,43 @@ impl RayScene {
         query: impl Fn(usize) -> Q + Sync + Send,
         answer: impl Fn(&Tlas<MeshBlas>, Q) -> T + Sync,
     ) -> PyResult<Bound<'py, PyArray1<T>>> {
+        let each = |tlas: &Tlas<MeshBlas>, queries: &[Q], answers: &mut [T]| {
+            for (a, &q) in answers.iter_mut().zip(queries) {
+                *a = answer(tlas, q);
+            }
+        };
+        self.per_batch(py, n, threads, place, query, each)
+    }
+
+    /// [`RayScene::per_row`] where `answer(tlas, queries, answers)` answers a run of up
+    /// to [`POINT_CHUNK`] rows at once (one walk of the tree for a batch of rays).
+    fn per_batch<'py, Q: Send, T: numpy::Element + Copy + Default + Send + Sync>(
+        &self,
+        py: Python<'py>,
+        n: usize,
+        threads: Option<usize>,
+        place: impl Fn(usize) -> Vec3 + Sync + Send,
+        query: impl Fn(usize) -> Q + Sync + Send,
+        answer: impl Fn(&Tlas<MeshBlas>, &[Q], &mut [T]) + Sync,
+    ) -> PyResult<Bound<'py, PyArray1<T>>> {
         let tlas = py.detach(|| self.tlas(threads))?;
         // SAFETY (both): the array is made here, and every element is written below
         // before it is returned; nothing else refers to it yet.
         let out = unsafe { PyArray1::<T>::new(py, n, false) };
         let values = unsafe { out.as_slice_mut().expect("contiguous") };
-        let answer = |q: Q| answer(&tlas, q);
+        let answer = |queries: &[Q], answers: &mut [T]| answer(&tlas, queries, answers);
         py.detach(|| {
             pools::install(threads, || match query_order(&tlas, n, place) {
-                Some(order) => order.answer_into(POINT_CHUNK, query, answer, values),
+                Some(order) => order.answer_batches_into(POINT_CHUNK, query, answer, values),
                 None => values
-                    .par_iter_mut()
-                    .with_min_len(POINT_CHUNK)
+                    .par_chunks_mut(POINT_CHUNK)
                     .enumerate()
-                    .for_each(|(i, v)| *v = answer(query(i))),
+                    .for_each_init(Vec::new, |queries, (chunk, answers)| {
+                        let first = chunk * POINT_CHUNK;
+                        queries.clear();
+                        queries.extend((first..first + answers.len()).map(&query));
+                        answer(queries, answers)
+                    }),
             })
         })?;
         Ok(out)
@@ -646,8 +669,13 @@ impl RayScene {
         let batch = batch(&origins, &directions, &tnear, &mut near, &tfar, &mut far)?;
         let along = hits_along(per_triangle);
         let (origin, ray) = (|i| batch.origin(i), |i| batch.ray(i));
-        self.per_row(py, batch.len(), threads, origin, ray, |tlas, ray| {
-            tlas.count_hits(&ray, mask, along) as i64
+        self.per_batch(py, batch.len(), threads, origin, ray, |tlas, rays, out| {
+            let mut counts = [0; POINT_CHUNK];
+            let counts = &mut counts[..rays.len()];
+            tlas.count_hits_each(rays, mask, along, counts);
+            for (o, &count) in out.iter_mut().zip(counts.iter()) {
+                *o = count as i64;
+            }
         })
     }
 
@@ -683,21 +711,17 @@ impl RayScene {
         let order =
             py.detach(|| pools::install(threads, || query_order(&tlas, n, |i| batch.origin(i))))?;
         let ray_at = |k: usize| order.as_ref().map_or(k, |o| o.indices()[k] as usize);
-        let per_task: Vec<(Vec<u32>, Vec<Hit>)> = py.detach(|| {
+        let per_task: Vec<(Vec<usize>, Vec<Hit>)> = py.detach(|| {
             pools::install(threads, || {
                 (0..n.div_ceil(POINT_CHUNK))
                     .into_par_iter()
-                    .map_init(Vec::new, |scratch, task| {
+                    .map(|task| {
                         let traced = task * POINT_CHUNK..((task + 1) * POINT_CHUNK).min(n);
                         // Gathered first, as `RayOrder::answer_into` does.
                         let rays: Vec<Ray> = traced.map(|k| batch.ray(ray_at(k))).collect();
-                        let mut counts = Vec::with_capacity(rays.len());
+                        let mut counts = vec![0; rays.len()];
                         let mut hits = Vec::new();
-                        for ray in &rays {
-                            tlas.hits_into(ray, mask, along, scratch);
-                            counts.push(scratch.len() as u32);
-                            hits.extend_from_slice(scratch);
-                        }
+                        tlas.hits_each(&rays, mask, along, &mut hits, &mut counts);
                         (counts, hits)
                     })
                     .collect()
@@ -707,7 +731,7 @@ impl RayScene {
         let mut first_hit = Vec::with_capacity(n + 1);
         first_hit.push(0usize);
         for count in per_task.iter().flat_map(|(counts, _)| counts) {
-            first_hit.push(first_hit.last().expect("not empty") + *count as usize);
+            first_hit.push(first_hit.last().expect("not empty") + *count);
         }
         let hits: Vec<Hit> = per_task.into_iter().flat_map(|(_, hits)| hits).collect();
         let total = hits.len();

@@ -54,29 +54,48 @@ impl<G: TriangleSurface> Blas<G> {
         along: HitsAlong,
         mut each: impl FnMut(Hit, &[Vec3; 3]),
     ) {
-        if !ray.is_traceable() {
-            return;
-        }
+        let rays = std::slice::from_ref(ray);
+        self.each_hit_of(rays, along, |_, hit, vertices| each(hit, vertices));
+    }
+
+    /// [`Blas::each_hit`] of each of `rays`, one ray after another, as
+    /// `each(i, hit, vertices)`: one walk of the tree for the batch.
+    pub(super) fn each_hit_of(
+        &self,
+        rays: &[Ray],
+        along: HitsAlong,
+        mut each: impl FnMut(usize, Hit, &[Vec3; 3]),
+    ) {
         let g = self.geometry();
-        let sheared = ShearedRay::new(ray);
-        let test =
-            |prim: u32, ray: &Ray| intersect_triangle(&g.vertices_of_triangle(prim), ray, &sheared);
+        // The closure tests only what the tree does not pack (a wide tree packs every
+        // triangle of a mesh), so its ray is prepared where it is called.
+        let test = |prim: u32, ray: &Ray| {
+            intersect_triangle(&g.vertices_of_triangle(prim), ray, &ShearedRay::new(ray))
+        };
         // Hits are few: the tie rule is applied to them alone, after the tree's own
         // (packed) tests, whose hits are the scalar test's bit for bit.
-        let found = |hit: Hit, vertices: Option<[Vec3; 3]>| {
+        let found = |i: usize, hit: Hit, vertices: Option<[Vec3; 3]>| {
             let v = vertices.unwrap_or_else(|| g.vertices_of_triangle(hit.prim));
             let tie = along == HitsAlong::Crossings && may_lie_on_an_edge(&hit);
-            if !tie || crosses_triangle(&v, ray, &sheared).is_some() {
-                each(hit, &v);
+            let ray = &rays[i];
+            if !tie || crosses_triangle(&v, ray, &ShearedRay::new(ray)).is_some() {
+                each(i, hit, &v);
             }
         };
         match self.tree() {
-            Some(tree) => tree.for_each_hit(ray, test, found),
+            Some(tree) => tree.for_each_hit_of(rays, test, found),
             None => {
                 let mut found = found;
-                for prim in 0..g.len() as u32 {
-                    if let Some(h) = test(prim, ray) {
-                        found(Hit::new(prim, h), None);
+                for (i, ray) in rays.iter().enumerate() {
+                    if !ray.is_traceable() {
+                        continue;
+                    }
+                    let sheared = ShearedRay::new(ray);
+                    for prim in 0..g.len() as u32 {
+                        let v = g.vertices_of_triangle(prim);
+                        if let Some(h) = intersect_triangle(&v, ray, &sheared) {
+                            found(i, Hit::new(prim, h), Some(v));
+                        }
                     }
                 }
             }

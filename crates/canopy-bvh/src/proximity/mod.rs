@@ -211,12 +211,106 @@ pub trait SurfaceQuery: Sync {
     fn hits_into(&self, ray: &Ray, mask: u32, along: HitsAlong, out: &mut Vec<Hit>) {
         out.clear();
         self.all_hits(ray, mask, along, out);
-        out.sort_unstable_by(|a, b| {
-            a.t.total_cmp(&b.t)
-                .then((a.inst, a.prim).cmp(&(b.inst, b.prim)))
-        });
-        out.dedup_by(|a, b| (a.inst, a.prim) == (b.inst, b.prim) && a.t == b.t);
+        sort_and_dedup_from(out, 0);
     }
+
+    /// [`SurfaceQuery::count_hits`] of each of `rays`, into `counts`.
+    ///
+    /// # Panics
+    /// If `counts` does not hold one count per ray.
+    fn count_hits_each(&self, rays: &[Ray], mask: u32, along: HitsAlong, counts: &mut [usize]) {
+        count_hits_one_by_one(self, rays, mask, along, counts)
+    }
+
+    /// [`SurfaceQuery::hits`] of each of `rays`, one ray's after another's into `hits`
+    /// (cleared first): `counts[i]` of them for ray `i`.
+    ///
+    /// # Panics
+    /// If `counts` does not hold one count per ray.
+    fn hits_each(
+        &self,
+        rays: &[Ray],
+        mask: u32,
+        along: HitsAlong,
+        hits: &mut Vec<Hit>,
+        counts: &mut [usize],
+    ) {
+        hits_one_by_one(self, rays, mask, along, hits, counts)
+    }
+}
+
+/// [`SurfaceQuery::count_hits_each`], a ray at a time.
+fn count_hits_one_by_one<Q: SurfaceQuery + ?Sized>(
+    query: &Q,
+    rays: &[Ray],
+    mask: u32,
+    along: HitsAlong,
+    counts: &mut [usize],
+) {
+    assert_eq!(rays.len(), counts.len(), "one count per ray");
+    for (ray, count) in rays.iter().zip(counts) {
+        *count = query.count_hits(ray, mask, along);
+    }
+}
+
+/// [`SurfaceQuery::hits_each`], a ray at a time.
+fn hits_one_by_one<Q: SurfaceQuery + ?Sized>(
+    query: &Q,
+    rays: &[Ray],
+    mask: u32,
+    along: HitsAlong,
+    hits: &mut Vec<Hit>,
+    counts: &mut [usize],
+) {
+    assert_eq!(rays.len(), counts.len(), "one count per ray");
+    hits.clear();
+    for (ray, count) in rays.iter().zip(counts) {
+        let first = hits.len();
+        query.all_hits(ray, mask, along, hits);
+        sort_and_dedup_from(hits, first);
+        *count = hits.len() - first;
+    }
+}
+
+/// Sorts `hits[first..]` (one ray's) and drops its repeats, as [`sort_and_dedup`].
+fn sort_and_dedup_from(hits: &mut Vec<Hit>, first: usize) {
+    let kept = sort_and_dedup(&mut hits[first..]);
+    hits.truncate(first + kept);
+}
+
+/// Sorts and dedups each ray's hits, `counts[i]` of them for ray `i` one after another
+/// in `hits` (as [`sort_and_dedup`]), moving them together and lowering the counts.
+fn sort_and_dedup_each(hits: &mut Vec<Hit>, counts: &mut [usize]) {
+    let (mut read, mut write) = (0, 0);
+    for count in counts {
+        hits.copy_within(read..read + *count, write);
+        read += *count;
+        *count = sort_and_dedup(&mut hits[write..write + *count]);
+        write += *count;
+    }
+    hits.truncate(write);
+}
+
+/// Sorts one ray's hits nearest first (equal distances by instance, then triangle) and
+/// moves them to the front without repeats (a triangle met in several leaves); returns
+/// how many are kept.
+fn sort_and_dedup(hits: &mut [Hit]) -> usize {
+    hits.sort_unstable_by(|a, b| {
+        a.t.total_cmp(&b.t)
+            .then((a.inst, a.prim).cmp(&(b.inst, b.prim)))
+    });
+    let mut kept = 0;
+    for k in 0..hits.len() {
+        let repeat = kept > 0 && {
+            let (last, hit) = (&hits[kept - 1], &hits[k]);
+            (last.inst, last.prim) == (hit.inst, hit.prim) && last.t == hit.t
+        };
+        if !repeat {
+            hits[kept] = hits[k];
+            kept += 1;
+        }
+    }
+    kept
 }
 
 /// Which hits along a ray [`SurfaceQuery::hits`] reports.
@@ -258,6 +352,21 @@ impl<S: SurfaceQuery + Send> SurfaceQuery for std::sync::Arc<S> {
 
     fn all_hits(&self, ray: &Ray, mask: u32, along: HitsAlong, out: &mut Vec<Hit>) {
         (**self).all_hits(ray, mask, along, out)
+    }
+
+    fn count_hits_each(&self, rays: &[Ray], mask: u32, along: HitsAlong, counts: &mut [usize]) {
+        (**self).count_hits_each(rays, mask, along, counts)
+    }
+
+    fn hits_each(
+        &self,
+        rays: &[Ray],
+        mask: u32,
+        along: HitsAlong,
+        hits: &mut Vec<Hit>,
+        counts: &mut [usize],
+    ) {
+        (**self).hits_each(rays, mask, along, hits, counts)
     }
 }
 

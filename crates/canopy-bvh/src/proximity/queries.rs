@@ -3,6 +3,7 @@
 
 use super::walk::{self, beats, Best};
 use super::{closest_point_on_triangle, solid_angle, HitsAlong, Nearest, Placement, SurfaceQuery};
+use super::{count_hits_one_by_one, hits_one_by_one, sort_and_dedup_each};
 use super::{PointTree, TriangleSurface, INSIDE_FAR_FIELD};
 use crate::{Blas, Hit, Ray, RayQuery, Tlas};
 use glam::Vec3;
@@ -92,14 +93,39 @@ impl<G: TriangleSurface> SurfaceQuery for Blas<G> {
     }
 
     fn count_hits(&self, ray: &Ray, mask: u32, along: HitsAlong) -> usize {
-        match self.repeats_triangles() {
-            true => self.hits(ray, mask, along).len(),
-            false => {
-                let mut count = 0;
-                self.each_hit(ray, along, |_, _| count += 1);
-                count
-            }
+        let mut count = [0];
+        self.count_hits_each(std::slice::from_ref(ray), mask, along, &mut count);
+        count[0]
+    }
+
+    fn count_hits_each(&self, rays: &[Ray], mask: u32, along: HitsAlong, counts: &mut [usize]) {
+        assert_eq!(rays.len(), counts.len(), "one count per ray");
+        if self.repeats_triangles() {
+            // A triangle met in several leaves counts once: listed and deduplicated.
+            let mut hits = Vec::new();
+            return self.hits_each(rays, mask, along, &mut hits, counts);
         }
+        counts.fill(0);
+        self.each_hit_of(rays, along, |i, _, _| counts[i] += 1);
+    }
+
+    fn hits_each(
+        &self,
+        rays: &[Ray],
+        _mask: u32,
+        along: HitsAlong,
+        hits: &mut Vec<Hit>,
+        counts: &mut [usize],
+    ) {
+        assert_eq!(rays.len(), counts.len(), "one count per ray");
+        hits.clear();
+        counts.fill(0);
+        // The walk takes the rays one after another, so each ray's hits come together.
+        self.each_hit_of(rays, along, |i, hit, _| {
+            hits.push(hit);
+            counts[i] += 1;
+        });
+        sort_and_dedup_each(hits, counts);
     }
 }
 
@@ -170,6 +196,35 @@ impl<B: RayQuery + SurfaceQuery> SurfaceQuery for Tlas<B> {
             count += blas.count_hits(ray, mask, along)
         });
         count
+    }
+
+    fn count_hits_each(&self, rays: &[Ray], mask: u32, along: HitsAlong, counts: &mut [usize]) {
+        assert_eq!(rays.len(), counts.len(), "one count per ray");
+        match self.alone() {
+            Some((blas, _, only_mask)) if only_mask & mask != 0 => {
+                blas.count_hits_each(rays, mask, along, counts)
+            }
+            Some(_) => counts.fill(0),
+            None => count_hits_one_by_one(self, rays, mask, along, counts),
+        }
+    }
+
+    fn hits_each(
+        &self,
+        rays: &[Ray],
+        mask: u32,
+        along: HitsAlong,
+        hits: &mut Vec<Hit>,
+        counts: &mut [usize],
+    ) {
+        assert_eq!(rays.len(), counts.len(), "one count per ray");
+        match self.alone() {
+            Some((blas, index, only_mask)) if only_mask & mask != 0 => {
+                blas.hits_each(rays, mask, along, hits, counts);
+                hits.iter_mut().for_each(|h| h.inst = index);
+            }
+            _ => hits_one_by_one(self, rays, mask, along, hits, counts),
+        }
     }
 }
 

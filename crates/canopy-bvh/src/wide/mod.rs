@@ -30,7 +30,8 @@ use packet_packs::PackedPacketLeaves;
 use rayon::prelude::*;
 use std::marker::PhantomData;
 use traverse::{
-    any_each, closest_each, ClosureLeaves, EveryHit, PackedLeaves, Query, ShapeLeaves, WalkNodes,
+    any_each, closest_each, every_each, ClosureLeaves, EveryHit, PackedLeaves, Query, ShapeLeaves,
+    WalkNodes,
 };
 
 pub use packet::PACKET;
@@ -590,18 +591,31 @@ where
     /// particular order; a primitive in several leaves, after spatial splits, once per
     /// leaf), with the triangle's vertices where its pack holds them. Triangles in packs
     /// are tested by canopy itself; the closure tests the rest.
-    pub fn for_each_hit<F, P, H>(&self, ray: &Ray, hit_prim: F, found: H)
+    pub fn for_each_hit<F, P, H>(&self, ray: &Ray, hit_prim: F, mut found: H)
     where
         F: FnMut(u32, &Ray) -> Option<P>,
         P: IntoHit,
         H: FnMut(Hit, Option<[Vec3; 3]>),
+    {
+        let rays = std::slice::from_ref(ray);
+        self.for_each_hit_of(rays, hit_prim, |_, hit, vertices| found(hit, vertices))
+    }
+
+    /// [`BvhN::for_each_hit`] of each of `rays`, one ray after another, each hit given to
+    /// `found(i, hit, vertices)` with its ray's index: the instruction set is chosen
+    /// and the walk's stack made once for the batch.
+    pub fn for_each_hit_of<F, P, H>(&self, rays: &[Ray], hit_prim: F, found: H)
+    where
+        F: FnMut(u32, &Ray) -> Option<P>,
+        P: IntoHit,
+        H: FnMut(usize, Hit, Option<[Vec3; 3]>),
     {
         if self.nodes.is_empty() {
             return;
         }
         let query = EveryHitQuery {
             bvh: self,
-            ray,
+            rays,
             test: hit_prim,
             found,
         };
@@ -929,7 +943,7 @@ where
 
 struct EveryHitQuery<'a, const N: usize, F, H> {
     bvh: &'a BvhN<N>,
-    ray: &'a Ray,
+    rays: &'a [Ray],
     test: F,
     found: H,
 }
@@ -938,7 +952,7 @@ impl<const N: usize, F, P, H> Query<N> for EveryHitQuery<'_, N, F, H>
 where
     F: FnMut(u32, &Ray) -> Option<P>,
     P: IntoHit,
-    H: FnMut(Hit, Option<[Vec3; 3]>),
+    H: FnMut(usize, Hit, Option<[Vec3; 3]>),
 {
     type Out = ();
 
@@ -946,16 +960,19 @@ where
     unsafe fn run<K: kernels::NodeKernel<N>, T: crate::triangle::PackKernel>(self) {
         let Self {
             bvh,
-            ray,
+            rays,
             test,
             found,
         } = self;
         let nodes = bvh.walk_nodes();
-        let stack = &mut nodes.stack();
         with_leaves!(bvh, test, T, |leaves| {
-            let mut every = EveryHit { leaves, found };
+            let mut every = EveryHit {
+                leaves,
+                found,
+                ray: 0,
+            };
             // SAFETY: the caller guarantees the instruction sets.
-            unsafe { traverse::any::<N, K, _>(nodes, ray, &mut every, stack) };
+            unsafe { every_each::<N, K, _, _>(nodes, rays.len(), |i| rays[i], &mut every) };
         })
     }
 }

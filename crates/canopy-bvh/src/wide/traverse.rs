@@ -805,7 +805,10 @@ fn any_triangle_packs<T: PackKernel, const PACKS: usize>(
 /// pack's lane, already in the cache: the caller need not fetch them from the mesh).
 pub(crate) struct EveryHit<L, H> {
     pub leaves: L,
+    /// Takes each hit as `found(ray, hit, vertices)`.
     pub found: H,
+    /// Which ray of a batch is walked.
+    pub ray: usize,
 }
 
 impl<L: PrefetchLeaves, H> PrefetchLeaves for EveryHit<L, H> {
@@ -819,7 +822,7 @@ impl<F, P, H> AnyLeaves for EveryHit<ClosureLeaves<'_, F>, H>
 where
     F: FnMut(u32, &Ray) -> Option<P>,
     P: IntoHit,
-    H: FnMut(Hit, Option<[Vec3; 3]>),
+    H: FnMut(usize, Hit, Option<[Vec3; 3]>),
 {
     #[inline(always)]
     fn any(&mut self, first: u32, count: u32, ray: &Ray) -> bool {
@@ -827,7 +830,7 @@ where
         let first = first as usize;
         for &prim in &leaves.prims[first..first + count as usize] {
             if let Some(hit) = (leaves.test)(prim, ray) {
-                (self.found)(hit.into_hit(prim), None);
+                (self.found)(self.ray, hit.into_hit(prim), None);
             }
         }
         false
@@ -838,7 +841,7 @@ impl<F, P, H> AnyLeaves for EveryHit<ShapeLeaves<'_, F>, H>
 where
     F: FnMut(u32, &Ray) -> Option<P>,
     P: IntoHit,
-    H: FnMut(Hit, Option<[Vec3; 3]>),
+    H: FnMut(usize, Hit, Option<[Vec3; 3]>),
 {
     #[inline(always)]
     fn any(&mut self, first: u32, count: u32, ray: &Ray) -> bool {
@@ -853,7 +856,7 @@ where
                 false => (leaves.test)(prim, ray).map(|hit| hit.into_hit(prim)),
             };
             if let Some(hit) = hit {
-                (self.found)(hit, None);
+                (self.found)(self.ray, hit, None);
             }
         }
         false
@@ -865,7 +868,7 @@ where
     T: PackKernel,
     F: FnMut(u32, &Ray) -> Option<P>,
     P: IntoHit,
-    H: FnMut(Hit, Option<[Vec3; 3]>),
+    H: FnMut(usize, Hit, Option<[Vec3; 3]>),
 {
     /// Reports the hits in one pack or a pair tested together.
     #[inline(always)]
@@ -885,12 +888,12 @@ where
             for lane in lanes(mask) {
                 let (pack, in_pack) = (&packs[lane / PACK_LANES], lane % PACK_LANES);
                 let hit = Hit::new(pack.prim[in_pack], hits.lane(lane));
-                (self.found)(hit, Some(pack.vertices(in_pack)));
+                (self.found)(self.ray, hit, Some(pack.vertices(in_pack)));
             }
         }
         for pack in packs {
             if pack.others != 0 {
-                every_other(pack, &mut leaves.test, ray, &mut self.found);
+                every_other(pack, &mut leaves.test, ray, self.ray, &mut self.found);
             }
         }
     }
@@ -899,11 +902,11 @@ where
 /// Reports the hits on a pack's lanes that are not triangles (see [`closest_others`]).
 #[cold]
 #[inline(never)]
-fn every_other<F, P, H>(pack: &TrianglePack, test: &mut F, ray: &Ray, found: &mut H)
+fn every_other<F, P, H>(pack: &TrianglePack, test: &mut F, ray: &Ray, index: usize, found: &mut H)
 where
     F: FnMut(u32, &Ray) -> Option<P>,
     P: IntoHit,
-    H: FnMut(Hit, Option<[Vec3; 3]>),
+    H: FnMut(usize, Hit, Option<[Vec3; 3]>),
 {
     for lane in lanes(pack.others) {
         let prim = pack.prim[lane];
@@ -912,7 +915,7 @@ where
             None => test(prim, ray).map(|hit| hit.into_hit(prim)),
         };
         if let Some(hit) = hit {
-            found(hit, None);
+            found(index, hit, None);
         }
     }
 }
@@ -922,7 +925,7 @@ where
     T: PackKernel,
     F: FnMut(u32, &Ray) -> Option<P>,
     P: IntoHit,
-    H: FnMut(Hit, Option<[Vec3; 3]>),
+    H: FnMut(usize, Hit, Option<[Vec3; 3]>),
 {
     #[inline(always)]
     fn new_ray(&mut self) {
@@ -1363,6 +1366,83 @@ pub(crate) unsafe fn any_each<const N: usize, K, L>(
         // SAFETY: the caller guarantees the instruction set.
         let blocked = unsafe { any::<N, K, L>(nodes, &ray, &mut leaves, &mut stack) };
         answer(i, blocked);
+    }
+}
+
+/// Every leaf that `ray` enters, each handed to `leaves` (whose answers are ignored:
+/// nothing stops the walk), in no particular order: a walk for every hit along a ray
+/// (counts and lists of crossings), which visits each entered node whatever it finds, so
+/// that the order of children saves nothing. The entered slots are pushed without a
+/// branch each (and fetched ahead, as [`any`] does), and the first of them entered at
+/// once.
+///
+/// # Safety
+/// As [`any`].
+#[inline(always)]
+pub(crate) unsafe fn every<const N: usize, K, L>(
+    nodes: WalkNodes<'_, N>,
+    ray: &Ray,
+    leaves: &mut L,
+    stack: &mut AnyStack,
+) where
+    K: NodeKernel<N>,
+    L: AnyLeaves + PrefetchLeaves,
+{
+    if !ray.is_traceable() {
+        return;
+    }
+    let oct = OctRay::new(ray);
+    // SAFETY: the caller guarantees the instruction set.
+    let kray = unsafe { K::prepare(&oct) };
+    let (mut child, mut count) = ROOT;
+    loop {
+        if count > 0 {
+            _ = leaves.any(child, count, ray);
+        } else {
+            // SAFETY: as in `closest_from`.
+            let node = unsafe { nodes.node(child) };
+            let (mask, _) = unsafe { K::hit_mask(node, &kray, ray.t_max) };
+            if mask != 0 {
+                let first = mask.trailing_zeros() as usize;
+                let rest = mask & (mask - 1);
+                stack.push_masked::<N>(rest, |i| (node.child[i], node.count[i]));
+                for i in lanes(rest) {
+                    nodes.prefetch_child(leaves, node.child[i], node.count[i]);
+                }
+                (child, count) = (node.child[first], node.count[first]);
+                continue;
+            }
+        }
+        match stack.pop() {
+            None => return,
+            Some(entry) => (child, count) = entry,
+        }
+    }
+}
+
+/// [`every`] for rays `0..count` (`ray(i)` makes ray `i`), one after another through the
+/// same leaves and stack, the leaves told which ray they test ([`EveryHit::ray`]).
+///
+/// # Safety
+/// As [`any`].
+#[inline(always)]
+pub(crate) unsafe fn every_each<const N: usize, K, L, H>(
+    nodes: WalkNodes<'_, N>,
+    count: usize,
+    ray: impl FnMut(usize) -> Ray,
+    leaves: &mut EveryHit<L, H>,
+) where
+    K: NodeKernel<N>,
+    EveryHit<L, H>: AnyLeaves + PrefetchLeaves,
+{
+    let mut stack: AnyStack = nodes.stack();
+    let mut rays = Upcoming::new(count, ray);
+    for i in 0..count {
+        let ray = rays.take(i);
+        leaves.new_ray();
+        leaves.ray = i;
+        // SAFETY: the caller guarantees the instruction set.
+        unsafe { every::<N, K, _>(nodes, &ray, leaves, &mut stack) };
     }
 }
 

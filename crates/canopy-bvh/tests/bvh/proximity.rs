@@ -8,8 +8,8 @@ use common::{structures, torus, uniform};
 
 use canopy_bvh::{
     closest_point_on_triangle, crosses_triangle, intersect_triangle, solid_angle, Blas, BlasParams,
-    Builder, BvhWidth, Hit, HitsAlong, Instance, Ray, ShearedRay, SurfaceQuery, Tlas, TriangleMesh,
-    ALL_MASKS, INSIDE_FAR_FIELD,
+    Builder, BvhWidth, Hit, HitsAlong, Instance, PrimHit, Ray, ShearedRay, SurfaceQuery, Tlas,
+    TriangleMesh, ALL_MASKS, INSIDE_FAR_FIELD,
 };
 use glam::{Affine3A, Quat, Vec3};
 
@@ -191,6 +191,80 @@ fn every_hit_along_a_ray_is_brute_forces_for_every_builder_and_layout() {
     assert!(crossed > 1000, "the rays cross the torus ({crossed} hits)");
 }
 
+/// Checks that `structure`'s batch forms answer `rays` as brute force answers each:
+/// [`SurfaceQuery::hits_each`] lists each ray's hits after the ray before's, and
+/// [`SurfaceQuery::count_hits_each`] counts them.
+fn check_batch(
+    name: &str,
+    structure: &impl SurfaceQuery,
+    meshes: &[(&TriangleMesh, Instance)],
+    rays: &[Ray],
+    mask: u32,
+) -> usize {
+    let mut listed = 0;
+    for along in [HitsAlong::Crossings, HitsAlong::Triangles] {
+        let expected: Vec<Vec<Hit>> = rays
+            .iter()
+            .map(|ray| hits_by_loop(meshes, ray, mask, along))
+            .collect();
+        let mut counts = vec![usize::MAX; rays.len()];
+        structure.count_hits_each(rays, mask, along, &mut counts);
+        let expected_counts: Vec<usize> = expected.iter().map(Vec::len).collect();
+        assert_eq!(counts, expected_counts, "{name}, {along:?}, mask {mask}");
+        // Left over from an earlier batch: cleared first.
+        let mut hits = vec![
+            Hit::new(
+                7,
+                PrimHit {
+                    t: 1.0,
+                    u: 0.0,
+                    v: 0.0
+                }
+            );
+            3
+        ];
+        counts.fill(usize::MAX);
+        structure.hits_each(rays, mask, along, &mut hits, &mut counts);
+        assert_eq!(counts, expected_counts, "{name}, {along:?}, mask {mask}");
+        assert_eq!(hits, expected.concat(), "{name}, {along:?}, mask {mask}");
+        listed += hits.len();
+    }
+    listed
+}
+
+/// Rays for a batch: [`rays`], with rays that miss everything among them (one that is
+/// not traceable, one that leaves the scene at once).
+fn batch_rays() -> Vec<Ray> {
+    let mut batch = rays(150, 21);
+    batch.insert(40, Ray::new(Vec3::NAN, Vec3::X, 0.0, f32::INFINITY));
+    batch.insert(
+        90,
+        Ray::new(Vec3::splat(50.0), Vec3::ONE, 0.0, f32::INFINITY),
+    );
+    batch
+}
+
+#[test]
+fn batches_of_rays_count_and_list_every_hit_as_brute_force_for_every_builder_and_layout() {
+    let mesh = torus(24, 12);
+    let alone = [(&mesh, Instance::new(0, Affine3A::IDENTITY))];
+    let batch = batch_rays();
+    let mut listed = 0;
+    for (name, blas) in structures(&mesh) {
+        listed += check_batch(&name, &blas, &alone, &batch, ALL_MASKS);
+        // A structure placed alone as itself answers through its own batch walk; a mask
+        // that refuses it leaves every ray without a hit.
+        let index = 0;
+        let masked = Instance::new(index, Affine3A::IDENTITY).with_mask(2);
+        let top = Tlas::build(vec![blas], vec![masked], &BlasParams::default()).unwrap();
+        let placed = [(&mesh, masked)];
+        for mask in [ALL_MASKS, 1, 2] {
+            check_batch(&format!("{name} alone"), &top, &placed, &batch, mask);
+        }
+    }
+    assert!(listed > 1000, "the rays cross the torus ({listed} hits)");
+}
+
 fn placed(next: &mut impl FnMut() -> f32, mirror: bool) -> Affine3A {
     let axis = Vec3::new(next() - 0.5, next() - 0.5, next() - 0.5).normalize_or(Vec3::Y);
     let rotation = Quat::from_axis_angle(axis, next() * std::f32::consts::TAU);
@@ -259,6 +333,9 @@ fn instances_answer_in_world_measure_for_every_top_builder_and_layout() {
                         assert_eq!(tlas.count_hits(&ray, mask, along), expected.len());
                     }
                 }
+            }
+            for mask in [ALL_MASKS, 1, 2] {
+                check_batch(&name, &tlas, &placed, &batch_rays(), mask);
             }
         }
     }
