@@ -176,8 +176,8 @@ def test_large_batches_answer_every_row_as_small_ones_do():
     lists = scene.list_intersections(points, directions)
     np.testing.assert_array_equal(np.diff(lists.ray_splits), counts)
     pieces = in_pieces(scene.list_intersections, points, directions)
-    same(lists.t, [p.t for p in pieces])
-    same(lists.prim, [p.prim for p in pieces])
+    for field in ("t", "prim", "instance", "uv", "normal"):
+        same(getattr(lists, field), [getattr(p, field) for p in pieces])
     same(lists.ray, [p.ray + 1000 * i for i, p in enumerate(pieces)])
 
 

@@ -363,6 +363,37 @@ mod tests {
         }
     }
 
+    /// Builders split their work across threads above a few hundred primitives; the tree
+    /// (and so every image) must not depend on how many there are.
+    #[test]
+    fn every_builder_makes_the_same_tree_whatever_the_threads() {
+        let mut seed = 7u32;
+        let mut next = move || {
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (seed >> 8) as f32 / (1 << 24) as f32
+        };
+        let boxes: Vec<Aabb> = (0..3000)
+            .map(|_| {
+                let p = glam::Vec3::new(next(), next(), next()) * 50.0;
+                Aabb::new(p, p + glam::Vec3::new(next(), next(), next()))
+            })
+            .collect();
+        let (boxes, params) = (&boxes, &BuildParams::default());
+        let on = |threads| {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            move |builder| pool.install(|| build(builder, boxes, params))
+        };
+        let (one, four) = (on(1), on(4));
+        for &builder in Builder::ALL {
+            let tree = four(builder);
+            tree.validate(boxes).unwrap();
+            assert!(tree == one(builder), "{builder}: another tree on 4 threads");
+        }
+    }
+
     #[test]
     fn check_names_what_is_wrong_and_try_build_refuses_it() {
         let ok = BuildParams::default();
