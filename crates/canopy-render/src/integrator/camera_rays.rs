@@ -91,7 +91,11 @@ fn pinhole_rays(basis: &CameraBasis, pass: &PassSamples, mut emit: impl FnMut(Ra
     let sobol = pass.streams.sampler == Sampler::Sobol;
     let (width, height) = (pass.width as f32, pass.height as f32);
     let row = pass.y as f32;
-    let [ox, oy, oz] = basis.origin.to_array();
+    // Copied once here: read through `basis` in the loop below, the origin was copied
+    // field by field onto the stack for every ray and read back 16 bytes at once, a
+    // store forward that fails (a third of this function's samples waited on it).
+    let origin = basis.origin;
+    let [ox, oy, oz] = origin.to_array();
     let [ux, uy, uz] = basis.upper_left.to_array();
     let [hx, hy, hz] = basis.horizontal.to_array();
     let [vx, vy, vz] = basis.vertical.to_array();
@@ -148,7 +152,7 @@ fn pinhole_rays(basis: &CameraBasis, pass: &PassSamples, mut emit: impl FnMut(Ra
         }
         for lane in 0..count {
             let ray = Ray {
-                origin: basis.origin,
+                origin,
                 dir: Vec3::new(dir[0][lane], dir[1][lane], dir[2][lane]),
                 inv_dir: Vec3::new(inv[0][lane], inv[1][lane], inv[2][lane]),
                 t_min: 0.0,
