@@ -44,7 +44,11 @@ impl PacketShear {
         for (lane, ray) in rays.iter().enumerate().filter(|(_, r)| r.is_traceable()) {
             let s = ShearedRay::new(ray);
             let k = [s.kx, s.ky, s.kz];
-            if *axes.get_or_insert(k) != k {
+            // The axes compared as one number: compared as arrays, they were stored in
+            // 8-byte pieces and read back 16 bytes at once, a store forward that fails
+            // (half of this function's samples).
+            let code = s.kx | s.ky << 2 | s.kz << 4;
+            if axes.get_or_insert((k, code)).1 != code {
                 return None;
             }
             let origin = ray.origin.to_array();
@@ -55,7 +59,7 @@ impl PacketShear {
                 packet.shear[axis][lane] = shear;
             }
         }
-        packet.k = axes?;
+        packet.k = axes?.0;
         Some(packet)
     }
 
