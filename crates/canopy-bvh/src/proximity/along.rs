@@ -67,10 +67,18 @@ impl<G: TriangleSurface> Blas<G> {
         mut each: impl FnMut(usize, Hit, &[Vec3; 3]),
     ) {
         let g = self.geometry();
-        // The closure tests only what the tree does not pack (a wide tree packs every
-        // triangle of a mesh), so its ray is prepared where it is called.
-        let test = |prim: u32, ray: &Ray| {
-            intersect_triangle(&g.vertices_of_triangle(prim), ray, &ShearedRay::new(ray))
+        // The closure tests what the tree does not pack (every triangle of a binary
+        // tree; none of a wide one), a ray at a time: the shear, made from the direction
+        // alone, is made at a ray's first test and kept for the rest (by the direction's
+        // bits: a zero's sign changes it).
+        let mut prepared: Option<([u32; 3], ShearedRay)> = None;
+        let test = move |prim: u32, ray: &Ray| {
+            let dir = ray.dir.to_array().map(f32::to_bits);
+            let sheared = match prepared {
+                Some((made_for, sheared)) if made_for == dir => sheared,
+                _ => prepared.insert((dir, ShearedRay::new(ray))).1,
+            };
+            intersect_triangle(&g.vertices_of_triangle(prim), ray, &sheared)
         };
         // Hits are few: the tie rule is applied to them alone, after the tree's own
         // (packed) tests, whose hits are the scalar test's bit for bit.
