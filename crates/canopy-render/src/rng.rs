@@ -69,6 +69,8 @@ impl std::str::FromStr for Sampler {
 /// vertices carry little of a pixel's variance (paper-1, paper-5 and the Cornell box had
 /// the same noise with 12, 16, 24 and 32), and each pair costs a few hashes.
 pub const SOBOL_DIMENSIONS: u32 = 12;
+// A stream counts its Sobol dimensions in a byte.
+const _: () = assert!(SOBOL_DIMENSIONS <= u8::MAX as u32);
 
 /// Words of a stream: first the sampler's Sobol dimensions, then `pcg4d` (Jarzynski &
 /// Olano, "Hash Functions for GPU Rendering", JCGT 2020) of (pixel, sample, seed key,
@@ -77,14 +79,16 @@ pub const SOBOL_DIMENSIONS: u32 = 12;
 pub struct Rng {
     key: [u32; 3],
     counter: u32,
+    /// The last hash's words, of which `next` is the next to give. While the stream
+    /// draws Sobol pairs no hash is made (`next` is 4), and `words[0]` keeps the second
+    /// number of the pair whose first was just drawn.
     words: [u32; 4],
-    next: u32,
+    next: u8,
     /// Sobol dimensions drawn so far (or skipped to start a pair), and how many the
-    /// stream has.
-    dimension: u32,
-    sobol_dimensions: u32,
-    /// The second number of the pair whose first was just drawn.
-    pending: u32,
+    /// stream has. Bytes, so that a path and its stream fit 128 bytes in the renderer's
+    /// stream, which copies them inline (a 144-byte copy was a call to `memmove`).
+    dimension: u8,
+    sobol_dimensions: u8,
 }
 
 /// A 32-bit integer hash (Wellons' "lowbias32"), to fold 64-bit keys into 32 bits.
@@ -282,8 +286,7 @@ impl Rng {
             words: [0; 4],
             next: 4,
             dimension: 0,
-            sobol_dimensions: sampler.sobol_dimensions(),
-            pending: 0,
+            sobol_dimensions: sampler.sobol_dimensions() as u8,
         }
     }
 
@@ -304,10 +307,9 @@ impl Rng {
             key,
             counter: 1,
             words,
-            next: drawn,
+            next: drawn as u8,
             dimension: 0,
             sobol_dimensions: 0,
-            pending: 0,
         }
     }
 
@@ -342,10 +344,10 @@ impl Rng {
         let dimension = self.dimension;
         self.dimension += 1;
         if dimension % 2 == 1 {
-            return self.pending;
+            return self.words[0];
         }
-        let [first, second] = sobol_pair(self.key, dimension / 2);
-        self.pending = second;
+        let [first, second] = sobol_pair(self.key, u32::from(dimension / 2));
+        self.words[0] = second;
         first
     }
 

@@ -975,9 +975,7 @@ impl<'a, const N: usize> WalkNodes<'a, N> {
     /// allocate: [`TraversalStack::push_in_room`]).
     #[inline(always)]
     pub fn stack<T: Copy>(self) -> TraversalStack<T> {
-        let mut stack = TraversalStack::new();
-        stack.make_room(self.stack_room);
-        stack
+        TraversalStack::with_room(self.stack_room)
     }
 
     /// The node at index `child`, without a bounds check (a check and its branch on every

@@ -69,6 +69,21 @@ struct BsdfVertex {
     pdf: f32,
 }
 
+impl BsdfVertex {
+    /// No such vertex (the camera ray, or after a delta bounce), told by a pdf no sample
+    /// has rather than by an `Option`'s tag: without those 4 bytes a path and its random
+    /// stream fit the 128 bytes the renderer's stream copies inline.
+    const NONE: Self = Self {
+        p: Vec3::ZERO,
+        pdf: f32::NEG_INFINITY,
+    };
+
+    #[inline(always)]
+    fn found(self) -> Option<Self> {
+        (self.pdf != f32::NEG_INFINITY).then_some(self)
+    }
+}
+
 /// A path being traced: where it goes next and what it has gathered.
 #[derive(Clone, Copy)]
 pub(super) struct PathState {
@@ -79,7 +94,7 @@ pub(super) struct PathState {
     pub throughput: Vec3,
     pub radiance: Vec3,
     /// None for the camera ray and after delta bounces: nothing else could find the light.
-    previous: Option<BsdfVertex>,
+    previous: BsdfVertex,
 }
 
 impl PathState {
@@ -89,7 +104,7 @@ impl PathState {
             segments: 1,
             throughput: Vec3::ONE,
             radiance: Vec3::ZERO,
-            previous: None,
+            previous: BsdfVertex::NONE,
         }
     }
 }
@@ -227,10 +242,14 @@ impl Tracer<'_> {
         };
         path.throughput *= sample.weight;
         if settings.integrator == Integrator::Path {
-            path.previous = (!sample.delta).then_some(BsdfVertex {
-                p: surface.p,
-                pdf: sample.pdf,
-            });
+            path.previous = if sample.delta {
+                BsdfVertex::NONE
+            } else {
+                BsdfVertex {
+                    p: surface.p,
+                    pdf: sample.pdf,
+                }
+            };
             if !self.survives_roulette(&mut path.throughput, path.segments, rng) {
                 return false;
             }
@@ -312,7 +331,7 @@ impl Tracer<'_> {
             if let Some(track) = track {
                 track.escaped(scene.background.radiance(path.ray.dir));
             }
-            let weight = match path.previous {
+            let weight = match path.previous.found() {
                 Some(v) if scene.background.is_sampled() => {
                     power_heuristic(v.pdf, scene.background.pdf(path.ray.dir))
                 }
@@ -327,7 +346,7 @@ impl Tracer<'_> {
         }
         let emitted = material.emitted();
         if emitted != Vec3::ZERO {
-            let weight = match path.previous {
+            let weight = match path.previous.found() {
                 Some(v) => {
                     let light_pdf =
                         self.lights
