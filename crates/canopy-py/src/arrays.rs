@@ -26,10 +26,24 @@ fn first_non_finite(values: &[f32]) -> Option<usize> {
 
 /// The rows of an `(n, 3)` float32 array as `[x, y, z]`, every number finite.
 pub fn points<'a>(name: &str, array: &'a PyReadonlyArray2<'_, f32>) -> PyResult<&'a [[f32; 3]]> {
+    finite_rows(name, array)
+}
+
+/// The rows of an `(n, 6)` float32 array of rays, each an origin then a direction (as
+/// Open3D passes them), every number finite: read in place, not split into two copies.
+pub fn rays<'a>(name: &str, array: &'a PyReadonlyArray2<'_, f32>) -> PyResult<&'a [[f32; 6]]> {
+    finite_rows(name, array)
+}
+
+/// The rows of an `(n, N)` float32 array, every number finite.
+fn finite_rows<'a, const N: usize>(
+    name: &str,
+    array: &'a PyReadonlyArray2<'_, f32>,
+) -> PyResult<&'a [[f32; N]]> {
     let shape = array.shape();
-    if shape[1] != 3 {
+    if shape[1] != N {
         return error(format!(
-            "{name} must have shape (n, 3), not ({}, {})",
+            "{name} must have shape (n, {N}), not ({}, {})",
             shape[0], shape[1]
         ));
     }
@@ -39,8 +53,8 @@ pub fn points<'a>(name: &str, array: &'a PyReadonlyArray2<'_, f32>) -> PyResult<
     if let Some(i) = first_non_finite(flat) {
         return error(format!(
             "{name}[{}] = {:?} is not finite",
-            i / 3,
-            &flat[i / 3 * 3..i / 3 * 3 + 3]
+            i / N,
+            &flat[i / N * N..i / N * N + N]
         ));
     }
     Ok(rows(flat))

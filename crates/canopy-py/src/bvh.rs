@@ -218,30 +218,48 @@ fn write_hit(t: &mut [f32], prim: &mut [i64], uv: &mut [f32], i: usize, hit: Opt
 /// in parallel.
 #[derive(Clone, Copy)]
 pub(crate) struct Batch<'a> {
-    origins: &'a [[f32; 3]],
-    directions: &'a [[f32; 3]],
+    rows: RayRows<'a>,
     tnear: PerRay<'a>,
     tfar: PerRay<'a>,
 }
 
+/// The rays' origins and directions as the caller gave them.
+#[derive(Clone, Copy)]
+enum RayRows<'a> {
+    /// Two `(n, 3)` arrays.
+    Apart(&'a [[f32; 3]], &'a [[f32; 3]]),
+    /// One `(n, 6)` array, origin then direction (Open3D's rays).
+    Joined(&'a [[f32; 6]]),
+}
+
 impl Batch<'_> {
     pub(crate) fn len(&self) -> usize {
-        self.origins.len()
+        match self.rows {
+            RayRows::Apart(origins, _) => origins.len(),
+            RayRows::Joined(rays) => rays.len(),
+        }
     }
 
     #[inline]
     pub(crate) fn origin(&self, i: usize) -> Vec3 {
-        Vec3::from(self.origins[i])
+        match self.rows {
+            RayRows::Apart(origins, _) => Vec3::from(origins[i]),
+            RayRows::Joined(rays) => Vec3::from_slice(&rays[i][..3]),
+        }
     }
 
     #[inline]
     pub(crate) fn ray(&self, i: usize) -> Ray {
-        Ray::new(
-            Vec3::from(self.origins[i]),
-            Vec3::from(self.directions[i]),
-            self.tnear.get(i),
-            self.tfar.get(i),
-        )
+        let (origin, direction) = match self.rows {
+            RayRows::Apart(origins, directions) => {
+                (Vec3::from(origins[i]), Vec3::from(directions[i]))
+            }
+            RayRows::Joined(rays) => {
+                let [ox, oy, oz, dx, dy, dz] = rays[i];
+                (Vec3::new(ox, oy, oz), Vec3::new(dx, dy, dz))
+            }
+        };
+        Ray::new(origin, direction, self.tnear.get(i), self.tfar.get(i))
     }
 }
 
@@ -264,30 +282,39 @@ fn per_ray<'a, 'py>(
     Ok(PerRay::Each(values))
 }
 
-/// The checked batch of a query's arguments (`near` and `far` hold per-ray arrays).
+/// The checked batch of a query's arguments (`near` and `far` hold per-ray arrays):
+/// `origins` and `directions` `(n, 3)`, or, without `directions`, `origins` `(n, 6)` rays.
 pub(crate) fn batch<'a, 'py>(
     origins: &'a PyReadonlyArray2<'py, f32>,
-    directions: &'a PyReadonlyArray2<'py, f32>,
+    directions: &'a Option<PyReadonlyArray2<'py, f32>>,
     tnear: &'a Bound<'py, PyAny>,
     near: &'a mut Option<PyReadonlyArray1<'py, f32>>,
     tfar: &'a Bound<'py, PyAny>,
     far: &'a mut Option<PyReadonlyArray1<'py, f32>>,
 ) -> PyResult<Batch<'a>> {
-    let o = arrays::points("origins", origins)?;
-    let d = arrays::points("directions", directions)?;
-    if o.len() != d.len() {
-        return Err(PyValueError::new_err(format!(
-            "origins and directions must have the same number of rows, not {} and {}",
-            o.len(),
-            d.len()
-        )));
-    }
-    Ok(Batch {
-        origins: o,
-        directions: d,
-        tnear: per_ray("tnear", tnear, near, o.len())?,
-        tfar: per_ray("tfar", tfar, far, o.len())?,
-    })
+    let rows = match directions {
+        None => RayRows::Joined(arrays::rays("rays", origins)?),
+        Some(directions) => {
+            let o = arrays::points("origins", origins)?;
+            let d = arrays::points("directions", directions)?;
+            if o.len() != d.len() {
+                return Err(PyValueError::new_err(format!(
+                    "origins and directions must have the same number of rows, not {} and {}",
+                    o.len(),
+                    d.len()
+                )));
+            }
+            RayRows::Apart(o, d)
+        }
+    };
+    let mut batch = Batch {
+        rows,
+        tnear: PerRay::All(0.0),
+        tfar: PerRay::All(0.0),
+    };
+    batch.tnear = per_ray("tnear", tnear, near, batch.len())?;
+    batch.tfar = per_ray("tfar", tfar, far, batch.len())?;
+    Ok(batch)
 }
 
 #[pymethods]
@@ -569,7 +596,7 @@ impl Bvh {
         &self,
         py: Python<'py>,
         origins: PyReadonlyArray2<'py, f32>,
-        directions: PyReadonlyArray2<'py, f32>,
+        directions: Option<PyReadonlyArray2<'py, f32>>,
         tnear: Bound<'py, PyAny>,
         tfar: Bound<'py, PyAny>,
         threads: Option<usize>,
@@ -661,7 +688,7 @@ impl Bvh {
         &self,
         py: Python<'py>,
         origins: PyReadonlyArray2<'py, f32>,
-        directions: PyReadonlyArray2<'py, f32>,
+        directions: Option<PyReadonlyArray2<'py, f32>>,
         tnear: Bound<'py, PyAny>,
         tfar: Bound<'py, PyAny>,
         threads: Option<usize>,

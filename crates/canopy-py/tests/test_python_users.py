@@ -75,8 +75,18 @@ def test_rays_as_one_n_by_6_array_as_open3d_passes_them():
     np.testing.assert_array_equal(scene.occluded(rays, tfar=0.5), scene.occluded(origins, directions, tfar=0.5))
     np.testing.assert_array_equal(scene.count_intersections(rays), scene.count_intersections(origins, directions))
     np.testing.assert_array_equal(bvh.intersect(rays).t, bvh.intersect(origins, directions).t)
+    np.testing.assert_array_equal(bvh.occluded(rays), bvh.occluded(origins, directions))
+    for a, b in zip(scene.list_intersections(rays), scene.list_intersections(origins, directions)):
+        np.testing.assert_array_equal(a, b)
+    # Strided rows (every other ray of a larger array) give the same answers.
+    both = np.repeat(rays, 2, axis=0)[::2]
+    np.testing.assert_array_equal(scene.count_intersections(both), scene.count_intersections(rays))
     with pytest.raises(ValueError, match=r"shape \(n, 6\)"):
         scene.intersect(origins)
+    bad = rays.astype(np.float32)
+    bad[7, 4] = np.nan
+    with pytest.raises(ValueError, match=r"rays\[7\].*not finite"):
+        scene.count_intersections(bad)
 
 
 def same_answers(a, b, origins, directions, points):
