@@ -232,12 +232,18 @@ enum RayRows<'a> {
     Joined(&'a [[f32; 6]]),
 }
 
-impl Batch<'_> {
-    pub(crate) fn len(&self) -> usize {
-        match self.rows {
+impl RayRows<'_> {
+    fn len(&self) -> usize {
+        match self {
             RayRows::Apart(origins, _) => origins.len(),
             RayRows::Joined(rays) => rays.len(),
         }
+    }
+}
+
+impl Batch<'_> {
+    pub(crate) fn len(&self) -> usize {
+        self.rows.len()
     }
 
     #[inline]
@@ -307,14 +313,11 @@ pub(crate) fn batch<'a, 'py>(
             RayRows::Apart(o, d)
         }
     };
-    let mut batch = Batch {
+    Ok(Batch {
         rows,
-        tnear: PerRay::All(0.0),
-        tfar: PerRay::All(0.0),
-    };
-    batch.tnear = per_ray("tnear", tnear, near, batch.len())?;
-    batch.tfar = per_ray("tfar", tfar, far, batch.len())?;
-    Ok(batch)
+        tnear: per_ray("tnear", tnear, near, rows.len())?,
+        tfar: per_ray("tfar", tfar, far, rows.len())?,
+    })
 }
 
 #[pymethods]

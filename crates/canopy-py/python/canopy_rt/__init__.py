@@ -124,9 +124,10 @@ def _ray_batch(origins, directions, tnear, tfar):
             raise ValueError(
                 f"rays without directions must have shape (n, 6) (origin, direction), not {rays.shape}"
             )
-        return rays, None, _per_ray(tnear, "tnear", rays.shape[0]), _per_ray(tfar, "tfar", rays.shape[0])
-    origins = _array(origins, "origins", np.float32, 2, "(n, 3)")
-    directions = _array(directions, "directions", np.float32, 2, "(n, 3)")
+        origins = rays
+    else:
+        origins = _array(origins, "origins", np.float32, 2, "(n, 3)")
+        directions = _array(directions, "directions", np.float32, 2, "(n, 3)")
     n = origins.shape[0]
     return origins, directions, _per_ray(tnear, "tnear", n), _per_ray(tfar, "tfar", n)
 
