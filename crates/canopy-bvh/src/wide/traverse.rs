@@ -1372,7 +1372,7 @@ pub(crate) unsafe fn any_each<const N: usize, K, L>(
 /// (counts and lists of crossings), which visits each entered node whatever it finds, so
 /// that the order of children saves nothing. The entered slots are pushed without a
 /// branch each (and fetched ahead, as [`any`] does), and the first of them entered at
-/// once.
+/// once. Leaves are tested a few steps after they are reached ([`WaitingLeaves`]).
 ///
 /// # Safety
 /// As [`any`].
@@ -1393,9 +1393,13 @@ pub(crate) unsafe fn every<const N: usize, K, L>(
     // SAFETY: the caller guarantees the instruction set.
     let kray = unsafe { K::prepare(&oct) };
     let (mut child, mut count) = ROOT;
+    let mut waiting = WaitingLeaves::default();
     loop {
         if count > 0 {
-            _ = leaves.any(child, count, ray);
+            nodes.prefetch_child(leaves, child, count);
+            if let Some((first, n)) = waiting.push((child, count)) {
+                _ = leaves.any(first, n, ray);
+            }
         } else {
             // SAFETY: as in `closest_from`.
             let node = unsafe { nodes.node(child) };
@@ -1408,13 +1412,64 @@ pub(crate) unsafe fn every<const N: usize, K, L>(
                     nodes.prefetch_child(leaves, node.child[i], node.count[i]);
                 }
                 (child, count) = (node.child[first], node.count[first]);
+                // The slot entered at once is fetched too, and a leaf that waited is
+                // tested while it loads.
+                nodes.prefetch_child(leaves, child, count);
+                if let Some((first, n)) = waiting.pop() {
+                    _ = leaves.any(first, n, ray);
+                }
                 continue;
             }
         }
         match stack.pop() {
-            None => return,
+            None => break,
             Some(entry) => (child, count) = entry,
         }
+    }
+    while let Some((first, n)) = waiting.pop() {
+        _ = leaves.any(first, n, ray);
+    }
+}
+
+/// The leaves an every-hit walk ([`every`]) has reached but not yet tested, oldest first:
+/// a leaf is fetched when it is reached and tested a few steps later, while the nodes
+/// after it load, so that its cache misses and theirs overlap instead of following one
+/// another. Nothing a leaf finds changes that walk, so the order of its tests is free.
+/// (Four leaves: 3–6% off a count of the 202k dragon's crossings in Morton order, 19% in
+/// random order, nothing in a tree that stays in the cache; eight did no better.)
+#[derive(Default)]
+struct WaitingLeaves {
+    leaves: [(u32, u32); WaitingLeaves::ROOM],
+    oldest: usize,
+    len: usize,
+}
+
+impl WaitingLeaves {
+    const ROOM: usize = 4;
+
+    /// Queues `leaf`, handing back the oldest waiting leaf when the queue was full.
+    #[inline(always)]
+    fn push(&mut self, leaf: (u32, u32)) -> Option<(u32, u32)> {
+        if self.len < Self::ROOM {
+            self.leaves[(self.oldest + self.len) % Self::ROOM] = leaf;
+            self.len += 1;
+            return None;
+        }
+        let oldest = std::mem::replace(&mut self.leaves[self.oldest], leaf);
+        self.oldest = (self.oldest + 1) % Self::ROOM;
+        Some(oldest)
+    }
+
+    /// The oldest waiting leaf, taken off the queue.
+    #[inline(always)]
+    fn pop(&mut self) -> Option<(u32, u32)> {
+        if self.len == 0 {
+            return None;
+        }
+        let oldest = self.leaves[self.oldest];
+        self.oldest = (self.oldest + 1) % Self::ROOM;
+        self.len -= 1;
+        Some(oldest)
     }
 }
 
@@ -1525,3 +1580,31 @@ macro_rules! scalar_dispatch {
 
 #[cfg(not(target_arch = "x86_64"))]
 scalar_dispatch!(4, 8);
+
+#[cfg(test)]
+mod tests {
+    use super::WaitingLeaves;
+
+    #[test]
+    fn waiting_leaves_come_back_oldest_first_and_none_is_lost() {
+        let mut waiting = WaitingLeaves::default();
+        let leaf = |i: u32| (i, i + 100);
+        let mut handed_back = Vec::new();
+        for i in 0..11 {
+            handed_back.extend(waiting.push(leaf(i)));
+        }
+        // A full queue hands back its oldest leaf for each one pushed.
+        assert_eq!(handed_back, (0..7).map(leaf).collect::<Vec<_>>());
+        handed_back.extend(std::iter::from_fn(|| waiting.pop()));
+        assert_eq!(handed_back, (0..11).map(leaf).collect::<Vec<_>>());
+        assert_eq!(waiting.pop(), None);
+        // Pops and pushes mixed: the queue stays first in, first out.
+        waiting.push(leaf(20));
+        waiting.push(leaf(21));
+        assert_eq!(waiting.pop(), Some(leaf(20)));
+        waiting.push(leaf(22));
+        assert_eq!(waiting.pop(), Some(leaf(21)));
+        assert_eq!(waiting.pop(), Some(leaf(22)));
+        assert_eq!(waiting.pop(), None);
+    }
+}
