@@ -98,6 +98,16 @@ impl Tree {
         }
     }
 
+    /// Packs every leaf, a tree without triangles too (wide layouts). See
+    /// [`BvhN::pack_leaves`].
+    pub fn pack_leaves(&mut self, triangle: impl Fn(u32) -> Option<[Vec3; 3]> + Sync) {
+        match self {
+            Tree::Binary(_) | Tree::Gpu(_) => {}
+            Tree::Four(t) => t.pack_leaves(triangle),
+            Tree::Eight(t) => t.pack_leaves(triangle),
+        }
+    }
+
     /// Keeps the leaves' spheres and boxes beside them for the wide kernels to test (wide
     /// layouts; see [`BvhN::store_shapes`]).
     pub fn store_shapes(&mut self, shape: impl Fn(u32) -> Option<KnownShape> + Sync) {

@@ -29,6 +29,8 @@ mod geometry;
 mod gpu_layout;
 mod instance;
 mod isa;
+#[cfg(target_arch = "x86_64")]
+mod lanes;
 mod layout;
 pub mod optimize;
 mod proximity;

@@ -584,6 +584,26 @@ pub trait PackKernel {
             0,
         )
     }
+
+    /// The pack's kept-sphere lanes that `ray` hits within its range (bit `i` for lane
+    /// `i`), each hit's distance at its lane of `t` (see `wide::pack_spheres`).
+    ///
+    /// # Safety
+    /// As [`PackKernel::test`].
+    #[inline(always)]
+    unsafe fn spheres(pack: &TrianglePack, ray: &Ray, t: &mut [f32; PAIR_LANES]) -> u32 {
+        crate::wide::spheres_one_by_one(std::slice::from_ref(pack), ray, t)
+    }
+
+    /// [`PackKernel::spheres`] of two packs, the second's lanes as bits and distances
+    /// 4..8.
+    ///
+    /// # Safety
+    /// As [`PackKernel::test`].
+    #[inline(always)]
+    unsafe fn sphere_pair(packs: &[TrianglePack; 2], ray: &Ray, t: &mut [f32; PAIR_LANES]) -> u32 {
+        crate::wide::spheres_one_by_one(packs, ray, t)
+    }
 }
 
 /// The mode a kernel's `REFINES` parameter stands for.
@@ -635,123 +655,8 @@ pub(crate) use simd::{Avx2Pack, Sse2Pack};
 #[cfg(target_arch = "x86_64")]
 mod simd {
     use super::*;
+    use crate::lanes::Lanes;
     use std::arch::x86_64::*;
-
-    /// A SIMD register of floats, one triangle per lane, holding one pack (4 lanes, SSE2)
-    /// or two (8 lanes, AVX): the operations the pack test needs, so that the test is
-    /// written once for both.
-    ///
-    /// # Safety
-    /// The methods use the register's instruction set (SSE2 is baseline x86-64; the
-    /// 8-lane one runs only inside functions compiled for AVX2).
-    trait Lanes: Copy {
-        /// Lanes per register: one pack's, or two packs'.
-        const PACKS: usize;
-        unsafe fn splat(x: f32) -> Self;
-        /// Coordinate `axis` of `vertex` of the first `PACKS` packs.
-        unsafe fn load(packs: &[TrianglePack], vertex: usize, axis: usize) -> Self;
-        unsafe fn add(self, b: Self) -> Self;
-        unsafe fn sub(self, b: Self) -> Self;
-        unsafe fn mul(self, b: Self) -> Self;
-        unsafe fn div(self, b: Self) -> Self;
-        unsafe fn and(self, b: Self) -> Self;
-        unsafe fn or(self, b: Self) -> Self;
-        unsafe fn eq(self, b: Self) -> Self;
-        unsafe fn ne(self, b: Self) -> Self;
-        unsafe fn lt(self, b: Self) -> Self;
-        unsafe fn gt(self, b: Self) -> Self;
-        unsafe fn ge(self, b: Self) -> Self;
-        unsafe fn le(self, b: Self) -> Self;
-        unsafe fn mask(self) -> u32;
-        unsafe fn store(self, to: &mut [f32; PAIR_LANES]);
-    }
-
-    /// Binary operations of a `Lanes` impl, each one intrinsic.
-    macro_rules! binary_ops {
-        ($($name:ident: $op:expr;)*) => {$(
-            #[inline(always)]
-            unsafe fn $name(self, b: Self) -> Self {
-                // SAFETY: as the trait says.
-                unsafe { $op(self, b) }
-            }
-        )*};
-    }
-
-    impl Lanes for __m128 {
-        const PACKS: usize = 1;
-
-        #[inline(always)]
-        unsafe fn splat(x: f32) -> Self {
-            // SAFETY: SSE2 is baseline x86-64.
-            unsafe { _mm_set1_ps(x) }
-        }
-
-        #[inline(always)]
-        unsafe fn load(packs: &[TrianglePack], vertex: usize, axis: usize) -> Self {
-            // SAFETY: SSE2 is baseline; the lanes are a 16-aligned `[f32; 4]`.
-            unsafe { _mm_load_ps(packs[0].v[vertex][axis].as_ptr()) }
-        }
-
-        binary_ops! {
-            add: _mm_add_ps; sub: _mm_sub_ps; mul: _mm_mul_ps; div: _mm_div_ps;
-            and: _mm_and_ps; or: _mm_or_ps;
-            eq: _mm_cmpeq_ps; ne: _mm_cmpneq_ps; lt: _mm_cmplt_ps; gt: _mm_cmpgt_ps;
-            ge: _mm_cmpge_ps; le: _mm_cmple_ps;
-        }
-
-        #[inline(always)]
-        unsafe fn mask(self) -> u32 {
-            // SAFETY: SSE2 is baseline x86-64.
-            unsafe { _mm_movemask_ps(self) as u32 }
-        }
-
-        #[inline(always)]
-        unsafe fn store(self, to: &mut [f32; PAIR_LANES]) {
-            // SAFETY: SSE2 is baseline; four floats fit in `to`.
-            unsafe { _mm_storeu_ps(to.as_mut_ptr(), self) }
-        }
-    }
-
-    impl Lanes for __m256 {
-        const PACKS: usize = 2;
-
-        #[inline(always)]
-        unsafe fn splat(x: f32) -> Self {
-            // SAFETY: the caller guarantees AVX.
-            unsafe { _mm256_set1_ps(x) }
-        }
-
-        #[inline(always)]
-        unsafe fn load(packs: &[TrianglePack], vertex: usize, axis: usize) -> Self {
-            // SAFETY: the caller guarantees AVX and two packs; lanes are 16-aligned.
-            unsafe {
-                let low = _mm_load_ps(packs[0].v[vertex][axis].as_ptr());
-                let high = _mm_load_ps(packs[1].v[vertex][axis].as_ptr());
-                _mm256_set_m128(high, low)
-            }
-        }
-
-        // The comparisons are those of the SSE2 intrinsics: ordered, except `ne`.
-        binary_ops! {
-            add: _mm256_add_ps; sub: _mm256_sub_ps; mul: _mm256_mul_ps; div: _mm256_div_ps;
-            and: _mm256_and_ps; or: _mm256_or_ps;
-            eq: _mm256_cmp_ps::<_CMP_EQ_OQ>; ne: _mm256_cmp_ps::<_CMP_NEQ_UQ>;
-            lt: _mm256_cmp_ps::<_CMP_LT_OQ>; gt: _mm256_cmp_ps::<_CMP_GT_OQ>;
-            ge: _mm256_cmp_ps::<_CMP_GE_OQ>; le: _mm256_cmp_ps::<_CMP_LE_OQ>;
-        }
-
-        #[inline(always)]
-        unsafe fn mask(self) -> u32 {
-            // SAFETY: the caller guarantees AVX.
-            unsafe { _mm256_movemask_ps(self) as u32 }
-        }
-
-        #[inline(always)]
-        unsafe fn store(self, to: &mut [f32; PAIR_LANES]) {
-            // SAFETY: the caller guarantees AVX; eight floats fit in `to`.
-            unsafe { _mm256_storeu_ps(to.as_mut_ptr(), self) }
-        }
-    }
 
     /// The pack test on `V::PACKS` packs: the scalar core's operations in every lane;
     /// the lanes hit, and those left to refine. In the watertight mode, lanes whose edge
@@ -933,6 +838,31 @@ mod simd {
         ) -> (u32, u32) {
             sse2_pair::<HITS, REFINES, true>(packs, ray, t_min, t_max, hits)
         }
+
+        #[inline(always)]
+        unsafe fn spheres(pack: &TrianglePack, ray: &Ray, t: &mut [f32; PAIR_LANES]) -> u32 {
+            sse2_spheres(pack, ray, t)
+        }
+
+        #[inline(always)]
+        unsafe fn sphere_pair(
+            packs: &[TrianglePack; 2],
+            ray: &Ray,
+            t: &mut [f32; PAIR_LANES],
+        ) -> u32 {
+            let [low, high] = packs;
+            let mut upper = [0.0; PAIR_LANES];
+            let hit = sse2_spheres(low, ray, t) | sse2_spheres(high, ray, &mut upper) << PACK_LANES;
+            t[PACK_LANES..].copy_from_slice(&upper[..PACK_LANES]);
+            hit
+        }
+    }
+
+    /// One pack's spheres in SSE2 lanes.
+    #[inline(always)]
+    fn sse2_spheres(pack: &TrianglePack, ray: &Ray, t: &mut [f32; PAIR_LANES]) -> u32 {
+        // SAFETY: SSE2 is baseline x86-64.
+        unsafe { crate::wide::sphere_lanes::<__m128>(std::slice::from_ref(pack), ray, t) }
     }
 
     /// The AVX2 kernel: single packs as SSE2 does, pairs of packs in eight lanes;
@@ -988,6 +918,21 @@ mod simd {
         ) -> (u32, u32) {
             // SAFETY: the caller guarantees AVX2.
             unsafe { test_lanes::<__m256, HITS, REFINES, true>(packs, ray, t_min, t_max, hits) }
+        }
+
+        #[inline(always)]
+        unsafe fn spheres(pack: &TrianglePack, ray: &Ray, t: &mut [f32; PAIR_LANES]) -> u32 {
+            sse2_spheres(pack, ray, t)
+        }
+
+        #[inline(always)]
+        unsafe fn sphere_pair(
+            packs: &[TrianglePack; 2],
+            ray: &Ray,
+            t: &mut [f32; PAIR_LANES],
+        ) -> u32 {
+            // SAFETY: the caller guarantees AVX2.
+            unsafe { crate::wide::sphere_lanes::<__m256>(packs, ray, t) }
         }
     }
 }

@@ -10,6 +10,7 @@
 
 mod frustum;
 mod kernels;
+mod pack_spheres;
 mod packet;
 mod packet_packs;
 mod refit;
@@ -34,6 +35,9 @@ use traverse::{
     WalkNodes,
 };
 
+#[cfg(target_arch = "x86_64")]
+pub(crate) use pack_spheres::sphere_lanes;
+pub(crate) use pack_spheres::spheres_one_by_one;
 pub use packet::PACKET;
 pub(crate) use traverse::Dispatch;
 
@@ -322,6 +326,17 @@ impl<const N: usize> BvhN<N> {
     /// between leaves, never inside one).
     /// A tree without triangles is left as it is.
     pub fn pack_triangles(&mut self, triangle: impl Fn(u32) -> Option<[Vec3; 3]> + Sync) {
+        self.pack(triangle, false);
+    }
+
+    /// Stores every leaf in packs as [`BvhN::pack_triangles`] does, a tree without
+    /// triangles too: the spheres that [`BvhN::store_shapes`] then keeps in the packs'
+    /// lanes are tested a pack or two at a time, in the walk's loop, as triangles are.
+    pub fn pack_leaves(&mut self, triangle: impl Fn(u32) -> Option<[Vec3; 3]> + Sync) {
+        self.pack(triangle, true);
+    }
+
+    fn pack(&mut self, triangle: impl Fn(u32) -> Option<[Vec3; 3]> + Sync, always: bool) {
         // Which primitives are triangles, asked in the caller's order, where lookups are
         // cheap; the leaf order scatters them into cache misses, so there each triangle
         // is looked up only once, for its vertices.
@@ -334,7 +349,7 @@ impl<const N: usize> BvhN<N> {
             .into_par_iter()
             .map(|p| triangle(p).is_some())
             .collect();
-        if !is_triangle.contains(&true) {
+        if self.nodes.is_empty() || !(always || is_triangle.contains(&true)) {
             return;
         }
         let is_triangle = |p: u32| is_triangle[p as usize];

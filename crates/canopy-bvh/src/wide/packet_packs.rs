@@ -180,10 +180,17 @@ where
         t_max: &mut [f32; PACKET],
         best: &mut [Option<Hit>; PACKET],
     ) {
-        let Some(shear) = self
-            .shear
-            .get_or_insert_with(|| PacketShear::new(group.rays, self.triangle_test))
-        else {
+        let packs = leaf_packs(self.packs, first, count);
+        // A leaf of spheres alone (a field of spheres packed) needs no shears.
+        let triangles = packs.iter().any(|pack| pack.triangles != 0);
+        let shear = match triangles {
+            true => self
+                .shear
+                .get_or_insert_with(|| PacketShear::new(group.rays, self.triangle_test))
+                .as_ref(),
+            false => None,
+        };
+        if triangles && shear.is_none() {
             // Rays sheared differently: the single-ray pack test, one lane at a time.
             let (packs, test) = (self.packs, &mut self.test);
             match self.triangle_test {
@@ -203,18 +210,21 @@ where
             u: [0.0; PACKET],
             v: [0.0; PACKET],
         };
-        for pack in leaf_packs(self.packs, first, count) {
-            for lane in lanes(pack.triangles) {
-                let corner = |v: &[[f32; PACK_LANES]; 3]| [v[0][lane], v[1][lane], v[2][lane]];
-                let v = [corner(&pack.v[0]), corner(&pack.v[1]), corner(&pack.v[2])];
-                let hit = shear.hit_lanes(v, group.active, &group.packet.t_min, t_max, &mut hits);
-                for ray in lanes(hit) {
-                    let prim_hit = PrimHit {
-                        t: hits.t[ray],
-                        u: hits.u[ray],
-                        v: hits.v[ray],
-                    };
-                    offer_lane(ray, Hit::new(pack.prim[lane], prim_hit), t_max, best);
+        for pack in packs {
+            if let Some(shear) = shear {
+                for lane in lanes(pack.triangles) {
+                    let corner = |v: &[[f32; PACK_LANES]; 3]| [v[0][lane], v[1][lane], v[2][lane]];
+                    let v = [corner(&pack.v[0]), corner(&pack.v[1]), corner(&pack.v[2])];
+                    let hit =
+                        shear.hit_lanes(v, group.active, &group.packet.t_min, t_max, &mut hits);
+                    for ray in lanes(hit) {
+                        let prim_hit = PrimHit {
+                            t: hits.t[ray],
+                            u: hits.u[ray],
+                            v: hits.v[ray],
+                        };
+                        offer_lane(ray, Hit::new(pack.prim[lane], prim_hit), t_max, best);
+                    }
                 }
             }
             for lane in lanes(pack.others) {

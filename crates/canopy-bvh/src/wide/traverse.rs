@@ -9,9 +9,9 @@ use super::WideNode;
 use crate::shapes::{intersect_box, ShapeRecord};
 use crate::traverse::{TraversalCounter, TraversalStack};
 use crate::triangle::{
-    triangle_lanes, PackHits, PackKernel, PackRay, ScalarPack, TrianglePack, PACK_LANES,
+    triangle_lanes, PackHits, PackKernel, PackRay, ScalarPack, TrianglePack, PACK_LANES, PAIR_LANES,
 };
-use crate::{Aabb, Hit, IntoHit, Isa, KnownShape, Ray};
+use crate::{Aabb, Hit, IntoHit, Isa, KnownShape, PrimHit, Ray};
 use glam::Vec3;
 use std::marker::PhantomData;
 
@@ -529,6 +529,26 @@ unsafe fn test_packs<T: PackKernel, const HITS: bool, const PACKS: usize>(
     }
 }
 
+/// The kept-sphere lanes of `packs` that `ray` hits, as [`test_packs`] gives triangle
+/// lanes: one pack by `T::spheres`, a pair by `T::sphere_pair`.
+///
+/// # Safety
+/// As [`test_packs`].
+#[inline(always)]
+unsafe fn test_spheres<T: PackKernel, const PACKS: usize>(
+    packs: &[TrianglePack; PACKS],
+    ray: &Ray,
+    t: &mut [f32; PAIR_LANES],
+) -> u32 {
+    // SAFETY: as in `test_packs`.
+    unsafe {
+        match <&[TrianglePack; 2]>::try_from(packs.as_slice()) {
+            Ok(pair) => T::sphere_pair(pair, ray, t),
+            Err(_) => T::spheres(&packs[0], ray, t),
+        }
+    }
+}
+
 /// [`test_packs`] by [`PackKernel::test_unrefined`]: the lanes hit, and those left to
 /// refine.
 ///
@@ -558,31 +578,43 @@ where
     P: IntoHit,
 {
     /// Offers the hits of one pack or a pair tested together without a call: `false`
-    /// where a lane is not a triangle or is left to refine.
+    /// where a lane is neither a triangle nor a kept sphere, or is left to refine.
     #[inline(always)]
     fn closest_triangle_packs<const PACKS: usize>(
         &mut self,
         packs: &[TrianglePack; PACKS],
-        pack_ray: &PackRay,
         s: &mut Closest,
     ) -> bool {
-        if packs.iter().any(|pack| pack.others != 0) {
+        if packs.iter().any(|pack| pack.others != pack.spheres) {
             return false;
         }
-        let hits = &mut self.hits;
-        // SAFETY: `dispatch` runs this only where `T`'s instruction set exists.
-        let (mask, refine) = unsafe {
-            test_packs_unrefined::<T, true, PACKS>(
-                packs,
-                pack_ray,
-                pack_ray.t_min,
-                s.ray.t_max,
-                hits,
-            )
-        };
-        for lane in lanes(mask) {
-            let prim = packs[lane / PACK_LANES].prim[lane % PACK_LANES];
-            s.offer(Hit::new(prim, hits.lane(lane)));
+        let mut refine = 0;
+        if triangle_lanes(packs) != 0 {
+            let pack_ray = self.pack_ray(&s.ray);
+            let hits = &mut self.hits;
+            // SAFETY: `dispatch` runs this only where `T`'s instruction set exists.
+            let mask;
+            (mask, refine) = unsafe {
+                test_packs_unrefined::<T, true, PACKS>(
+                    packs,
+                    &pack_ray,
+                    pack_ray.t_min,
+                    s.ray.t_max,
+                    hits,
+                )
+            };
+            for lane in lanes(mask) {
+                let prim = packs[lane / PACK_LANES].prim[lane % PACK_LANES];
+                s.offer(Hit::new(prim, hits.lane(lane)));
+            }
+        }
+        if packs.iter().any(|pack| pack.spheres != 0) {
+            let mut t = [0.0; PAIR_LANES];
+            // SAFETY: `dispatch` runs this only where `T`'s instruction set exists.
+            for lane in lanes(unsafe { test_spheres::<T, PACKS>(packs, &s.ray, &mut t) }) {
+                let prim = packs[lane / PACK_LANES].prim[lane % PACK_LANES];
+                s.offer(Hit::new(prim, PrimHit::from(t[lane])));
+            }
         }
         refine == 0
     }
@@ -677,20 +709,21 @@ where
         c: &mut C,
     ) -> bool {
         let packs = leaf_packs(self.packs, first, count);
-        let pack_ray = self.pack_ray(&s.ray);
         let (pairs, rest) = pairs_and_rest::<T>(packs);
         for pair in pairs {
-            if !self.closest_triangle_packs(pair, &pack_ray, s) {
+            if !self.closest_triangle_packs(pair, s) {
                 return false;
             }
         }
         for pack in rest {
-            if !self.closest_triangle_packs(std::array::from_ref(pack), &pack_ray, s) {
+            if !self.closest_triangle_packs(std::array::from_ref(pack), s) {
                 return false;
             }
         }
-        for _ in 0..triangle_lanes(packs).count_ones() {
-            c.test_primitive();
+        for pack in packs {
+            for _ in 0..(pack.triangles | pack.spheres).count_ones() {
+                c.test_primitive();
+            }
         }
         true
     }
@@ -759,20 +792,19 @@ impl<T: PackKernel, F: FnMut(u32, &Ray) -> bool> AnyLeaves for PackedLeaves<'_, 
     #[inline(always)]
     fn any_without_call(&mut self, first: u32, count: u32, ray: &Ray) -> Option<bool> {
         let packs = leaf_packs(self.packs, first, count);
-        let pack_ray = self.pack_ray(ray);
         let mut scratch = PackHits::default();
         let (pairs, rest) = pairs_and_rest::<T>(packs);
         // A lane hit is a blocker whether or not others are left to refine.
         let mut refine = 0;
         for pair in pairs {
-            match any_triangle_packs::<T, 2>(pair, &pack_ray, ray, &mut scratch)? {
+            match self.any_triangle_packs::<2>(pair, ray, &mut scratch)? {
                 (0, left) => refine |= left,
                 _ => return Some(true),
             }
         }
         for pack in rest {
             let pack = std::array::from_ref(pack);
-            match any_triangle_packs::<T, 1>(pack, &pack_ray, ray, &mut scratch)? {
+            match self.any_triangle_packs::<1>(pack, ray, &mut scratch)? {
                 (0, left) => refine |= left,
                 _ => return Some(true),
             }
@@ -781,22 +813,37 @@ impl<T: PackKernel, F: FnMut(u32, &Ray) -> bool> AnyLeaves for PackedLeaves<'_, 
     }
 }
 
-/// The lanes of one pack or a pair tested together that block `ray`, and those left to
-/// refine, without a call; `None` where a lane is not a triangle.
-#[inline(always)]
-fn any_triangle_packs<T: PackKernel, const PACKS: usize>(
-    packs: &[TrianglePack; PACKS],
-    pack_ray: &PackRay,
-    ray: &Ray,
-    scratch: &mut PackHits,
-) -> Option<(u32, u32)> {
-    if packs.iter().any(|pack| pack.others != 0) {
-        return None;
+impl<T: PackKernel, F> PackedLeaves<'_, T, F> {
+    /// The lanes of one pack or a pair tested together that block `ray`, and those left
+    /// to refine, without a call; `None` where a lane is neither a triangle nor a kept
+    /// sphere.
+    #[inline(always)]
+    fn any_triangle_packs<const PACKS: usize>(
+        &mut self,
+        packs: &[TrianglePack; PACKS],
+        ray: &Ray,
+        scratch: &mut PackHits,
+    ) -> Option<(u32, u32)> {
+        if packs.iter().any(|pack| pack.others != pack.spheres) {
+            return None;
+        }
+        if packs.iter().any(|pack| pack.spheres != 0) {
+            let mut t = [0.0; PAIR_LANES];
+            // SAFETY: `dispatch` runs this only where `T`'s instruction set exists.
+            let blocked = unsafe { test_spheres::<T, PACKS>(packs, ray, &mut t) };
+            if blocked != 0 {
+                return Some((blocked, 0));
+            }
+        }
+        if triangle_lanes(packs) == 0 {
+            return Some((0, 0));
+        }
+        let pack_ray = self.pack_ray(ray);
+        // SAFETY: `dispatch` runs this only where `T`'s instruction set exists.
+        Some(unsafe {
+            test_packs_unrefined::<T, false, PACKS>(packs, &pack_ray, ray.t_min, ray.t_max, scratch)
+        })
     }
-    // SAFETY: `dispatch` runs this only where `T`'s instruction set exists.
-    Some(unsafe {
-        test_packs_unrefined::<T, false, PACKS>(packs, pack_ray, ray.t_min, ray.t_max, scratch)
-    })
 }
 
 /// Leaves of an every-hit walk: [`any`] over leaves that never report a blocker, so

@@ -271,6 +271,22 @@ fn kept_spheres_give_brute_force_answers_alone_and_in_packets() {
     }
 }
 
+/// A field of spheres is built in packs, four spheres to a pack, tested in SIMD lanes
+/// (the tests above check its answers); with a quarter of boxes among them it keeps its
+/// shapes beside the leaves instead.
+#[test]
+fn mostly_spheres_are_built_in_packs() {
+    for (box_every, packed) in [(0, true), (4, false)] {
+        for width in [BvhWidth::Four, BvhWidth::Eight] {
+            let params = BlasParams::new(Some(Builder::BinnedSah), width);
+            let blas = Blas::build(balls(300, box_every, 0, 11), &params);
+            let tree = blas.tree().expect("a tree");
+            assert_eq!(tree.has_triangle_packs(), packed, "boxes every {box_every}");
+            assert!(tree.has_kept_shapes());
+        }
+    }
+}
+
 #[test]
 fn boxes_among_the_spheres_are_kept_or_go_to_the_closure() {
     let geometry = balls(200, 4, 0, 13);
