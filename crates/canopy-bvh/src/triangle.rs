@@ -67,13 +67,14 @@ impl ShearedRay {
     };
 
     /// `ray` prepared for the watertight test.
-    #[inline]
+    #[inline(always)]
     pub fn new(ray: &Ray) -> Self {
         Self::with_test(ray, TriangleTest::Watertight)
     }
 
-    /// `ray` prepared for tests in mode `test`.
-    #[inline]
+    /// `ray` prepared for tests in mode `test`. Always inlined: made at a walk's first
+    /// leaf, out of line it was a call in the walk's loop.
+    #[inline(always)]
     pub fn with_test(ray: &Ray, test: TriangleTest) -> Self {
         // x and y follow z cyclically, swapped when the ray runs down z to keep the
         // winding: `AXES[kz][runs down z]`.

@@ -468,9 +468,14 @@ impl<'a, T, F> PackedLeaves<'a, T, F> {
         }
     }
 
+    /// A `match`, not `Option::get_or_insert_with`: called from each pack test of a
+    /// leaf, the compiler left that one out of line, a call in the walk's loop.
     #[inline(always)]
     fn pack_ray(&mut self, ray: &Ray) -> PackRay {
-        *self.ray.get_or_insert_with(|| PackRay::new(ray))
+        match self.ray {
+            Some(pack_ray) => pack_ray,
+            None => *self.ray.insert(PackRay::new(ray)),
+        }
     }
 }
 
@@ -583,38 +588,38 @@ where
     fn closest_triangle_packs<const PACKS: usize>(
         &mut self,
         packs: &[TrianglePack; PACKS],
+        pack_ray: &PackRay,
         s: &mut Closest,
     ) -> bool {
-        if packs.iter().any(|pack| pack.others != pack.spheres) {
-            return false;
-        }
-        let mut refine = 0;
-        if triangle_lanes(packs) != 0 {
-            let pack_ray = self.pack_ray(&s.ray);
-            let hits = &mut self.hits;
-            // SAFETY: `dispatch` runs this only where `T`'s instruction set exists.
-            let mask;
-            (mask, refine) = unsafe {
-                test_packs_unrefined::<T, true, PACKS>(
-                    packs,
-                    &pack_ray,
-                    pack_ray.t_min,
-                    s.ray.t_max,
-                    hits,
-                )
-            };
-            for lane in lanes(mask) {
-                let prim = packs[lane / PACK_LANES].prim[lane % PACK_LANES];
-                s.offer(Hit::new(prim, hits.lane(lane)));
+        // Packs of triangles alone (a mesh's) take the first test and nothing else.
+        if packs.iter().any(|pack| pack.others != 0) {
+            if packs.iter().any(|pack| pack.others != pack.spheres) {
+                return false;
             }
-        }
-        if packs.iter().any(|pack| pack.spheres != 0) {
             let mut t = [0.0; PAIR_LANES];
             // SAFETY: `dispatch` runs this only where `T`'s instruction set exists.
             for lane in lanes(unsafe { test_spheres::<T, PACKS>(packs, &s.ray, &mut t) }) {
                 let prim = packs[lane / PACK_LANES].prim[lane % PACK_LANES];
                 s.offer(Hit::new(prim, PrimHit::from(t[lane])));
             }
+            if triangle_lanes(packs) == 0 {
+                return true;
+            }
+        }
+        let hits = &mut self.hits;
+        // SAFETY: `dispatch` runs this only where `T`'s instruction set exists.
+        let (mask, refine) = unsafe {
+            test_packs_unrefined::<T, true, PACKS>(
+                packs,
+                pack_ray,
+                pack_ray.t_min,
+                s.ray.t_max,
+                hits,
+            )
+        };
+        for lane in lanes(mask) {
+            let prim = packs[lane / PACK_LANES].prim[lane % PACK_LANES];
+            s.offer(Hit::new(prim, hits.lane(lane)));
         }
         refine == 0
     }
@@ -709,14 +714,15 @@ where
         c: &mut C,
     ) -> bool {
         let packs = leaf_packs(self.packs, first, count);
+        let pack_ray = self.pack_ray(&s.ray);
         let (pairs, rest) = pairs_and_rest::<T>(packs);
         for pair in pairs {
-            if !self.closest_triangle_packs(pair, s) {
+            if !self.closest_triangle_packs(pair, &pack_ray, s) {
                 return false;
             }
         }
         for pack in rest {
-            if !self.closest_triangle_packs(std::array::from_ref(pack), s) {
+            if !self.closest_triangle_packs(std::array::from_ref(pack), &pack_ray, s) {
                 return false;
             }
         }
@@ -792,19 +798,20 @@ impl<T: PackKernel, F: FnMut(u32, &Ray) -> bool> AnyLeaves for PackedLeaves<'_, 
     #[inline(always)]
     fn any_without_call(&mut self, first: u32, count: u32, ray: &Ray) -> Option<bool> {
         let packs = leaf_packs(self.packs, first, count);
+        let pack_ray = self.pack_ray(ray);
         let mut scratch = PackHits::default();
         let (pairs, rest) = pairs_and_rest::<T>(packs);
         // A lane hit is a blocker whether or not others are left to refine.
         let mut refine = 0;
         for pair in pairs {
-            match self.any_triangle_packs::<2>(pair, ray, &mut scratch)? {
+            match any_triangle_packs::<T, 2>(pair, &pack_ray, ray, &mut scratch)? {
                 (0, left) => refine |= left,
                 _ => return Some(true),
             }
         }
         for pack in rest {
             let pack = std::array::from_ref(pack);
-            match self.any_triangle_packs::<1>(pack, ray, &mut scratch)? {
+            match any_triangle_packs::<T, 1>(pack, &pack_ray, ray, &mut scratch)? {
                 (0, left) => refine |= left,
                 _ => return Some(true),
             }
@@ -813,37 +820,31 @@ impl<T: PackKernel, F: FnMut(u32, &Ray) -> bool> AnyLeaves for PackedLeaves<'_, 
     }
 }
 
-impl<T: PackKernel, F> PackedLeaves<'_, T, F> {
-    /// The lanes of one pack or a pair tested together that block `ray`, and those left
-    /// to refine, without a call; `None` where a lane is neither a triangle nor a kept
-    /// sphere.
-    #[inline(always)]
-    fn any_triangle_packs<const PACKS: usize>(
-        &mut self,
-        packs: &[TrianglePack; PACKS],
-        ray: &Ray,
-        scratch: &mut PackHits,
-    ) -> Option<(u32, u32)> {
+/// The lanes of one pack or a pair tested together that block `ray`, and those left to
+/// refine, without a call; `None` where a lane is neither a triangle nor a kept sphere.
+#[inline(always)]
+fn any_triangle_packs<T: PackKernel, const PACKS: usize>(
+    packs: &[TrianglePack; PACKS],
+    pack_ray: &PackRay,
+    ray: &Ray,
+    scratch: &mut PackHits,
+) -> Option<(u32, u32)> {
+    // Packs of triangles alone (a mesh's) take the triangle test and nothing else.
+    if packs.iter().any(|pack| pack.others != 0) {
         if packs.iter().any(|pack| pack.others != pack.spheres) {
             return None;
         }
-        if packs.iter().any(|pack| pack.spheres != 0) {
-            let mut t = [0.0; PAIR_LANES];
-            // SAFETY: `dispatch` runs this only where `T`'s instruction set exists.
-            let blocked = unsafe { test_spheres::<T, PACKS>(packs, ray, &mut t) };
-            if blocked != 0 {
-                return Some((blocked, 0));
-            }
-        }
-        if triangle_lanes(packs) == 0 {
-            return Some((0, 0));
-        }
-        let pack_ray = self.pack_ray(ray);
+        let mut t = [0.0; PAIR_LANES];
         // SAFETY: `dispatch` runs this only where `T`'s instruction set exists.
-        Some(unsafe {
-            test_packs_unrefined::<T, false, PACKS>(packs, &pack_ray, ray.t_min, ray.t_max, scratch)
-        })
+        let blocked = unsafe { test_spheres::<T, PACKS>(packs, ray, &mut t) };
+        if blocked != 0 || triangle_lanes(packs) == 0 {
+            return Some((blocked, 0));
+        }
     }
+    // SAFETY: `dispatch` runs this only where `T`'s instruction set exists.
+    Some(unsafe {
+        test_packs_unrefined::<T, false, PACKS>(packs, pack_ray, ray.t_min, ray.t_max, scratch)
+    })
 }
 
 /// Leaves of an every-hit walk: [`any`] over leaves that never report a blocker, so
