@@ -468,8 +468,8 @@ impl<'a, T, F> PackedLeaves<'a, T, F> {
         }
     }
 
-    /// A `match`, not `Option::get_or_insert_with`: called from each pack test of a
-    /// leaf, the compiler left that one out of line, a call in the walk's loop.
+    /// A `match`, not `Option::get_or_insert_with`, which the compiler once left out of
+    /// line: a call in the walk's loop.
     #[inline(always)]
     fn pack_ray(&mut self, ray: &Ray) -> PackRay {
         match self.ray {
@@ -591,7 +591,7 @@ where
         pack_ray: &PackRay,
         s: &mut Closest,
     ) -> bool {
-        // Packs of triangles alone (a mesh's) take the first test and nothing else.
+        // Packs of triangles alone (a mesh's) take the triangle test and nothing else.
         if packs.iter().any(|pack| pack.others != 0) {
             if packs.iter().any(|pack| pack.others != pack.spheres) {
                 return false;
