@@ -1,5 +1,5 @@
 //! One SIMD register of floats, one primitive of a [`TrianglePack`] per lane: the
-//! operations the pack tests (triangles in `triangle`, spheres in `wide::pack_spheres`)
+//! operations the pack tests (triangles in `triangle`, spheres and boxes in `wide::pack_shapes`)
 //! need, written once for SSE2's 4 lanes (one pack) and AVX's 8 (two packs).
 
 use crate::triangle::{TrianglePack, PAIR_LANES};

@@ -586,24 +586,25 @@ pub trait PackKernel {
         )
     }
 
-    /// The pack's kept-sphere lanes that `ray` hits within its range (bit `i` for lane
-    /// `i`), each hit's distance at its lane of `t` (see `wide::pack_spheres`).
+    /// The pack's kept-shape lanes (spheres and boxes) that `ray` hits within its range
+    /// (bit `i` for lane `i`), each hit's distance at its lane of `t` (see
+    /// `wide::pack_shapes`).
     ///
     /// # Safety
     /// As [`PackKernel::test`].
     #[inline(always)]
-    unsafe fn spheres(pack: &TrianglePack, ray: &Ray, t: &mut [f32; PAIR_LANES]) -> u32 {
-        crate::wide::spheres_one_by_one(std::slice::from_ref(pack), ray, t)
+    unsafe fn shapes(pack: &TrianglePack, ray: &Ray, t: &mut [f32; PAIR_LANES]) -> u32 {
+        crate::wide::shapes_one_by_one(std::slice::from_ref(pack), ray, t)
     }
 
-    /// [`PackKernel::spheres`] of two packs, the second's lanes as bits and distances
+    /// [`PackKernel::shapes`] of two packs, the second's lanes as bits and distances
     /// 4..8.
     ///
     /// # Safety
     /// As [`PackKernel::test`].
     #[inline(always)]
-    unsafe fn sphere_pair(packs: &[TrianglePack; 2], ray: &Ray, t: &mut [f32; PAIR_LANES]) -> u32 {
-        crate::wide::spheres_one_by_one(packs, ray, t)
+    unsafe fn shape_pair(packs: &[TrianglePack; 2], ray: &Ray, t: &mut [f32; PAIR_LANES]) -> u32 {
+        crate::wide::shapes_one_by_one(packs, ray, t)
     }
 }
 
@@ -841,29 +842,29 @@ mod simd {
         }
 
         #[inline(always)]
-        unsafe fn spheres(pack: &TrianglePack, ray: &Ray, t: &mut [f32; PAIR_LANES]) -> u32 {
-            sse2_spheres(pack, ray, t)
+        unsafe fn shapes(pack: &TrianglePack, ray: &Ray, t: &mut [f32; PAIR_LANES]) -> u32 {
+            sse2_shapes(pack, ray, t)
         }
 
         #[inline(always)]
-        unsafe fn sphere_pair(
+        unsafe fn shape_pair(
             packs: &[TrianglePack; 2],
             ray: &Ray,
             t: &mut [f32; PAIR_LANES],
         ) -> u32 {
             let [low, high] = packs;
             let mut upper = [0.0; PAIR_LANES];
-            let hit = sse2_spheres(low, ray, t) | sse2_spheres(high, ray, &mut upper) << PACK_LANES;
+            let hit = sse2_shapes(low, ray, t) | sse2_shapes(high, ray, &mut upper) << PACK_LANES;
             t[PACK_LANES..].copy_from_slice(&upper[..PACK_LANES]);
             hit
         }
     }
 
-    /// One pack's spheres in SSE2 lanes.
+    /// One pack's kept shapes in SSE2 lanes.
     #[inline(always)]
-    fn sse2_spheres(pack: &TrianglePack, ray: &Ray, t: &mut [f32; PAIR_LANES]) -> u32 {
+    fn sse2_shapes(pack: &TrianglePack, ray: &Ray, t: &mut [f32; PAIR_LANES]) -> u32 {
         // SAFETY: SSE2 is baseline x86-64.
-        unsafe { crate::wide::sphere_lanes::<__m128>(std::slice::from_ref(pack), ray, t) }
+        unsafe { crate::wide::shape_lanes::<__m128>(std::slice::from_ref(pack), ray, t) }
     }
 
     /// The AVX2 kernel: single packs as SSE2 does, pairs of packs in eight lanes;
@@ -922,18 +923,18 @@ mod simd {
         }
 
         #[inline(always)]
-        unsafe fn spheres(pack: &TrianglePack, ray: &Ray, t: &mut [f32; PAIR_LANES]) -> u32 {
-            sse2_spheres(pack, ray, t)
+        unsafe fn shapes(pack: &TrianglePack, ray: &Ray, t: &mut [f32; PAIR_LANES]) -> u32 {
+            sse2_shapes(pack, ray, t)
         }
 
         #[inline(always)]
-        unsafe fn sphere_pair(
+        unsafe fn shape_pair(
             packs: &[TrianglePack; 2],
             ray: &Ray,
             t: &mut [f32; PAIR_LANES],
         ) -> u32 {
             // SAFETY: the caller guarantees AVX2.
-            unsafe { crate::wide::sphere_lanes::<__m256>(packs, ray, t) }
+            unsafe { crate::wide::shape_lanes::<__m256>(packs, ray, t) }
         }
     }
 }

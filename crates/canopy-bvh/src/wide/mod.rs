@@ -10,7 +10,7 @@
 
 mod frustum;
 mod kernels;
-mod pack_spheres;
+mod pack_shapes;
 mod packet;
 mod packet_packs;
 mod refit;
@@ -36,8 +36,8 @@ use traverse::{
 };
 
 #[cfg(target_arch = "x86_64")]
-pub(crate) use pack_spheres::sphere_lanes;
-pub(crate) use pack_spheres::spheres_one_by_one;
+pub(crate) use pack_shapes::shape_lanes;
+pub(crate) use pack_shapes::shapes_one_by_one;
 pub use packet::PACKET;
 pub(crate) use traverse::Dispatch;
 

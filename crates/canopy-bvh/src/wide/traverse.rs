@@ -352,7 +352,7 @@ pub(crate) fn shape_packet(
     best: &mut [Option<Hit>; PACKET],
 ) {
     let t = match shape {
-        KnownShape::Sphere { center, radius } => sphere_lanes(center, radius, lanes.packet, t_max),
+        KnownShape::Sphere { center, radius } => shape_lanes(center, radius, lanes.packet, t_max),
         KnownShape::Box(b) => box_lanes(b, lanes.packet, t_max),
     };
     let mut hit = [false; PACKET];
@@ -384,7 +384,7 @@ fn box_lanes(b: Aabb, packet: &PacketRays, t_max: &[f32; PACKET]) -> [f32; PACKE
 /// ray's range): [`crate::intersect_sphere`] lane by lane, the same operations in the same
 /// order, so the same distances.
 #[inline(always)]
-fn sphere_lanes(
+fn shape_lanes(
     center: Vec3,
     radius: f32,
     packet: &PacketRays,
@@ -534,13 +534,14 @@ unsafe fn test_packs<T: PackKernel, const HITS: bool, const PACKS: usize>(
     }
 }
 
-/// The kept-sphere lanes of `packs` that `ray` hits, as [`test_packs`] gives triangle
-/// lanes: one pack by `T::spheres`, a pair by `T::sphere_pair`.
+/// The kept-shape lanes (spheres and boxes) of `packs` that `ray` hits, as
+/// [`test_packs`] gives triangle lanes: one pack by `T::shapes`, a pair by
+/// `T::shape_pair`.
 ///
 /// # Safety
 /// As [`test_packs`].
 #[inline(always)]
-unsafe fn test_spheres<T: PackKernel, const PACKS: usize>(
+unsafe fn test_shapes<T: PackKernel, const PACKS: usize>(
     packs: &[TrianglePack; PACKS],
     ray: &Ray,
     t: &mut [f32; PAIR_LANES],
@@ -548,8 +549,8 @@ unsafe fn test_spheres<T: PackKernel, const PACKS: usize>(
     // SAFETY: as in `test_packs`.
     unsafe {
         match <&[TrianglePack; 2]>::try_from(packs.as_slice()) {
-            Ok(pair) => T::sphere_pair(pair, ray, t),
-            Err(_) => T::spheres(&packs[0], ray, t),
+            Ok(pair) => T::shape_pair(pair, ray, t),
+            Err(_) => T::shapes(&packs[0], ray, t),
         }
     }
 }
@@ -583,7 +584,7 @@ where
     P: IntoHit,
 {
     /// Offers the hits of one pack or a pair tested together without a call: `false`
-    /// where a lane is neither a triangle nor a kept sphere, or is left to refine.
+    /// where a lane is neither a triangle nor a kept shape, or is left to refine.
     #[inline(always)]
     fn closest_triangle_packs<const PACKS: usize>(
         &mut self,
@@ -593,12 +594,15 @@ where
     ) -> bool {
         // Packs of triangles alone (a mesh's) take the triangle test and nothing else.
         if packs.iter().any(|pack| pack.others != 0) {
-            if packs.iter().any(|pack| pack.others != pack.spheres) {
+            if packs
+                .iter()
+                .any(|pack| pack.others != (pack.spheres | pack.boxes))
+            {
                 return false;
             }
             let mut t = [0.0; PAIR_LANES];
             // SAFETY: `dispatch` runs this only where `T`'s instruction set exists.
-            for lane in lanes(unsafe { test_spheres::<T, PACKS>(packs, &s.ray, &mut t) }) {
+            for lane in lanes(unsafe { test_shapes::<T, PACKS>(packs, &s.ray, &mut t) }) {
                 let prim = packs[lane / PACK_LANES].prim[lane % PACK_LANES];
                 s.offer(Hit::new(prim, PrimHit::from(t[lane])));
             }
@@ -727,7 +731,7 @@ where
             }
         }
         for pack in packs {
-            for _ in 0..(pack.triangles | pack.spheres).count_ones() {
+            for _ in 0..(pack.triangles | pack.spheres | pack.boxes).count_ones() {
                 c.test_primitive();
             }
         }
@@ -821,7 +825,7 @@ impl<T: PackKernel, F: FnMut(u32, &Ray) -> bool> AnyLeaves for PackedLeaves<'_, 
 }
 
 /// The lanes of one pack or a pair tested together that block `ray`, and those left to
-/// refine, without a call; `None` where a lane is neither a triangle nor a kept sphere.
+/// refine, without a call; `None` where a lane is neither a triangle nor a kept shape.
 #[inline(always)]
 fn any_triangle_packs<T: PackKernel, const PACKS: usize>(
     packs: &[TrianglePack; PACKS],
@@ -831,12 +835,15 @@ fn any_triangle_packs<T: PackKernel, const PACKS: usize>(
 ) -> Option<(u32, u32)> {
     // Packs of triangles alone (a mesh's) take the triangle test and nothing else.
     if packs.iter().any(|pack| pack.others != 0) {
-        if packs.iter().any(|pack| pack.others != pack.spheres) {
+        if packs
+            .iter()
+            .any(|pack| pack.others != (pack.spheres | pack.boxes))
+        {
             return None;
         }
         let mut t = [0.0; PAIR_LANES];
         // SAFETY: `dispatch` runs this only where `T`'s instruction set exists.
-        let blocked = unsafe { test_spheres::<T, PACKS>(packs, ray, &mut t) };
+        let blocked = unsafe { test_shapes::<T, PACKS>(packs, ray, &mut t) };
         if blocked != 0 || triangle_lanes(packs) == 0 {
             return Some((blocked, 0));
         }
