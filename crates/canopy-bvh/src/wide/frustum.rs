@@ -247,20 +247,7 @@ mod tests {
     use crate::aabb::Aabb;
     use glam::Vec3;
 
-    /// A small deterministic generator (xorshift), enough for test inputs.
-    struct Numbers(u64);
-
-    impl Numbers {
-        fn next(&mut self) -> f32 {
-            self.0 ^= self.0 << 13;
-            self.0 ^= self.0 >> 7;
-            self.0 ^= self.0 << 17;
-            (self.0 >> 40) as f32 / (1u64 << 24) as f32
-        }
-        fn vec(&mut self, scale: f32) -> Vec3 {
-            Vec3::new(self.next(), self.next(), self.next()) * 2.0 * scale - Vec3::splat(scale)
-        }
-    }
+    use crate::wide::test_numbers::Numbers;
 
     /// Every slot one of the packet's rays enters by the single-ray test, the frustum
     /// enters too, with an entry bound no farther than that ray's: packets of rays from

@@ -14,6 +14,8 @@ mod pack_shapes;
 mod packet;
 mod packet_packs;
 mod refit;
+#[cfg(test)]
+mod test_numbers;
 mod traverse;
 
 use crate::query::{Coherence, RayBatch};

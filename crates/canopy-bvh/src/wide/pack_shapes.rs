@@ -193,21 +193,7 @@ mod tests {
     use crate::{Aabb, KnownShape};
     use glam::Vec3;
 
-    /// A small deterministic generator (xorshift), so the test needs no seed crate.
-    struct Numbers(u64);
-
-    impl Numbers {
-        fn next(&mut self) -> f32 {
-            self.0 ^= self.0 << 13;
-            self.0 ^= self.0 >> 7;
-            self.0 ^= self.0 << 17;
-            (self.0 >> 40) as f32 / (1u64 << 24) as f32
-        }
-
-        fn vec(&mut self, scale: f32) -> Vec3 {
-            Vec3::new(self.next(), self.next(), self.next()) * 2.0 * scale - scale
-        }
-    }
+    use crate::wide::test_numbers::Numbers;
 
     /// Two packs: five spheres (huge and near, tiny, one of radius zero), two boxes (one
     /// flat, as a quad light is) and a lane that keeps nothing.
