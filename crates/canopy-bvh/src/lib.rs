@@ -67,7 +67,7 @@ pub use query::{
     trace_batch, Coherence, Forward, RayBatch, RayQuery, ALL_MASKS, BATCH_CHUNK, CLOSURE_CHUNK,
 };
 pub use ray::{Hit, IntoHit, PrimHit, Ray};
-pub use ray_order::{RayOrder, RAY_ORDER_MIN};
+pub use ray_order::{AnswerSlots, RayOrder, SliceSlots, RAY_ORDER_MIN};
 pub use shapes::{intersect_box, intersect_sphere, KnownShape};
 pub use stats::TreeStats;
 pub use tlas::Tlas;

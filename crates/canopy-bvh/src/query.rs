@@ -2,7 +2,7 @@
 //! ([`crate::Blas`], [`crate::Tlas`]) — closest hit, occlusion, their batch forms, ray
 //! masks — whatever the layout of its tree.
 
-use crate::{Aabb, Hit, Ray, RayOrder, TraversalCounter, TraversalStats};
+use crate::{Aabb, Hit, Ray, RayOrder, SliceSlots, TraversalCounter, TraversalStats};
 use glam::Vec3;
 use rayon::prelude::*;
 
@@ -374,8 +374,8 @@ fn in_chunks(
 
 /// Answers of many rays in parallel over chunks of [`BATCH_CHUNK`]: `each(rays, out)`
 /// answers a chunk on one thread. Traced in [`RayOrder`] where `ordered` (and the batch
-/// is worth ordering), the answers then put back in the caller's order.
-pub fn trace_batch<T: Copy + Default + Send + Sync>(
+/// is worth ordering), each answer written to the caller's slot.
+pub fn trace_batch<T: Copy + Default + Send>(
     ordered: bool,
     rays: &[Ray],
     out: &mut [T],
@@ -390,9 +390,6 @@ pub fn trace_batch<T: Copy + Default + Send + Sync>(
             .par_chunks_mut(BATCH_CHUNK)
             .zip(rays.par_chunks(BATCH_CHUNK))
             .for_each(|(out, rays)| each(rays, out)),
-        Some(order) => {
-            let traced = order.trace(BATCH_CHUNK, |i| rays[i], each);
-            order.unsort_into(&traced, out);
-        }
+        Some(order) => order.trace_into(BATCH_CHUNK, |i| rays[i], each, &SliceSlots::new(out)),
     }
 }

@@ -2,8 +2,9 @@
 
 use crate::arrays;
 use crate::pools;
+use canopy_bvh::ALL_MASKS;
 use canopy_bvh::{Aabb, BuildParams, BvhWidth, SahCosts, TriangleTest};
-use canopy_bvh::{Coherence, Hit, Ray, RayBatch, RayOrder, RayQuery, ALL_MASKS};
+use canopy_bvh::{AnswerSlots, Coherence, Hit, Ray, RayBatch, RayOrder, RayQuery, SliceSlots};
 use canopy_render::geometry::{Cuboid, Shape, Triangle};
 use canopy_render::scene::Primitive;
 use canopy_render::{Accel, AccelKind};
@@ -16,6 +17,7 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use rayon::prelude::*;
+use std::marker::PhantomData;
 use std::sync::{PoisonError, RwLock, RwLockReadGuard};
 use std::time::Instant;
 
@@ -211,6 +213,60 @@ fn write_hit(t: &mut [f32], prim: &mut [i64], uv: &mut [f32], i: usize, hit: Opt
             uv[2 * i] = 0.0;
             uv[2 * i + 1] = 0.0;
         }
+    }
+}
+
+/// The three output arrays of closest hits as [`AnswerSlots`]: rays traced out of the
+/// caller's order write their hits straight to their rows.
+struct HitColumns<'a> {
+    t: *mut f32,
+    prim: *mut i64,
+    uv: *mut f32,
+    len: usize,
+    _borrow: PhantomData<&'a mut [f32]>,
+}
+
+impl<'a> HitColumns<'a> {
+    /// # Panics
+    /// If the arrays do not all hold one row per ray (`uv` two values a row).
+    fn new(t: &'a mut [f32], prim: &'a mut [i64], uv: &'a mut [f32]) -> Self {
+        assert!(
+            prim.len() == t.len() && uv.len() == 2 * t.len(),
+            "one row per ray"
+        );
+        Self {
+            t: t.as_mut_ptr(),
+            prim: prim.as_mut_ptr(),
+            uv: uv.as_mut_ptr(),
+            len: t.len(),
+            _borrow: PhantomData,
+        }
+    }
+}
+
+// SAFETY: the columns stand for three `&mut` slices of plain numbers; `put`'s contract
+// keeps threads to disjoint rows.
+unsafe impl Sync for HitColumns<'_> {}
+
+impl AnswerSlots<Option<Hit>> for HitColumns<'_> {
+    fn len(&self) -> usize {
+        self.len
+    }
+
+    #[inline]
+    unsafe fn put(&self, i: usize, hit: Option<Hit>) {
+        debug_assert!(i < self.len);
+        // SAFETY: row `i` is in bounds of all three arrays (checked in `new`) and no
+        // other thread touches it, by the caller's contract; the arrays are borrowed
+        // mutably for the columns' life.
+        let (t, prim, uv) = unsafe {
+            (
+                std::slice::from_raw_parts_mut(self.t.add(i), 1),
+                std::slice::from_raw_parts_mut(self.prim.add(i), 1),
+                std::slice::from_raw_parts_mut(self.uv.add(2 * i), 2),
+            )
+        };
+        write_hit(t, prim, uv, 0, hit);
     }
 }
 
@@ -654,7 +710,7 @@ impl Bvh {
                             accel.closest_hits(batch, rays, answer, &mut ())
                         });
                 };
-                let traced = order.trace(
+                order.trace_into(
                     CHUNK,
                     |i| batch.ray(i),
                     |rays, out| {
@@ -666,18 +722,8 @@ impl Bvh {
                             &mut (),
                         )
                     },
-                );
-                let ranks = order.ranks();
-                t.par_chunks_mut(CHUNK)
-                    .zip(prim.par_chunks_mut(CHUNK))
-                    .zip(uv.par_chunks_mut(2 * CHUNK))
-                    .enumerate()
-                    .for_each(|(chunk, ((t, prim), uv))| {
-                        for i in 0..t.len() {
-                            let hit = traced[ranks[chunk * CHUNK + i] as usize];
-                            write_hit(t, prim, uv, i, hit);
-                        }
-                    })
+                    &HitColumns::new(t, prim, uv),
+                )
             })
         })?;
         Ok((t_out, prim_out, uv_out))
@@ -720,12 +766,12 @@ impl Bvh {
                             accel.any_hits(batch, rays, answer)
                         });
                 };
-                let traced = order.trace(
+                order.trace_into(
                     CHUNK,
                     |i| batch.ray(i),
                     |rays, out| accel.any_hits_into(rays, out, ALL_MASKS, Coherence::Incoherent),
+                    &SliceSlots::new(blocked),
                 );
-                order.unsort_into(&traced, blocked);
             })
         })?;
         Ok(out)
