@@ -2,7 +2,7 @@
 //! lights (point, spot, directional) glTF files bring. One is chosen in proportion to
 //! its power, then a point on it drawn by its shape (a punctual light is its own point).
 
-use crate::geometry::{Shape, SurfaceSample};
+use crate::geometry::{Rectangle, Shape, SurfaceSample};
 use crate::rng::Rng;
 use crate::sampling::{luminance, uniform_triangle, Distribution1D};
 use crate::scene::{Scene, PRIMITIVES_INSTANCE};
@@ -167,6 +167,12 @@ pub struct Lights {
     /// For each mesh instance, the light index of its first triangle (its triangles are
     /// lights in order), or [`Lights::NONE`] when its material does not emit.
     first_light_of_instance: Vec<u32>,
+    /// For each of the scene's primitives that is a light (lights `0..` in order), the
+    /// index in `rectangles` of its rectangle, [`Lights::NONE`] where it is not a flat
+    /// box; stops at the last such light.
+    rectangle_of: Vec<u32>,
+    /// The rectangles of flat boxes that are lights, with their radiance.
+    rectangles: Vec<(Rectangle, Vec3)>,
     /// The scene's punctual lights, after the emitters in light order.
     punctual: Vec<PunctualLight>,
     /// Radius of a sphere around the scene (where directional light starts from).
@@ -182,6 +188,7 @@ impl Lights {
         let mut emitters = Vec::new();
         let mut power = Vec::new();
         let mut light_of_prim = vec![Self::NONE; scene.primitives.len()];
+        let (mut rectangle_of, mut rectangles) = (Vec::new(), Vec::new());
         // Each material's emitted luminance, zero where it cannot light: a render makes
         // its lights at every pass, and asking each of a large mesh's primitives its
         // material's emission and area took the lit dragon (202k triangles) 15M
@@ -199,7 +206,24 @@ impl Lights {
             }
             let p = radiance * primitive.shape.area();
             if p.is_finite() && p > 0.0 {
-                light_of_prim[index] = emitters.len() as u32;
+                let light = emitters.len();
+                if let Some(rectangle) = match &primitive.shape {
+                    Shape::Cuboid(cuboid) => cuboid.rectangle(),
+                    _ => None,
+                } {
+                    rectangle_of.resize(light, Self::NONE);
+                    rectangle_of.push(rectangles.len() as u32);
+                    // A primitive's emission has no texture coordinates to vary by.
+                    let emitted = scene.emitted_at(
+                        primitive.material,
+                        PRIMITIVES_INSTANCE,
+                        index as u32,
+                        0.0,
+                        0.0,
+                    );
+                    rectangles.push((rectangle, emitted));
+                }
+                light_of_prim[index] = light as u32;
                 emitters.push((PRIMITIVES_INSTANCE, index as u32));
                 power.push(p);
             }
@@ -240,6 +264,8 @@ impl Lights {
             choice: Distribution1D::new(power),
             light_of_prim,
             first_light_of_instance,
+            rectangle_of,
+            rectangles,
             punctual: scene.lights.clone(),
             radius,
         }
@@ -300,6 +326,16 @@ impl Lights {
         let choice = self.choice.as_ref()?;
         let (light, _) = choice.sample(rng.next_f32());
         let u = rng.next_2d();
+        if let Some(&r) = self.rectangle_of.get(light).filter(|&&r| r != Self::NONE) {
+            let (rectangle, radiance) = &self.rectangles[r as usize];
+            let point = rectangle.sample_toward(reference, u)?;
+            return Some(LightSample {
+                point,
+                radiance: *radiance,
+                pdf: point.pdf * choice.pmf(light),
+                delta: false,
+            });
+        }
         if let Some(punctual) = self.punctual.get(light.wrapping_sub(self.emitters.len())) {
             let (p, irradiance) = punctual.toward(reference, self.radius)?;
             return Some(LightSample {

@@ -8,7 +8,7 @@ mod sphere;
 mod triangle;
 
 pub use canopy_bvh::ShearedRay;
-pub use cuboid::Cuboid;
+pub use cuboid::{Cuboid, Rectangle};
 pub use sphere::Sphere;
 pub use triangle::Triangle;
 
