@@ -16,8 +16,13 @@
 //! part ways below the top of the tree, so a packet goes on ray by ray once few of its
 //! rays remain together.
 //!
+//! With `--write-rays DIR`, the camera or bounce rays and the scene's triangles (its boxes
+//! as triangles too) are also written to `DIR/{camera,bounce}.bin` and `DIR/mesh.bin` in
+//! the files of `bench/kernel_profile.py`, so that canopy's kernels and Embree's can be
+//! timed on a render's own rays (`walk_profile`, `embree_profile`).
+//!
 //! `cargo run --release -p canopy-render --example packet_speed -- [scene ...]
-//!  [--size 480x480] [--samples 8] [--turns 5] [--shadows | --bounces]`
+//!  [--size 480x480] [--samples 8] [--turns 5] [--shadows | --bounces] [--write-rays DIR]`
 use canopy_bvh::{Coherence, Hit, Ray, RayQuery, ALL_MASKS};
 use canopy_render::accel::Accel;
 use canopy_render::camera::Camera;
@@ -32,6 +37,7 @@ fn main() {
     let mut args = std::env::args().skip(1);
     let (mut scenes, mut size, mut samples, mut turns) = (Vec::new(), (480, 480), 8u32, 5);
     let (mut shadows, mut bounces) = (false, false);
+    let mut write_rays = None;
     while let Some(arg) = args.next() {
         let mut value = || args.next().expect("a value after each option");
         match arg.as_str() {
@@ -44,6 +50,7 @@ fn main() {
             "--turns" => turns = value().parse().expect("turns"),
             "--shadows" => shadows = true,
             "--bounces" => bounces = true,
+            "--write-rays" => write_rays = Some(std::path::PathBuf::from(value())),
             _ => scenes.push(arg),
         }
     }
@@ -76,6 +83,9 @@ fn main() {
         } else {
             "camera"
         };
+        if let Some(dir) = &write_rays {
+            write_kernel_profile_files(dir, &scene, &rays, kind);
+        }
         let mut single = vec![None; rays.len()];
         let mut packets = vec![None; rays.len()];
         let (mut best_single, mut best_packets) = (Duration::MAX, Duration::MAX);
@@ -203,4 +213,44 @@ fn time_shadows(name: &str, scene: &Scene, accel: &Accel, camera_rays: &[Ray], t
         single == packets,
     );
     assert_eq!(single, packets, "packets must give the same answers");
+}
+
+/// Writes the scene's triangles (boxes by their faces' triangles; spheres left out) as
+/// `dir/mesh.bin` and `rays` as `dir/{kind}.bin`, in `bench/kernel_profile.py`'s files:
+/// counts as u64, then f32 and u32 arrays, little-endian.
+fn write_kernel_profile_files(dir: &std::path::Path, scene: &Scene, rays: &[Ray], kind: &str) {
+    use canopy_render::geometry::Shape;
+    let triangles: Vec<[Vec3; 3]> = scene
+        .primitives
+        .iter()
+        .flat_map(|p| match &p.shape {
+            Shape::Triangle(t) => vec![t.v],
+            Shape::Cuboid(c) => c.face_triangles(),
+            Shape::Sphere(_) => Vec::new(),
+        })
+        .collect();
+    let mut mesh = Vec::new();
+    mesh.extend((3 * triangles.len() as u64).to_le_bytes());
+    mesh.extend((triangles.len() as u64).to_le_bytes());
+    let corners = triangles.iter().flatten().flat_map(|v| v.to_array());
+    mesh.extend(corners.flat_map(f32::to_le_bytes));
+    mesh.extend((0..3 * triangles.len() as u32).flat_map(u32::to_le_bytes));
+    let mut ray_file = (rays.len() as u64).to_le_bytes().to_vec();
+    ray_file.extend(
+        rays.iter()
+            .flat_map(|r| r.origin.to_array())
+            .flat_map(f32::to_le_bytes),
+    );
+    ray_file.extend(
+        rays.iter()
+            .flat_map(|r| r.dir.to_array())
+            .flat_map(f32::to_le_bytes),
+    );
+    for (name, bytes) in [
+        ("mesh.bin".to_string(), mesh),
+        (format!("{kind}.bin"), ray_file),
+    ] {
+        let path = dir.join(name);
+        std::fs::write(&path, bytes).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    }
 }

@@ -1358,7 +1358,7 @@ pub(crate) unsafe fn closest_each<const N: usize, K, L, C>(
         let ray = rays.take(i);
         leaves.new_ray();
         // SAFETY: the caller guarantees the instruction set.
-        let hit = unsafe { closest::<N, K, L, C>(nodes, &ray, &mut leaves, counter, &mut stack) };
+        let hit = unsafe { closest::<N, K, L, C>(nodes, ray, &mut leaves, counter, &mut stack) };
         answer(i, hit);
     }
 }
@@ -1367,32 +1367,38 @@ pub(crate) unsafe fn closest_each<const N: usize, K, L, C>(
 /// traced. A caller's `ray(i)` that the compiler leaves out of line returns its ray
 /// through memory, written in pieces; read at once by the walk, in wider loads, the loads
 /// waited for the pieces (a failed store forward: 15–20 ns a ray, a quarter of a primary
-/// ray's time). Made a walk earlier, the ray has long been written.
+/// ray's time). Made a walk earlier, the ray has long been written. The walk reads it
+/// where it was made, in one of two slots: a copy out of the slot was itself written in
+/// pieces and read across them at once (`Ray::is_traceable`'s loads).
 struct Upcoming<R> {
     make: R,
     count: usize,
-    ray: Ray,
+    slots: [Ray; 2],
 }
 
 impl<R: FnMut(usize) -> Ray> Upcoming<R> {
     #[inline(always)]
     fn new(count: usize, mut make: R) -> Self {
         // An empty batch never reads its placeholder.
-        let ray = match count {
-            0 => Ray::new(Vec3::ZERO, Vec3::X, 0.0, 0.0),
+        let placeholder = Ray::new(Vec3::ZERO, Vec3::X, 0.0, 0.0);
+        let first = match count {
+            0 => placeholder,
             _ => make(0),
         };
-        Self { make, count, ray }
+        Self {
+            make,
+            count,
+            slots: [first, placeholder],
+        }
     }
 
-    /// Ray `i` (made at the call before), having made ray `i + 1`.
+    /// Ray `i` (made at the call before), having made ray `i + 1`. Calls go in order.
     #[inline(always)]
-    fn take(&mut self, i: usize) -> Ray {
-        let this = self.ray;
+    fn take(&mut self, i: usize) -> &Ray {
         if i + 1 < self.count {
-            self.ray = (self.make)(i + 1);
+            self.slots[(i + 1) & 1] = (self.make)(i + 1);
         }
-        this
+        &self.slots[i & 1]
     }
 }
 
@@ -1417,7 +1423,7 @@ pub(crate) unsafe fn any_each<const N: usize, K, L>(
         let ray = rays.take(i);
         leaves.new_ray();
         // SAFETY: the caller guarantees the instruction set.
-        let blocked = unsafe { any::<N, K, L>(nodes, &ray, &mut leaves, &mut stack) };
+        let blocked = unsafe { any::<N, K, L>(nodes, ray, &mut leaves, &mut stack) };
         answer(i, blocked);
     }
 }
@@ -1550,7 +1556,7 @@ pub(crate) unsafe fn every_each<const N: usize, K, L, H>(
         leaves.new_ray();
         leaves.ray = i;
         // SAFETY: the caller guarantees the instruction set.
-        unsafe { every::<N, K, _>(nodes, &ray, leaves, &mut stack) };
+        unsafe { every::<N, K, _>(nodes, ray, leaves, &mut stack) };
     }
 }
 
