@@ -1298,18 +1298,23 @@ where
                 let node = unsafe { nodes.node(child) };
                 let (mask, t) = unsafe { K::hit_mask(node, &kray, ray.t_max) };
                 if mask != 0 {
-                    // Descend into the nearest entered slot (where a blocker is likeliest),
-                    // push the others.
+                    // Descend into an entered leaf if there is one, else the nearest
+                    // entered slot; push the others. A leaf next to nodes is likely a large
+                    // primitive (a floor, a wall) that the builder kept near the root: any
+                    // hit ends the walk, and testing it first saved the lit dragon's camera
+                    // rays more than half their occlusion walk.
                     let mut nearest = mask.trailing_zeros() as usize;
                     let mut rest = mask & (mask - 1);
                     while rest != 0 {
                         let i = rest.trailing_zeros() as usize;
                         rest &= rest - 1;
-                        // Selects, not a branch: which of two slots is nearer is a coin toss
-                        // (as a branch, 1.7 mispredictions an incoherent ray).
-                        let closer = t[i] < t[nearest];
-                        let farther = std::hint::select_unpredictable(closer, nearest, i);
-                        nearest = std::hint::select_unpredictable(closer, i, nearest);
+                        // Selects, not a branch: which of two slots comes first is a coin
+                        // toss (as a branch, 1.7 mispredictions an incoherent ray).
+                        let (leaf_i, leaf_n) = (node.count[i] > 0, node.count[nearest] > 0);
+                        let goes_first =
+                            (leaf_i & !leaf_n) | ((leaf_i == leaf_n) & (t[i] < t[nearest]));
+                        let farther = std::hint::select_unpredictable(goes_first, nearest, i);
+                        nearest = std::hint::select_unpredictable(goes_first, i, nearest);
                         nodes.prefetch_child(leaves, node.child[farther], node.count[farther]);
                         stack.push_in_room((node.child[farther], node.count[farther]));
                     }
